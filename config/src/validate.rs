@@ -1,0 +1,408 @@
+//! Validation of a scenario against the paper's assumptions and basic physical sense.
+//!
+//! Every error names the offending field (as a TOML path) and the assumption it breaks, so that a
+//! user sees at once what to fix. Commands exit with code 2 on a validation error.
+
+use crate::graph::Topology;
+use crate::scenario::{AgentSpec, Scenario};
+use crate::MAX_AGENTS;
+
+/// One reason a scenario is rejected.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidationError {
+    /// TOML path of the offending field, e.g. `agents[2].fault.gamma_final[0]`.
+    pub field: String,
+    /// The paper assumption or physical requirement it breaks.
+    pub assumption: &'static str,
+    /// What is wrong, with the offending value.
+    pub message: String,
+}
+
+impl std::fmt::Display for ValidationError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {} ({})", self.field, self.message, self.assumption)
+    }
+}
+
+/// All the reasons a scenario is rejected.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ValidationErrors(pub Vec<ValidationError>);
+
+impl std::fmt::Display for ValidationErrors {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for (k, e) in self.0.iter().enumerate() {
+            if k > 0 {
+                writeln!(f)?;
+            }
+            write!(f, "{e}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ValidationErrors {}
+
+/// Assumption 1 of the paper.
+pub const A1: &str = "Assumption 1: the graph is connected and the leader reaches every agent";
+/// Assumption 2 of the paper.
+pub const A2: &str = "Assumption 2: delays are bounded, 0 <= tau_i(t) <= tau_M";
+/// Assumption 4 of the paper.
+pub const A4: &str = "Assumption 4: the initial attitude lies inside the constraints";
+/// Assumption 5 of the paper.
+pub const A5: &str = "Assumption 5: 0 < Gamma_min <= Gamma_ik(t) <= Gamma_max";
+/// Input saturation (3).
+pub const SAT: &str = "eq. (3): U_ik,L < U_ik,H";
+/// Physical sense.
+pub const PHYS: &str = "physical parameters must be positive";
+/// Finite numbers.
+pub const FINITE: &str = "every number must be finite";
+/// Graph indices.
+pub const INDEX: &str = "agent and neighbour indices must be in range 1..=N";
+/// Simulation settings.
+pub const SIM: &str = "simulation settings must be positive and consistent";
+/// Controller settings.
+pub const CTRL: &str = "controller gains must be positive where the paper requires it";
+
+struct Collector(Vec<ValidationError>);
+
+impl Collector {
+    fn push(&mut self, field: impl Into<String>, assumption: &'static str, message: impl Into<String>) {
+        self.0.push(ValidationError {
+            field: field.into(),
+            assumption,
+            message: message.into(),
+        });
+    }
+    fn positive(&mut self, field: &str, v: f64, assumption: &'static str) {
+        if !(v > 0.0) {
+            self.push(field, assumption, format!("must be > 0, got {v}"));
+        }
+    }
+    fn non_negative(&mut self, field: &str, v: f64, assumption: &'static str) {
+        if !(v >= 0.0) {
+            self.push(field, assumption, format!("must be >= 0, got {v}"));
+        }
+    }
+}
+
+/// Validates a scenario; returns every error found (not just the first).
+pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
+    let mut c = Collector(Vec::new());
+    check_finite(s, &mut c);
+    if !c.0.is_empty() {
+        return Err(ValidationErrors(c.0));
+    }
+    let n = s.n_agents();
+    // Simulation.
+    let sim = &s.simulation;
+    c.positive("simulation.dt_s", sim.dt_s, SIM);
+    c.positive("simulation.duration_s", sim.duration_s, SIM);
+    c.positive("simulation.output_rate_hz", sim.output_rate_hz, SIM);
+    c.positive("simulation.gravity_m_s2", sim.gravity_m_s2, PHYS);
+    c.positive("simulation.max_delay_s", sim.max_delay_s, A2);
+    if sim.dt_s > 0.0 && sim.output_rate_hz > 0.0 && 1.0 / sim.output_rate_hz < sim.dt_s {
+        c.push(
+            "simulation.output_rate_hz",
+            SIM,
+            format!("output rate {} Hz exceeds the step rate {} Hz", sim.output_rate_hz, 1.0 / sim.dt_s),
+        );
+    }
+    if sim.max_delay_s > 0.0 && sim.dt_s > 0.0 && sim.max_delay_s / sim.dt_s > 100_000.0 {
+        c.push("simulation.max_delay_s", A2, "delay bound spans more than 100000 steps");
+    }
+    // Metrics windows.
+    for (name, w) in [
+        ("metrics.cover_window_s", s.metrics.cover_window_s),
+        ("metrics.enclose_window_s", s.metrics.enclose_window_s),
+    ] {
+        if !(w[0] >= 0.0 && w[1] > w[0]) {
+            c.push(name, SIM, format!("window must satisfy 0 <= start < end, got [{}, {}]", w[0], w[1]));
+        }
+    }
+    c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
+    if !(s.metrics.sensor_fov_deg > 0.0 && s.metrics.sensor_fov_deg < 180.0) {
+        c.push("metrics.sensor_fov_deg", PHYS, format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg));
+    }
+    // Vehicle.
+    let v = &s.vehicle;
+    c.positive("vehicle.mass_kg", v.mass_kg, PHYS);
+    for k in 0..3 {
+        c.positive(&format!("vehicle.inertia_kg_m2[{k}]"), v.inertia_kg_m2[k], PHYS);
+        c.non_negative(&format!("vehicle.rotational_drag[{k}]"), v.rotational_drag[k], PHYS);
+        if !(v.torque_min_nm[k] < v.torque_max_nm[k]) {
+            c.push(
+                format!("vehicle.torque_min_nm[{k}]"),
+                SAT,
+                format!("U_min {} must be below U_max {}", v.torque_min_nm[k], v.torque_max_nm[k]),
+            );
+        }
+    }
+    if v.mass_kg > 0.0 && !(v.thrust_max_n > v.mass_kg * sim.gravity_m_s2) {
+        c.push(
+            "vehicle.thrust_max_n",
+            PHYS,
+            format!("{} N cannot lift m g = {:.3} N", v.thrust_max_n, v.mass_kg * sim.gravity_m_s2),
+        );
+    }
+    // Graph.
+    if n == 0 {
+        c.push("agents", A1, "at least one agent is needed");
+    }
+    if n > MAX_AGENTS {
+        c.push("agents", INDEX, format!("{n} agents exceed the supported maximum {MAX_AGENTS}"));
+    }
+    if s.graph.leader_weights.len() != n {
+        c.push(
+            "graph.leader_weights",
+            INDEX,
+            format!("has {} entries for {n} agents", s.graph.leader_weights.len()),
+        );
+    }
+    let mut graph_ok = s.graph.leader_weights.len() == n && n > 0;
+    for (k, e) in s.graph.edges.iter().enumerate() {
+        for (end, idx) in [("a", e.a), ("b", e.b)] {
+            if idx < 1 || idx > n {
+                c.push(format!("graph.edges[{k}].{end}"), INDEX, format!("agent {idx} is not in 1..={n}"));
+                graph_ok = false;
+            }
+        }
+        if e.a == e.b {
+            c.push(format!("graph.edges[{k}]"), A1, format!("self-loop on agent {} (a_ii = 0)", e.a));
+            graph_ok = false;
+        }
+        if !(e.weight > 0.0) {
+            c.push(format!("graph.edges[{k}].weight"), A1, format!("a_ij must be > 0, got {}", e.weight));
+            graph_ok = false;
+        }
+    }
+    for (i, b) in s.graph.leader_weights.iter().enumerate() {
+        c.non_negative(&format!("graph.leader_weights[{i}]"), *b, A1);
+    }
+    if graph_ok {
+        let topo = Topology::from_scenario(s);
+        if !topo.connected() {
+            c.push("graph.edges", A1, "the follower graph is not connected");
+        }
+        if !topo.leader_reaches_all() {
+            c.push("graph.leader_weights", A1, "no agent with b_i > 0 reaches every agent (the leader is unreachable)");
+        }
+    }
+    // Controller.
+    let ctl = &s.controller;
+    c.positive("controller.position.k_p", ctl.position.k_p, "Theorem 1: k_P > 0");
+    c.positive("controller.position.k_v", ctl.position.k_v, "Theorem 1: k_V > 0");
+    c.non_negative("controller.position.nn_learning_rate", ctl.position.nn_learning_rate, CTRL);
+    c.non_negative("controller.position.nn_leakage", ctl.position.nn_leakage, CTRL);
+    c.positive("controller.position.max_horizontal_accel_m_s2", ctl.position.max_horizontal_accel_m_s2, CTRL);
+    c.positive("controller.position.max_up_accel_m_s2", ctl.position.max_up_accel_m_s2, CTRL);
+    if !(ctl.position.max_down_accel_m_s2 > 0.0 && ctl.position.max_down_accel_m_s2 < sim.gravity_m_s2) {
+        c.push(
+            "controller.position.max_down_accel_m_s2",
+            "Remark 3: U_i3P + g > 0",
+            format!("must be in (0, g), got {}", ctl.position.max_down_accel_m_s2),
+        );
+    }
+    if !(ctl.position.max_tilt_rad > 0.0 && ctl.position.max_tilt_rad < std::f64::consts::FRAC_PI_2) {
+        c.push("controller.position.max_tilt_rad", CTRL, format!("must be in (0, pi/2), got {}", ctl.position.max_tilt_rad));
+    }
+    if ctl.rbfnn.neurons_per_axis == 0 || ctl.rbfnn.neurons_per_axis > 64 {
+        c.push("controller.rbfnn.neurons_per_axis", CTRL, format!("must be in 1..=64, got {}", ctl.rbfnn.neurons_per_axis));
+    }
+    c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    c.positive("controller.rbfnn.position_span_m", ctl.rbfnn.position_span_m, CTRL);
+    c.positive("controller.rbfnn.velocity_span_m_s", ctl.rbfnn.velocity_span_m_s, CTRL);
+    for (name, f) in [
+        ("controller.attitude_command_filter", &ctl.attitude_command_filter),
+        ("controller.rate_command_filter", &ctl.rate_command_filter),
+    ] {
+        c.positive(&format!("{name}.natural_frequency_rad_s"), f.natural_frequency_rad_s, CTRL);
+        c.positive(&format!("{name}.damping"), f.damping, CTRL);
+        if sim.dt_s > 0.0 && f.natural_frequency_rad_s * sim.dt_s > 0.5 {
+            c.push(
+                format!("{name}.natural_frequency_rad_s"),
+                SIM,
+                format!("omega_B dt = {:.3} > 0.5: the filter is not resolved by the step", f.natural_frequency_rad_s * sim.dt_s),
+            );
+        }
+        for k in 0..3 {
+            c.positive(&format!("{name}.magnitude_limit[{k}]"), f.magnitude_limit[k], CTRL);
+            c.positive(&format!("{name}.rate_limit[{k}]"), f.rate_limit[k], CTRL);
+        }
+    }
+    let att = &ctl.attitude;
+    c.positive("controller.attitude.k1_alpha", att.k1_alpha, "eq. (34): K_i1alpha > 2 K_i1C > 0");
+    c.positive("controller.attitude.k2_phi", att.k2_phi, "eq. (45): K_i2Phi > 2 K_i2C > 0");
+    c.positive("controller.attitude.eps1_c", att.eps1_c, CTRL);
+    c.positive("controller.attitude.eps2_c", att.eps2_c, CTRL);
+    if att.k1_alpha > 0.0 && att.eps1_c > 0.0 && !(att.k1_alpha > 2.0 * att.eps1_c.sqrt()) {
+        c.push("controller.attitude.k1_alpha", "eq. (34): K_i1alpha > 2 K_i1C", "K_i1alpha must exceed 2 sqrt(eps1_c)");
+    }
+    if att.k2_phi > 0.0 && att.eps2_c > 0.0 && !(att.k2_phi > 2.0 * att.eps2_c.sqrt()) {
+        c.push("controller.attitude.k2_phi", "eq. (45): K_i2Phi > 2 K_i2C", "K_i2Phi must exceed 2 sqrt(eps2_c)");
+    }
+    c.positive("controller.attitude.mu2", att.mu2, CTRL);
+    c.positive("controller.attitude.attitude_margin_rad", att.attitude_margin_rad, A4);
+    c.positive("controller.attitude.rate_limit_rad_s", att.rate_limit_rad_s, A4);
+    let alpha_bound = norm3(ctl.rate_command_filter.magnitude_limit);
+    if att.rate_limit_rad_s > 0.0 && !(alpha_bound < att.rate_limit_rad_s) {
+        c.push(
+            "controller.rate_command_filter.magnitude_limit",
+            "eq. (40): C_i2 = C-bar_i2 - alpha-bar_i > 0",
+            format!("||alpha||max = {alpha_bound:.4} must be below the rate constraint {:.4}", att.rate_limit_rad_s),
+        );
+    }
+    let ad = &ctl.adaptive;
+    if !(ad.gamma_min > 0.0 && ad.gamma_min <= ad.gamma_max) {
+        c.push("controller.adaptive.gamma_min", A5, format!("need 0 < Gamma_min <= Gamma_max, got [{}, {}]", ad.gamma_min, ad.gamma_max));
+    }
+    for (name, val) in [
+        ("controller.adaptive.model_rate", ad.model_rate),
+        ("controller.adaptive.model_leakage", ad.model_leakage),
+        ("controller.adaptive.delta_rate", ad.delta_rate),
+        ("controller.adaptive.delta_leakage", ad.delta_leakage),
+        ("controller.adaptive.gamma_rate", ad.gamma_rate),
+        ("controller.adaptive.gamma_leakage", ad.gamma_leakage),
+        ("controller.adaptive.disturbance_rate", ad.disturbance_rate),
+        ("controller.adaptive.disturbance_leakage", ad.disturbance_leakage),
+    ] {
+        c.non_negative(name, val, CTRL);
+    }
+    if !(ad.gamma_hat_initial >= ad.gamma_min && ad.gamma_hat_initial <= ad.gamma_max) {
+        c.push("controller.adaptive.gamma_hat_initial", A5, format!("{} lies outside [Gamma_min, Gamma_max]", ad.gamma_hat_initial));
+    }
+    let aux = &ctl.auxiliary;
+    c.non_negative("controller.auxiliary.k1_e", aux.k1_e, CTRL);
+    c.non_negative("controller.auxiliary.k2_e", aux.k2_e, CTRL);
+    c.positive("controller.auxiliary.e1_threshold", aux.e1_threshold, CTRL);
+    c.positive("controller.auxiliary.e2_threshold", aux.e2_threshold, CTRL);
+    c.positive("controller.unconstrained.attitude_gain", ctl.unconstrained.attitude_gain, CTRL);
+    c.positive("controller.unconstrained.rate_gain", ctl.unconstrained.rate_gain, CTRL);
+    // Agents.
+    for (i, a) in s.agents.iter().enumerate() {
+        check_agent(s, i, a, &mut c);
+    }
+    if c.0.is_empty() {
+        Ok(())
+    } else {
+        Err(ValidationErrors(c.0))
+    }
+}
+
+fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
+    let p = format!("agents[{i}]");
+    // Assumption 2: tau_i(t) in [0, tau_M] for all t.
+    let d = &a.delay;
+    let hi = d.base_s + d.amplitude_s.abs();
+    let lo = d.base_s - d.amplitude_s.abs();
+    if hi > s.simulation.max_delay_s + 1e-12 {
+        c.push(
+            format!("{p}.delay"),
+            A2,
+            format!("tau_{} reaches {:.4} s above tau_M = {:.4} s", i + 1, hi, s.simulation.max_delay_s),
+        );
+    }
+    if lo < 0.0 {
+        c.push(format!("{p}.delay"), A2, format!("tau_{} goes negative ({lo:.4} s)", i + 1));
+    }
+    // Assumption 4: initial attitude inside the constraints. With C-bar_i1 = ||A_iC|| + margin and the
+    // command starting at the initial attitude, the roll/pitch must stay clear of the R_r singularity
+    // and the initial rate (zero) is inside C-bar_i2.
+    let att = a.initial_attitude_rad;
+    let tilt_limit = s.controller.position.max_tilt_rad;
+    for (k, name) in [(0usize, "phi"), (1, "theta")] {
+        if att[k].abs() > tilt_limit {
+            c.push(
+                format!("{p}.initial_attitude_rad[{k}]"),
+                A4,
+                format!("initial {name} = {} rad exceeds the tilt limit {tilt_limit} rad", att[k]),
+            );
+        }
+    }
+    // Assumption 5: fault bounds.
+    let ad = &s.controller.adaptive;
+    let f = &a.fault;
+    for k in 0..3 {
+        let g_final = f.gamma_final[k];
+        let g_start = f.gamma_final[k] + f.gamma_initial_excess[k];
+        let (g_lo, g_hi) = (g_final.min(g_start), g_final.max(g_start));
+        if !(g_lo > 0.0) {
+            c.push(format!("{p}.fault.gamma_final[{k}]"), A5, format!("Gamma_{}{} reaches {g_lo} <= 0 (total failure)", i + 1, k + 1));
+        } else if g_lo < ad.gamma_min - 1e-12 {
+            c.push(
+                format!("{p}.fault.gamma_final[{k}]"),
+                A5,
+                format!("Gamma_{}{} reaches {g_lo} below Gamma_min = {}", i + 1, k + 1, ad.gamma_min),
+            );
+        }
+        if g_hi > ad.gamma_max + 1e-12 {
+            c.push(
+                format!("{p}.fault.gamma_initial_excess[{k}]"),
+                A5,
+                format!("Gamma_{}{} reaches {g_hi} above Gamma_max = {}", i + 1, k + 1, ad.gamma_max),
+            );
+        }
+    }
+    c.non_negative(&format!("{p}.fault.gamma_decay_rate"), f.gamma_decay_rate, A5);
+    c.non_negative(&format!("{p}.fault.delta_ramp_rate"), f.delta_ramp_rate, A5);
+    for k in 0..3 {
+        for (name, v) in [
+            ("delta_ramp_decay", f.delta_ramp_decay[k]),
+            ("delta_osc_grow", f.delta_osc_grow[k]),
+            ("delta_osc_decay", f.delta_osc_decay[k]),
+            ("delta_bias_decay", f.delta_bias_decay[k]),
+        ] {
+            c.non_negative(&format!("{p}.fault.{name}[{k}]"), v, "Assumption 5: delta_i(t) is bounded");
+        }
+        let span = s.vehicle.torque_max_nm[k] - s.vehicle.torque_min_nm[k];
+        let bound = f.delta_ramp_nm[k].abs() + f.delta_osc_amplitude_nm[k].abs() + f.delta_bias_nm[k].abs();
+        if span > 0.0 && bound >= 0.5 * span {
+            c.push(
+                format!("{p}.fault.delta_ramp_nm[{k}]"),
+                "Assumption 5 with eq. (3): the additive fault must leave torque authority",
+                format!("|delta_{}{}| can reach {bound:.3} N m, half the torque range or more", i + 1, k + 1),
+            );
+        }
+    }
+    for k in 0..3 {
+        if !(a.uncertainty.velocity_power[k] == 1 || a.uncertainty.velocity_power[k] == 2) {
+            c.push(format!("{p}.uncertainty.velocity_power[{k}]"), PHYS, "must be 1 or 2 (eq. (61))");
+        }
+    }
+    if norm3(a.disturbance.direction) == 0.0 {
+        c.push(format!("{p}.disturbance.direction"), PHYS, "must be a non-zero vector");
+    }
+}
+
+fn norm3(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// Rejects NaN and infinities anywhere in the scenario (checked through its TOML form, so no field is
+/// forgotten).
+fn check_finite(s: &Scenario, c: &mut Collector) {
+    let value = match toml::Value::try_from(s) {
+        Ok(v) => v,
+        Err(e) => {
+            c.push("<scenario>", FINITE, format!("cannot inspect: {e}"));
+            return;
+        }
+    };
+    fn walk(path: &str, v: &toml::Value, c: &mut Collector) {
+        match v {
+            toml::Value::Float(f) if !f.is_finite() => c.push(path, FINITE, format!("got {f}")),
+            toml::Value::Array(items) => {
+                for (k, it) in items.iter().enumerate() {
+                    walk(&format!("{path}[{k}]"), it, c);
+                }
+            }
+            toml::Value::Table(t) => {
+                for (k, it) in t {
+                    let p = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                    walk(&p, it, c);
+                }
+            }
+            _ => {}
+        }
+    }
+    walk("", &value, c);
+}

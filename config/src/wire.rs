@@ -1,0 +1,241 @@
+//! Wire messages: `#[repr(C)]`, zero-copy, explicitly and versionedly named, each stamped with the
+//! simulation step and time.
+//!
+//! The in-process runner passes exactly these structs between the same library calls that the
+//! processes make, so that a lockstep run over iceoryx2 and an in-process run produce bit-identical
+//! trajectories.
+//!
+//! Data flow of step k (lockstep):
+//! 1. leader  -> agents : [`ReferenceFrame`] for t_k (and plant / orchestrator, for the metrics).
+//! 2. plant   -> agent i: [`VehicleState`] of quadrotor i at t_k.
+//! 3. agent i -> its neighbours: [`NeighborState`] (P_i, V_i at t_k), published as soon as step 2 arrives.
+//! 4. agent i -> plant  : [`ControlCommand`] for step k, computed from information stamped
+//!    t_k - tau_i(t_k) (its own, its neighbours', the leader's) and its current attitude and rate.
+//! 5. plant integrates [t_k, t_{k+1}] once all N commands of step k are in, and publishes
+//!    [`PlantTruth`] (at the output rate) for the recorder.
+//!
+//! Injections from the orchestrator: [`FaultInjection`] (-> plant), [`DelayInjection`] (-> agents).
+
+use crate::MAX_AGENTS;
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Plant -> agent i: the state of quadrotor i at step k (eq. (1)-(2) states).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.VehicleState")]
+pub struct VehicleState {
+    /// Simulation step k.
+    pub step: u64,
+    /// Simulation time t_k, s.
+    pub t: f64,
+    /// Agent index i (0-based).
+    pub agent: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Position P_i, m (inertial frame).
+    pub position: [f64; 3],
+    /// Velocity V_i, m/s.
+    pub velocity: [f64; 3],
+    /// Attitude A_i = [phi, theta, psi], rad.
+    pub attitude: [f64; 3],
+    /// Body rate Omega_i = [p, q, r], rad/s.
+    pub rate: [f64; 3],
+}
+
+/// Agent i -> neighbours: the information the paper exchanges, (P_i, V_i) at step k.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.NeighborState")]
+pub struct NeighborState {
+    /// Simulation step k at which the state was measured.
+    pub step: u64,
+    /// Simulation time t_k, s.
+    pub t: f64,
+    /// Sender agent index j (0-based).
+    pub agent: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Position P_j, m.
+    pub position: [f64; 3],
+    /// Velocity V_j, m/s.
+    pub velocity: [f64; 3],
+}
+
+/// Leader -> agents: virtual leader P_d and the formation offsets Delta_i0 = Lambda_i - Lambda_0 with
+/// their first and second derivatives, at step k.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.ReferenceFrame")]
+pub struct ReferenceFrame {
+    /// Simulation step k.
+    pub step: u64,
+    /// Simulation time t_k, s.
+    pub t: f64,
+    /// Number of valid entries in the offset arrays.
+    pub n_agents: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Ground target T_g, m.
+    pub target: [f64; 3],
+    /// Virtual leader P_d, m.
+    pub p_d: [f64; 3],
+    /// P_d', m/s.
+    pub v_d: [f64; 3],
+    /// P_d'', m/s².
+    pub a_d: [f64; 3],
+    /// Delta_i0, m.
+    pub offset: [[f64; 3]; MAX_AGENTS],
+    /// Delta_i0', m/s.
+    pub offset_vel: [[f64; 3]; MAX_AGENTS],
+    /// Delta_i0'', m/s².
+    pub offset_acc: [[f64; 3]; MAX_AGENTS],
+}
+
+impl Default for ReferenceFrame {
+    fn default() -> Self {
+        ReferenceFrame {
+            step: 0,
+            t: 0.0,
+            n_agents: 0,
+            _pad: 0,
+            target: [0.0; 3],
+            p_d: [0.0; 3],
+            v_d: [0.0; 3],
+            a_d: [0.0; 3],
+            offset: [[0.0; 3]; MAX_AGENTS],
+            offset_vel: [[0.0; 3]; MAX_AGENTS],
+            offset_acc: [[0.0; 3]; MAX_AGENTS],
+        }
+    }
+}
+
+/// What the controller computed at step k besides the command (recorded and shown by `inspect`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.ControllerTelemetry")]
+pub struct ControllerTelemetry {
+    /// Delay tau_i(t_k) the agent applied, s.
+    pub tau_s: f64,
+    /// Delayed local consensus error e_iP(t - tau_i), eq. (8), m.
+    pub e_p: [f64; 3],
+    /// Delayed local consensus error e_iV(t - tau_i), eq. (9), m/s.
+    pub e_v: [f64; 3],
+    /// Position control U_iP after the acceleration limits, eq. (14), m/s².
+    pub u_p: [f64; 3],
+    /// RBFNN output F-hat_iP = W-hat^T Psi, eq. (11), m/s².
+    pub f_hat: [f64; 3],
+    /// Frobenius norm of the RBFNN weights.
+    pub nn_weight_norm: f64,
+    /// Raw attitude command from eq. (28), rad.
+    pub attitude_cmd_raw: [f64; 3],
+    /// Filtered attitude command A_iC (command filter 1), rad.
+    pub attitude_cmd: [f64; 3],
+    /// Filtered virtual control alpha_i, rad/s.
+    pub alpha: [f64; 3],
+    /// Attitude error z_i1 = A_i - A_iC, rad.
+    pub z1: [f64; 3],
+    /// Rate error z_i2 = Omega_i - alpha_i, rad/s.
+    pub z2: [f64; 3],
+    /// Barrier value V_i1B, eq. (31).
+    pub blf1: f64,
+    /// Barrier value V_i2B, eq. (40).
+    pub blf2: f64,
+    /// Barrier width C_i1, rad.
+    pub c1: f64,
+    /// Barrier width C_i2, rad/s.
+    pub c2: f64,
+    /// Gamma-hat_i (diagonal), eq. (48).
+    pub gamma_hat: [f64; 3],
+    /// delta-hat_i, eq. (47), N m.
+    pub delta_hat: [f64; 3],
+    /// D-hat_iA, eq. (49), rad/s².
+    pub d_hat: f64,
+    /// Frobenius norm of Delta F-hat_i - I, eq. (46).
+    pub model_hat_dev: f64,
+    /// Auxiliary state E_i1, eq. (35).
+    pub e1: [f64; 3],
+    /// Auxiliary state E_i2, eq. (50).
+    pub e2: [f64; 3],
+}
+
+/// Agent i -> plant: total thrust and torque command U_iAC for step k, with the telemetry.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.ControlCommand")]
+pub struct ControlCommand {
+    /// Simulation step k the command is for.
+    pub step: u64,
+    /// Simulation time t_k, s.
+    pub t: f64,
+    /// Agent index i (0-based).
+    pub agent: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Total thrust T_iC, eq. (28), N.
+    pub thrust_n: f64,
+    /// Torque command U_iAC, eq. (43), N m (before the actuator faults and saturation).
+    pub torque_nm: [f64; 3],
+    /// Controller internals at step k.
+    pub telemetry: ControllerTelemetry,
+}
+
+/// Plant -> recorder: the true quantities of quadrotor i at step k that only the plant knows.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.PlantTruth")]
+pub struct PlantTruth {
+    /// The state at step k.
+    pub state: VehicleState,
+    /// Thrust applied over [t_k, t_k+1), N.
+    pub thrust_n: f64,
+    /// Torque U_iA applied over [t_k, t_k+1) after faults (4) and saturation (3), N m.
+    pub torque_applied_nm: [f64; 3],
+    /// Multiplicative fault Gamma_i(t_k) (diagonal).
+    pub gamma: [f64; 3],
+    /// Additive fault delta_i(t_k), N m.
+    pub delta: [f64; 3],
+    /// True lumped uncertainty F_iP(P_i, V_i, t_k), m/s².
+    pub uncertainty: [f64; 3],
+    /// True attitude disturbance D_iA(t_k), rad/s².
+    pub disturbance: [f64; 3],
+}
+
+/// Orchestrator -> plant: actuator fault override of agent i from step `step` on.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.FaultInjection")]
+pub struct FaultInjection {
+    /// First step the new fault applies to.
+    pub step: u64,
+    /// Time of that step, s.
+    pub t: f64,
+    /// Agent index i (0-based).
+    pub agent: u32,
+    /// 1: constant override (gamma, delta); 0: back to the scenario's profile.
+    pub mode: u32,
+    /// Multiplicative fault Gamma_i (diagonal), in (0, 1].
+    pub gamma: [f64; 3],
+    /// Additive fault delta_i, N m.
+    pub delta: [f64; 3],
+}
+
+/// Orchestrator -> agents: new delay profile of agent i from step `step` on.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.DelayInjection")]
+pub struct DelayInjection {
+    /// First step the new delay applies to.
+    pub step: u64,
+    /// Time of that step, s.
+    pub t: f64,
+    /// Agent index i (0-based).
+    pub agent: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// tau_i(t) = base + amplitude sin(rate t), s.
+    pub base_s: f64,
+    /// Amplitude, s.
+    pub amplitude_s: f64,
+    /// Angular rate, rad/s.
+    pub angular_rate_rad_s: f64,
+}

@@ -1,0 +1,10 @@
+//! Virtual leader P_d, ground target T_g and formation function Lambda_F of Section 4, with analytic
+//! first and second derivatives.
+//!
+//! Pure math: no IPC, no clock, no allocation per step. The process loop around it is `main.rs`.
+#![warn(missing_docs)]
+
+pub mod mission;
+pub mod smooth;
+
+pub use mission::Mission;

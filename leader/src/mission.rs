@@ -1,0 +1,162 @@
+//! The mission of Section 4: T_g, P_d and Lambda_F (see `formation_config::scenario::Mission` for the
+//! parameters and docs/deviations.md for our readings D1-D3).
+
+use crate::smooth::{rise, smooth_step, time, Jet};
+use formation_config::scenario::Scenario;
+use formation_config::wire::ReferenceFrame;
+use formation_config::MAX_AGENTS;
+
+/// Precomputed mission parameters.
+#[derive(Debug, Clone)]
+pub struct Mission {
+    n: usize,
+    target_radius: f64,
+    target_rate: f64,
+    convergence_rate: f64,
+    start_xy: [f64; 2],
+    cruise_altitude: f64,
+    climb_rate: f64,
+    descent: f64,
+    descent_sharpness: f64,
+    cover_radius: f64,
+    enclose_radius: f64,
+    radius_sharpness: f64,
+    spin_rate: f64,
+    spin_sharpness: f64,
+    phases: [f64; MAX_AGENTS],
+    t1: f64,
+    t2: f64,
+    t3: f64,
+}
+
+impl Mission {
+    /// Builds the mission of a (validated) scenario.
+    pub fn from_scenario(s: &Scenario) -> Mission {
+        let m = &s.mission;
+        let n = s.n_agents().min(MAX_AGENTS);
+        let start_xy = if m.leader.start_at_initial_centroid && n > 0 {
+            let mut c = [0.0; 2];
+            for a in &s.agents {
+                c[0] += a.initial_position_m[0] / n as f64;
+                c[1] += a.initial_position_m[1] / n as f64;
+            }
+            c
+        } else {
+            [0.0, 0.0]
+        };
+        let mut phases = [0.0; MAX_AGENTS];
+        for (i, p) in phases.iter_mut().enumerate().take(n) {
+            *p = m.formation.first_phase_rad + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+        }
+        Mission {
+            n,
+            target_radius: m.target.path_radius_m,
+            target_rate: m.target.angular_rate_rad_s,
+            convergence_rate: m.leader.convergence_rate,
+            start_xy,
+            cruise_altitude: m.leader.cruise_altitude_m,
+            climb_rate: m.leader.climb_rate,
+            descent: m.leader.descent_m,
+            descent_sharpness: m.leader.descent_sharpness,
+            cover_radius: m.formation.cover_radius_m,
+            enclose_radius: m.formation.enclose_radius_m,
+            radius_sharpness: m.formation.radius_sharpness,
+            spin_rate: m.formation.spin_rate_rad_s,
+            spin_sharpness: m.formation.spin_onset_sharpness,
+            phases,
+            t1: m.formation.t1_s,
+            t2: m.formation.t2_s,
+            t3: m.formation.t3_s,
+        }
+    }
+
+    /// Number of agents.
+    pub fn n_agents(&self) -> usize {
+        self.n
+    }
+
+    /// Ground target T_g(t) = [r sin(w t), r cos(w t), 0] with derivatives, per axis (x, y).
+    pub fn target(&self, t: f64) -> [Jet; 2] {
+        let (s, c) = time(t).scale(self.target_rate).sin_cos();
+        [s.scale(self.target_radius), c.scale(self.target_radius)]
+    }
+
+    /// Virtual leader P_d(t) with derivatives, per axis.
+    pub fn leader(&self, t: f64) -> [Jet; 3] {
+        let tg = self.target(t);
+        let s = rise(self.convergence_rate, t);
+        let one_minus_s = s.scale(-1.0).add(Jet::constant(1.0));
+        let x = s.mul(tg[0]).add(one_minus_s.scale(self.start_xy[0]));
+        let y = s.mul(tg[1]).add(one_minus_s.scale(self.start_xy[1]));
+        // h_t = descent (step(T3) - 1)... written as -descent * (1 - step_down), step_down = atan(k(T3-t))/pi + 1/2
+        // atan(k (T3 - t))/pi + 1/2 = 1 - smooth_step(k, T3, t)
+        let step = smooth_step(self.descent_sharpness, self.t3, t);
+        let h_t = step.scale(-self.descent);
+        let height = h_t.add(Jet::constant(self.cruise_altitude));
+        let z = height.mul(rise(self.climb_rate, t));
+        [x, y, z]
+    }
+
+    /// Ring radius A_t with derivatives.
+    pub fn radius(&self, t: f64) -> Jet {
+        // atan(k (T1 - t))/pi + 1/2 = 1 - smooth_step(k, T1, t)
+        let down = smooth_step(self.radius_sharpness, self.t1, t).scale(-1.0).add(Jet::constant(1.0));
+        down.scale(self.cover_radius - self.enclose_radius)
+            .add(Jet::constant(self.enclose_radius))
+    }
+
+    /// Spin angle w_t (t - T2) with derivatives (without the phase phi_i).
+    pub fn spin_angle(&self, t: f64) -> Jet {
+        let w = smooth_step(self.spin_sharpness, self.t2, t).scale(self.spin_rate);
+        let tau = Jet {
+            v: t - self.t2,
+            d: 1.0,
+            dd: 0.0,
+        };
+        w.mul(tau)
+    }
+
+    /// Lambda_i(t) of agent `i` (0-based), per axis (z is 0).
+    pub fn lambda(&self, i: usize, t: f64) -> [Jet; 2] {
+        let a = self.radius(t);
+        let angle = self.spin_angle(t).add(Jet::constant(self.phases[i]));
+        let (s, c) = angle.sin_cos();
+        [a.mul(c), a.mul(s)]
+    }
+
+    /// Fills the reference frame of step `step` at time `t`: T_g, P_d and derivatives, and
+    /// Delta_i0 = Lambda_i - Lambda_0 with derivatives for every agent.
+    pub fn reference(&self, step: u64, t: f64, out: &mut ReferenceFrame) {
+        out.step = step;
+        out.t = t;
+        out.n_agents = self.n as u32;
+        let tg = self.target(t);
+        out.target = [tg[0].v, tg[1].v, 0.0];
+        let pd = self.leader(t);
+        for k in 0..3 {
+            out.p_d[k] = pd[k].v;
+            out.v_d[k] = pd[k].d;
+            out.a_d[k] = pd[k].dd;
+        }
+        let mut mean = [Jet::default(); 2];
+        for i in 0..self.n {
+            let l = self.lambda(i, t);
+            for k in 0..2 {
+                out.offset[i][k] = l[k].v;
+                out.offset_vel[i][k] = l[k].d;
+                out.offset_acc[i][k] = l[k].dd;
+                mean[k] = mean[k].add(l[k].scale(1.0 / self.n as f64));
+            }
+            out.offset[i][2] = 0.0;
+            out.offset_vel[i][2] = 0.0;
+            out.offset_acc[i][2] = 0.0;
+        }
+        for i in 0..self.n {
+            for k in 0..2 {
+                out.offset[i][k] -= mean[k].v;
+                out.offset_vel[i][k] -= mean[k].d;
+                out.offset_acc[i][k] -= mean[k].dd;
+            }
+        }
+    }
+}

@@ -1,0 +1,95 @@
+//! Eq. (1)-(2) of one quadrotor and a fixed-step RK4 with the inputs held over the step.
+
+use crate::kinematics::{euler_rate_matrix, thrust_axis};
+use crate::perturbations::{disturbance, model_perturbation, uncertainty};
+use formation_config::scenario::AgentSpec;
+use nalgebra::Vector3;
+
+/// The twelve states of eq. (1)-(2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigidState {
+    /// Position P_i, m.
+    pub p: Vector3<f64>,
+    /// Velocity V_i, m/s.
+    pub v: Vector3<f64>,
+    /// Attitude A_i = [phi, theta, psi], rad.
+    pub a: Vector3<f64>,
+    /// Body rate Omega_i, rad/s.
+    pub w: Vector3<f64>,
+}
+
+impl RigidState {
+    fn axpy(&self, h: f64, d: &RigidState) -> RigidState {
+        RigidState {
+            p: self.p + d.p * h,
+            v: self.v + d.v * h,
+            a: self.a + d.a * h,
+            w: self.w + d.w * h,
+        }
+    }
+
+    /// True when every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.p.iter().chain(self.v.iter()).chain(self.a.iter()).chain(self.w.iter()).all(|x| x.is_finite())
+    }
+}
+
+/// Physical parameters of one quadrotor.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Body {
+    /// Mass m_i, kg.
+    pub mass: f64,
+    /// Diagonal of J_i, kg m².
+    pub inertia: Vector3<f64>,
+    /// Diagonal of K_iD, N m s/rad.
+    pub drag: Vector3<f64>,
+    /// Gravity g, m/s².
+    pub gravity: f64,
+}
+
+/// Inputs held over one step: thrust T_i and the delivered torque U_iA (after faults and saturation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldInput {
+    /// Total thrust, N.
+    pub thrust: f64,
+    /// Delivered torque U_iA, N m.
+    pub torque: Vector3<f64>,
+}
+
+/// F_iA = -J^-1 S(Omega) J Omega - J^-1 K_D Omega of eq. (2).
+pub fn rotational_drift(body: &Body, w: &Vector3<f64>) -> Vector3<f64> {
+    let jw = w.component_mul(&body.inertia);
+    let gyro = w.cross(&jw);
+    -(gyro + body.drag.component_mul(w)).component_div(&body.inertia)
+}
+
+/// Time derivative of the state under eq. (1)-(2).
+pub fn derivative(body: &Body, spec: &AgentSpec, x: &RigidState, u: &HeldInput, t: f64) -> RigidState {
+    let f_p = uncertainty(&spec.uncertainty, &x.p, &x.v);
+    let acc = thrust_axis(&x.a) * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
+    let a_dot = euler_rate_matrix(&x.a) * x.w;
+    let delta_f = model_perturbation(&spec.model_perturbation, t);
+    let w_dot = delta_f * rotational_drift(body, &x.w)
+        + u.torque.component_div(&body.inertia)
+        + disturbance(&spec.disturbance, t);
+    RigidState {
+        p: x.v,
+        v: acc,
+        a: a_dot,
+        w: w_dot,
+    }
+}
+
+/// One classical RK4 step of length `h` from time `t`, inputs held.
+pub fn rk4(body: &Body, spec: &AgentSpec, x: &RigidState, u: &HeldInput, t: f64, h: f64) -> RigidState {
+    let k1 = derivative(body, spec, x, u, t);
+    let k2 = derivative(body, spec, &x.axpy(0.5 * h, &k1), u, t + 0.5 * h);
+    let k3 = derivative(body, spec, &x.axpy(0.5 * h, &k2), u, t + 0.5 * h);
+    let k4 = derivative(body, spec, &x.axpy(h, &k3), u, t + h);
+    RigidState {
+        p: x.p + (k1.p + (k2.p + k3.p) * 2.0 + k4.p) * (h / 6.0),
+        v: x.v + (k1.v + (k2.v + k3.v) * 2.0 + k4.v) * (h / 6.0),
+        a: x.a + (k1.a + (k2.a + k3.a) * 2.0 + k4.a) * (h / 6.0),
+        w: x.w + (k1.w + (k2.w + k3.w) * 2.0 + k4.w) * (h / 6.0),
+    }
+}

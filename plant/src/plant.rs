@@ -1,0 +1,167 @@
+//! N quadrotors stepped together: the plant of a run.
+
+use crate::dynamics::{rk4, Body, HeldInput, RigidState};
+use crate::faults::{actuate, FaultModel};
+use crate::perturbations::{disturbance, uncertainty};
+use formation_config::scenario::{AgentSpec, Scenario};
+use formation_config::wire::{ControlCommand, FaultInjection, PlantTruth, VehicleState};
+use nalgebra::Vector3;
+
+/// One quadrotor: its body, its perturbation profiles, its faults, its state and held input.
+#[derive(Debug, Clone)]
+struct Vehicle {
+    spec: AgentSpec,
+    faults: FaultModel,
+    state: RigidState,
+    input: HeldInput,
+    gamma: Vector3<f64>,
+    delta: Vector3<f64>,
+}
+
+/// The plant: N quadrotors, the step counter and the shared body parameters.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    body: Body,
+    torque_lo: Vector3<f64>,
+    torque_hi: Vector3<f64>,
+    thrust_max: f64,
+    dt: f64,
+    step: u64,
+    vehicles: Vec<Vehicle>,
+}
+
+impl Plant {
+    /// Builds the plant of a (validated) scenario at step 0, every quadrotor at its initial state
+    /// with hover thrust held.
+    pub fn from_scenario(s: &Scenario) -> Plant {
+        let v = &s.vehicle;
+        let body = Body {
+            mass: v.mass_kg,
+            inertia: Vector3::from(v.inertia_kg_m2),
+            drag: Vector3::from(v.rotational_drag),
+            gravity: s.simulation.gravity_m_s2,
+        };
+        let vehicles = s
+            .agents
+            .iter()
+            .map(|a| {
+                let faults = FaultModel::new(&a.fault);
+                let (gamma, delta) = faults.at(0, 0.0);
+                Vehicle {
+                    spec: a.clone(),
+                    faults,
+                    state: RigidState {
+                        p: Vector3::from(a.initial_position_m),
+                        v: Vector3::zeros(),
+                        a: Vector3::from(a.initial_attitude_rad),
+                        w: Vector3::zeros(),
+                    },
+                    input: HeldInput {
+                        thrust: body.mass * body.gravity,
+                        torque: Vector3::zeros(),
+                    },
+                    gamma,
+                    delta,
+                }
+            })
+            .collect();
+        Plant {
+            body,
+            torque_lo: Vector3::from(v.torque_min_nm),
+            torque_hi: Vector3::from(v.torque_max_nm),
+            thrust_max: v.thrust_max_n,
+            dt: s.simulation.dt_s,
+            step: 0,
+            vehicles,
+        }
+    }
+
+    /// Number of quadrotors.
+    pub fn n(&self) -> usize {
+        self.vehicles.len()
+    }
+
+    /// Current step k.
+    pub fn step_index(&self) -> u64 {
+        self.step
+    }
+
+    /// Current time t_k = k dt, s.
+    pub fn time(&self) -> f64 {
+        self.step as f64 * self.dt
+    }
+
+    /// The state message of quadrotor `i` at the current step.
+    pub fn vehicle_state(&self, i: usize) -> VehicleState {
+        let x = &self.vehicles[i].state;
+        VehicleState {
+            step: self.step,
+            t: self.time(),
+            agent: i as u32,
+            _pad: 0,
+            position: x.p.into(),
+            velocity: x.v.into(),
+            attitude: x.a.into(),
+            rate: x.w.into(),
+        }
+    }
+
+    /// The rigid-body state of quadrotor `i`.
+    pub fn rigid_state(&self, i: usize) -> &RigidState {
+        &self.vehicles[i].state
+    }
+
+    /// Sets the inputs of quadrotor `i` for the current step from its command: the thrust is clamped
+    /// to [0, T_max], the torque goes through the faults (4) and the saturation (3).
+    pub fn apply(&mut self, i: usize, cmd: &ControlCommand) {
+        let t = self.time();
+        let step = self.step;
+        let veh = &mut self.vehicles[i];
+        let (gamma, delta) = veh.faults.at(step, t);
+        veh.gamma = gamma;
+        veh.delta = delta;
+        let u_ac = Vector3::from(cmd.torque_nm);
+        veh.input = HeldInput {
+            thrust: cmd.thrust_n.clamp(0.0, self.thrust_max),
+            torque: actuate(&u_ac, &gamma, &delta, &self.torque_lo, &self.torque_hi),
+        };
+        if cmd.thrust_n.is_nan() {
+            veh.input.thrust = f64::NAN;
+        }
+    }
+
+    /// What only the plant knows about quadrotor `i` at the current step (after [`Plant::apply`]).
+    pub fn truth(&self, i: usize) -> PlantTruth {
+        let veh = &self.vehicles[i];
+        let x = &veh.state;
+        PlantTruth {
+            state: self.vehicle_state(i),
+            thrust_n: veh.input.thrust,
+            torque_applied_nm: veh.input.torque.into(),
+            gamma: veh.gamma.into(),
+            delta: veh.delta.into(),
+            uncertainty: uncertainty(&veh.spec.uncertainty, &x.p, &x.v).into(),
+            disturbance: disturbance(&veh.spec.disturbance, self.time()).into(),
+        }
+    }
+
+    /// Integrates every quadrotor over [t_k, t_k+1] with its held inputs and advances k.
+    pub fn advance(&mut self) {
+        let t = self.time();
+        for veh in &mut self.vehicles {
+            veh.state = rk4(&self.body, &veh.spec, &veh.state, &veh.input, t, self.dt);
+        }
+        self.step += 1;
+    }
+
+    /// Applies a fault injection (constant override, or back to the profile).
+    pub fn inject_fault(&mut self, inj: &FaultInjection) {
+        if let Some(veh) = self.vehicles.get_mut(inj.agent as usize) {
+            veh.faults.override_from = if inj.mode == 1 {
+                Some((inj.step, Vector3::from(inj.gamma), Vector3::from(inj.delta)))
+            } else {
+                None
+            };
+        }
+    }
+}
