@@ -1,0 +1,49 @@
+//! `formation`: the orchestrator CLI.
+//!
+//! * `sim`     — the whole closed loop in one process (fast; tests and sweeps).
+//! * `run`     — one OS process per quadrotor, plant and leader over iceoryx2 (the product).
+//! * `plot`    — the paper's figures from a run directory.
+//! * `check`   — what decides whether a gain set can work (graph spectrum, Theorem 1, bandwidths).
+//! * `bench`   — IPC latency and jitter: iceoryx2 vs Unix sockets vs UDP.
+#![warn(missing_docs)]
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+mod bench;
+mod check;
+mod cli;
+mod plot;
+mod record;
+mod sim;
+
+/// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
+#[derive(Parser, Debug)]
+#[command(name = "formation", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Run the closed loop in one process and write trajectory.csv and summary.json.
+    Sim(sim::SimArgs),
+    /// Render the paper's figures (PNG) from one run directory (or two, to compare variants).
+    Plot(plot::PlotArgs),
+    /// Print the graph spectrum, Theorem 1's matrix M and the loop bandwidths of a scenario.
+    Check(check::CheckArgs),
+    /// Measure IPC latency and jitter (iceoryx2, Unix domain sockets, UDP loopback).
+    Bench(bench::BenchArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::Sim(a)) => sim::main(a),
+        Some(Command::Plot(a)) => plot::main(a),
+        Some(Command::Check(a)) => check::main(a),
+        Some(Command::Bench(a)) => bench::main(a),
+        None => sim::main(sim::SimArgs::default()),
+    }
+}
