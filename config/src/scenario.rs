@@ -232,6 +232,11 @@ pub struct PositionGains {
     /// Add the leader's acceleration P_d'' (delayed) to U_iP. Paper: false (14 has only Delta_i0'').
     /// Ours: true — see docs/deviations.md (D4).
     pub reference_acceleration_feedforward: bool,
+    /// Leader-relative velocity damping k_L: U_iP gets -k_L (V_i - P_d' - Delta_i0') on the delayed
+    /// information every agent receives from the leader, 1/s. Paper: 0 (no such term).
+    /// Ours: see docs/deviations.md (D11) — lifts the slowest consensus mode above the negative damping
+    /// of the uncertainties (61) without speeding up the fastest one.
+    pub leader_velocity_damping: f64,
     /// Largest horizontal norm of U_iP, m/s². Paper: none (infinite). Ours: 3.0 (D5).
     pub max_horizontal_accel_m_s2: f64,
     /// Largest upward U_i3P, m/s². Paper: none. Ours: 4.0 (D5).

@@ -100,7 +100,9 @@ impl Mission {
     /// Ring radius A_t with derivatives.
     pub fn radius(&self, t: f64) -> Jet {
         // atan(k (T1 - t))/pi + 1/2 = 1 - smooth_step(k, T1, t)
-        let down = smooth_step(self.radius_sharpness, self.t1, t).scale(-1.0).add(Jet::constant(1.0));
+        let down = smooth_step(self.radius_sharpness, self.t1, t)
+            .scale(-1.0)
+            .add(Jet::constant(1.0));
         down.scale(self.cover_radius - self.enclose_radius)
             .add(Jet::constant(self.enclose_radius))
     }

@@ -84,5 +84,9 @@ pub fn smooth_step(k: f64, t0: f64, t: f64) -> Jet {
 
 /// The time itself.
 pub fn time(t: f64) -> Jet {
-    Jet { v: t, d: 1.0, dd: 0.0 }
+    Jet {
+        v: t,
+        d: 1.0,
+        dd: 0.0,
+    }
 }

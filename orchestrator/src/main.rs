@@ -14,7 +14,7 @@ mod bench;
 mod check;
 mod cli;
 mod plot;
-mod record;
+pub mod record;
 mod sim;
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).

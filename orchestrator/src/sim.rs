@@ -1,12 +1,127 @@
-//! `formation sim` (in progress).
+//! `formation sim`: the whole closed loop in one process. The loop passes the same wire messages
+//! between the same library calls as the processes of `formation run` do.
 
+use crate::cli;
+use crate::record::{Recorder, Summary};
+use formation_agent::Agent;
+use formation_config::wire::{
+    ControlCommand, NeighborState, PlantTruth, ReferenceFrame, VehicleState,
+};
+use formation_config::{Scenario, Variant};
+use formation_leader::Mission;
+use formation_plant::Plant;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::time::Instant;
 
 /// Arguments of `formation sim`.
 #[derive(clap::Args, Debug, Default)]
-pub struct SimArgs {}
+pub struct SimArgs {
+    /// Scenario: `paper` (default), `paper-exact`, or a TOML file.
+    pub scenario: Option<String>,
+    /// Controller variant: proposed, no-rbfnn, unconstrained.
+    #[arg(long, default_value = "proposed")]
+    pub variant: String,
+    /// Output directory (default: out/<scenario>-<variant>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Override a scenario parameter, e.g. `--set controller.position.k_p=1.5` (repeatable).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub sets: Vec<String>,
+    /// Print only the summary JSON path (for scripts).
+    #[arg(long)]
+    pub quiet: bool,
+}
 
 /// Entry point of `formation sim`.
-pub fn main(_args: SimArgs) -> ExitCode {
-    ExitCode::from(1)
+pub fn main(args: SimArgs) -> ExitCode {
+    let scenario = match cli::load_with_overrides(args.scenario.as_deref(), &args.sets) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
+    let variant = match cli::parse_variant(if args.variant.is_empty() {
+        "proposed"
+    } else {
+        &args.variant
+    }) {
+        Ok(v) => v,
+        Err(code) => return code,
+    };
+    let out = args
+        .out
+        .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}", scenario.name, variant.name())));
+    match run_in_process(&scenario, variant, &out) {
+        Ok(summary) => {
+            if args.quiet {
+                println!("{}", out.join("summary.json").display());
+            } else {
+                summary.print_table();
+                println!("wrote {}/trajectory.csv and summary.json", out.display());
+            }
+            if let Some(d) = &summary.divergence {
+                eprintln!(
+                    "diverged: t = {:.3} s, agent {}: {} (outputs up to that step are written)",
+                    d.time_s, d.agent, d.cause
+                );
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: cannot write outputs to {}: {e}", out.display());
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Runs the closed loop of `scenario` with `variant` in this process, writing the outputs to `out`.
+/// Stops at the end of the scenario or at the first divergence.
+pub fn run_in_process(
+    scenario: &Scenario,
+    variant: Variant,
+    out: &Path,
+) -> std::io::Result<Summary> {
+    let start = Instant::now();
+    let n = scenario.n_agents();
+    let mut plant = Plant::from_scenario(scenario);
+    let mission = Mission::from_scenario(scenario);
+    let mut agents: Vec<Agent> = (0..n).map(|i| Agent::new(scenario, i, variant)).collect();
+    let neighbours: Vec<Vec<usize>> = agents.iter().map(|a| a.neighbour_ids().collect()).collect();
+    let mut recorder = Recorder::create(scenario, variant, "in-process", out)?;
+    let mut reference = ReferenceFrame::default();
+    let mut states = vec![VehicleState::default(); n];
+    let mut shares = vec![NeighborState::default(); n];
+    let mut commands = vec![ControlCommand::default(); n];
+    let mut truths = vec![PlantTruth::default(); n];
+    let dt = scenario.simulation.dt_s;
+    let steps = scenario.n_steps();
+    let mut done = 0;
+    for k in 0..steps {
+        mission.reference(k, k as f64 * dt, &mut reference);
+        for a in agents.iter_mut() {
+            a.observe_reference(&reference);
+        }
+        for i in 0..n {
+            states[i] = plant.vehicle_state(i);
+            shares[i] = agents[i].observe_own(&states[i]);
+        }
+        for i in 0..n {
+            for &j in &neighbours[i] {
+                agents[i].observe_neighbor(&shares[j]);
+            }
+        }
+        for i in 0..n {
+            commands[i] = agents[i].step(&states[i]);
+            plant.apply(i, &commands[i]);
+            truths[i] = plant.truth(i);
+        }
+        done = k + 1;
+        if recorder
+            .record(k, &reference, &truths, &commands)?
+            .is_some()
+        {
+            break;
+        }
+        plant.advance();
+    }
+    recorder.finish(done, start.elapsed().as_secs_f64())
 }

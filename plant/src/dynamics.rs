@@ -30,7 +30,12 @@ impl RigidState {
 
     /// True when every component is finite.
     pub fn is_finite(&self) -> bool {
-        self.p.iter().chain(self.v.iter()).chain(self.a.iter()).chain(self.w.iter()).all(|x| x.is_finite())
+        self.p
+            .iter()
+            .chain(self.v.iter())
+            .chain(self.a.iter())
+            .chain(self.w.iter())
+            .all(|x| x.is_finite())
     }
 }
 
@@ -56,20 +61,27 @@ pub struct HeldInput {
     pub torque: Vector3<f64>,
 }
 
-/// F_iA = -J^-1 S(Omega) J Omega - J^-1 K_D Omega of eq. (2).
-pub fn rotational_drift(body: &Body, w: &Vector3<f64>) -> Vector3<f64> {
-    let jw = w.component_mul(&body.inertia);
-    let gyro = w.cross(&jw);
-    -(gyro + body.drag.component_mul(w)).component_div(&body.inertia)
+/// F_iA = -J^-1 S(Omega) J Omega - J^-1 K_D Omega of eq. (2) for the inertia diagonal `j` and the
+/// damping diagonal `drag` (also the controller's nominal model).
+pub fn rotational_drift(j: &Vector3<f64>, drag: &Vector3<f64>, w: &Vector3<f64>) -> Vector3<f64> {
+    let jw = w.component_mul(j);
+    -(w.cross(&jw) + drag.component_mul(w)).component_div(j)
 }
 
 /// Time derivative of the state under eq. (1)-(2).
-pub fn derivative(body: &Body, spec: &AgentSpec, x: &RigidState, u: &HeldInput, t: f64) -> RigidState {
+pub fn derivative(
+    body: &Body,
+    spec: &AgentSpec,
+    x: &RigidState,
+    u: &HeldInput,
+    t: f64,
+) -> RigidState {
     let f_p = uncertainty(&spec.uncertainty, &x.p, &x.v);
-    let acc = thrust_axis(&x.a) * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
+    let acc =
+        thrust_axis(&x.a) * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
     let a_dot = euler_rate_matrix(&x.a) * x.w;
     let delta_f = model_perturbation(&spec.model_perturbation, t);
-    let w_dot = delta_f * rotational_drift(body, &x.w)
+    let w_dot = delta_f * rotational_drift(&body.inertia, &body.drag, &x.w)
         + u.torque.component_div(&body.inertia)
         + disturbance(&spec.disturbance, t);
     RigidState {
@@ -81,7 +93,14 @@ pub fn derivative(body: &Body, spec: &AgentSpec, x: &RigidState, u: &HeldInput, 
 }
 
 /// One classical RK4 step of length `h` from time `t`, inputs held.
-pub fn rk4(body: &Body, spec: &AgentSpec, x: &RigidState, u: &HeldInput, t: f64, h: f64) -> RigidState {
+pub fn rk4(
+    body: &Body,
+    spec: &AgentSpec,
+    x: &RigidState,
+    u: &HeldInput,
+    t: f64,
+    h: f64,
+) -> RigidState {
     let k1 = derivative(body, spec, x, u, t);
     let k2 = derivative(body, spec, &x.axpy(0.5 * h, &k1), u, t + 0.5 * h);
     let k3 = derivative(body, spec, &x.axpy(0.5 * h, &k2), u, t + 0.5 * h);

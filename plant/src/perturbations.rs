@@ -8,7 +8,11 @@ use nalgebra::{Matrix3, Vector3};
 pub fn uncertainty(u: &UncertaintySpec, p: &Vector3<f64>, v: &Vector3<f64>) -> Vector3<f64> {
     let mut f = Vector3::zeros();
     for k in 0..3 {
-        let vk = if u.velocity_power[k] == 2 { v[k] * v[k] } else { v[k] };
+        let vk = if u.velocity_power[k] == 2 {
+            v[k] * v[k]
+        } else {
+            v[k]
+        };
         f[k] = u.gain[k] * (u.position_coeff[k] * p[k] + vk).sin();
     }
     f

@@ -1,0 +1,282 @@
+//! One quadrotor's controller as a message-driven node: it observes messages (its own state, its
+//! neighbours' states, the reference frame, delay injections) and, once it holds everything step k
+//! needs, computes the command of step k. The process loop and the in-process runner drive it the
+//! same way, which is what makes their trajectories bit-identical.
+
+use crate::attitude::AttitudeLoop;
+use crate::command_filter::CommandFilter;
+use crate::conversion::thrust_and_attitude;
+use crate::delay::{delay_steps, StepHistory};
+use crate::params::AgentParams;
+use crate::position::{consensus_errors, control_law, LeaderInfo, Member};
+use crate::rbfnn::{uniform, Rbfnn};
+use formation_config::scenario::{DelaySpec, Scenario};
+use formation_config::wire::{
+    ControlCommand, ControllerTelemetry, DelayInjection, NeighborState, ReferenceFrame,
+    VehicleState,
+};
+use formation_config::Variant;
+use nalgebra::Vector3;
+
+/// Offset Delta_j0 with its derivatives, as carried by the reference frame.
+type Offsets = [[f64; 3]; 3];
+
+/// Own position and velocity at one step.
+type Kinematic = ([f64; 3], [f64; 3]);
+
+/// The controller of agent i with its delay buffers.
+#[derive(Debug, Clone)]
+pub struct Agent {
+    p: AgentParams,
+    own: StepHistory<Kinematic>,
+    neighbours: Vec<StepHistory<Kinematic>>,
+    leader: StepHistory<LeaderInfo>,
+    /// Index 0: this agent's offsets; then one per neighbour, in `p.neighbours` order.
+    offsets: Vec<StepHistory<Offsets>>,
+    nn: Rbfnn,
+    attitude_filter: CommandFilter,
+    attitude: AttitudeLoop,
+    delay_override: Option<(u64, DelaySpec)>,
+}
+
+impl Agent {
+    /// The controller of agent `id` (0-based) of a validated scenario.
+    pub fn new(s: &Scenario, id: usize, variant: Variant) -> Agent {
+        Agent::from_params(AgentParams::from_scenario(s, id, variant))
+    }
+
+    /// The controller for explicit parameters.
+    pub fn from_params(p: AgentParams) -> Agent {
+        // Room for tau_M plus a few steps of slack.
+        let capacity = (p.max_delay / p.dt).ceil() as usize + 4;
+        let nn_spec = &p.gains.rbfnn;
+        let seed = nn_spec.seed.wrapping_add(p.id as u64 * 7919);
+        let amp = nn_spec.initial_weight_amplitude;
+        let nn = Rbfnn::new(
+            nn_spec.neurons_per_axis,
+            nn_spec.position_span_m,
+            nn_spec.velocity_span_m_s,
+            nn_spec.spread,
+            |k, j| amp * uniform(seed, k, j),
+        );
+        let attitude_filter =
+            CommandFilter::new(&p.gains.attitude_command_filter, p.initial_attitude);
+        let attitude = AttitudeLoop::new(&p);
+        let n_nb = p.neighbours.len();
+        Agent {
+            own: StepHistory::new(capacity),
+            neighbours: (0..n_nb).map(|_| StepHistory::new(capacity)).collect(),
+            leader: StepHistory::new(capacity),
+            offsets: (0..=n_nb).map(|_| StepHistory::new(capacity)).collect(),
+            nn,
+            attitude_filter,
+            attitude,
+            delay_override: None,
+            p,
+        }
+    }
+
+    /// Agent index i (0-based).
+    pub fn id(&self) -> usize {
+        self.p.id
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &AgentParams {
+        &self.p
+    }
+
+    /// Neighbour indices j (0-based) whose [`NeighborState`] this agent needs.
+    pub fn neighbour_ids(&self) -> impl Iterator<Item = usize> + '_ {
+        self.p.neighbours.iter().map(|(j, _)| *j)
+    }
+
+    /// Records the agent's own state of step k and returns the message to share with its neighbours.
+    pub fn observe_own(&mut self, s: &VehicleState) -> NeighborState {
+        self.own.push(s.step, (s.position, s.velocity));
+        NeighborState {
+            step: s.step,
+            t: s.t,
+            agent: self.p.id as u32,
+            _pad: 0,
+            position: s.position,
+            velocity: s.velocity,
+        }
+    }
+
+    /// Records a neighbour's shared state (messages from non-neighbours are ignored).
+    pub fn observe_neighbor(&mut self, m: &NeighborState) {
+        if let Some(idx) = self
+            .p
+            .neighbours
+            .iter()
+            .position(|(j, _)| *j == m.agent as usize)
+        {
+            self.neighbours[idx].push(m.step, (m.position, m.velocity));
+        }
+    }
+
+    /// Records the part of a reference frame this agent needs (P_d and the offsets of itself and its
+    /// neighbours).
+    pub fn observe_reference(&mut self, r: &ReferenceFrame) {
+        self.leader.push(
+            r.step,
+            LeaderInfo {
+                p: r.p_d,
+                v: r.v_d,
+                a: r.a_d,
+            },
+        );
+        let me = self.p.id;
+        self.offsets[0].push(r.step, [r.offset[me], r.offset_vel[me], r.offset_acc[me]]);
+        for (idx, (j, _)) in self.p.neighbours.iter().enumerate() {
+            self.offsets[idx + 1].push(r.step, [r.offset[*j], r.offset_vel[*j], r.offset_acc[*j]]);
+        }
+    }
+
+    /// Replaces the delay profile from the injection's step on.
+    pub fn set_delay(&mut self, inj: &DelayInjection) {
+        if inj.agent as usize == self.p.id {
+            self.delay_override = Some((
+                inj.step,
+                DelaySpec {
+                    base_s: inj.base_s,
+                    amplitude_s: inj.amplitude_s,
+                    angular_rate_rad_s: inj.angular_rate_rad_s,
+                },
+            ));
+        }
+    }
+
+    /// tau_i at step k, s, clamped to [0, tau_M].
+    pub fn delay_at(&self, step: u64) -> f64 {
+        let t = step as f64 * self.p.dt;
+        match &self.delay_override {
+            Some((from, d)) if step >= *from => (d.base_s
+                + d.amplitude_s * (d.angular_rate_rad_s * t).sin())
+            .clamp(0.0, self.p.max_delay),
+            _ => self.p.delay_at(t),
+        }
+    }
+
+    /// The step k - tau_i(t_k)/dt whose information the control of step k uses.
+    pub fn delayed_step(&self, step: u64) -> u64 {
+        let d = delay_steps(self.delay_at(step), self.p.dt).min(self.own.capacity() as u64 - 2);
+        step.saturating_sub(d)
+    }
+
+    /// True when everything the control of step k needs has been observed: the own state of k and the
+    /// own, neighbour and leader information of the delayed step.
+    pub fn ready(&self, step: u64) -> bool {
+        let kd = self.delayed_step(step);
+        self.own.has(step)
+            && self.own.has(kd)
+            && self.leader.has(kd)
+            && self.offsets.iter().all(|h| h.has(kd))
+            && self.neighbours.iter().all(|h| h.has(kd))
+    }
+
+    /// Computes the command of step k from the current attitude and rate in `own` and the delayed
+    /// information, then advances the controller's internal states by dt.
+    pub fn step(&mut self, own: &VehicleState) -> ControlCommand {
+        let k = own.step;
+        let tau = self.delay_at(k);
+        let kd = self.delayed_step(k);
+        let g = &self.p.gains;
+        let (p_d, v_d) = self
+            .own
+            .at_or_before(kd)
+            .unwrap_or((own.position, own.velocity));
+        let zero: Offsets = [[0.0; 3]; 3];
+        let off = self.offsets[0].at_or_before(kd).unwrap_or(zero);
+        let me = Member {
+            p: p_d,
+            v: v_d,
+            off: off[0],
+            off_v: off[1],
+            off_a: off[2],
+        };
+        let leader = self.leader.at_or_before(kd).unwrap_or_default();
+        let neighbours = self.p.neighbours.iter().enumerate().map(|(idx, (_, a))| {
+            let (p, v) = self.neighbours[idx].at_or_before(kd).unwrap_or((p_d, v_d));
+            let o = self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero);
+            (
+                *a,
+                Member {
+                    p,
+                    v,
+                    off: o[0],
+                    off_v: o[1],
+                    off_a: o[2],
+                },
+            )
+        });
+        let (ep, ev) = consensus_errors(&me, neighbours, self.p.leader_weight, &leader);
+
+        // RBFNN (11) and its update (15).
+        let use_nn = self.p.variant != Variant::NoRbfnn;
+        let f_hat = if use_nn {
+            self.nn.evaluate(p_d, v_d)
+        } else {
+            [0.0; 3]
+        };
+        let u_p = control_law(&g.position, self.p.gravity, ep, ev, f_hat, &me, &leader);
+        if use_nn {
+            let pg = &g.position;
+            let drive = [
+                pg.nn_k_p * ep[0] + pg.nn_k_v * ev[0],
+                pg.nn_k_p * ep[1] + pg.nn_k_v * ev[1],
+                pg.nn_k_p * ep[2] + pg.nn_k_v * ev[2],
+            ];
+            self.nn
+                .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
+        }
+
+        // Command conversion (28) with psi_iC = 0, tilt-limited.
+        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
+        let tilt = g.position.max_tilt_rad;
+        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
+        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
+
+        // Attitude loop on the filtered command (command filter 1).
+        let a_c = Vector3::from(self.attitude_filter.value());
+        let a_c_dot = Vector3::from(self.attitude_filter.derivative());
+        let a = Vector3::from(own.attitude);
+        let w = Vector3::from(own.rate);
+        let out = self.attitude.step(&self.p, &a, &w, &a_c, &a_c_dot);
+        self.attitude_filter.advance(att_raw, self.p.dt);
+
+        let at = &self.attitude;
+        ControlCommand {
+            step: k,
+            t: own.t,
+            agent: self.p.id as u32,
+            _pad: 0,
+            thrust_n: thrust,
+            torque_nm: out.torque.into(),
+            telemetry: ControllerTelemetry {
+                tau_s: tau,
+                e_p: ep,
+                e_v: ev,
+                u_p,
+                f_hat,
+                nn_weight_norm: if use_nn { self.nn.weight_norm() } else { 0.0 },
+                attitude_cmd_raw: att_raw,
+                attitude_cmd: a_c.into(),
+                alpha: out.alpha.into(),
+                z1: out.z1.into(),
+                z2: out.z2.into(),
+                blf1: out.blf1,
+                blf2: out.blf2,
+                c1: out.c1,
+                c2: out.c2,
+                gamma_hat: at.gamma_hat.into(),
+                delta_hat: at.delta_hat.into(),
+                d_hat: at.d_hat,
+                model_hat_dev: (at.model_hat - nalgebra::Matrix3::identity()).norm(),
+                e1: at.e1.into(),
+                e2: at.e2.into(),
+            },
+        }
+    }
+}

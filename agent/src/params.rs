@@ -1,0 +1,71 @@
+//! Parameters of one agent, taken from the scenario once at construction.
+
+use formation_config::graph::Topology;
+use formation_config::scenario::{Controller, DelaySpec, Scenario};
+use formation_config::Variant;
+
+/// Everything agent i needs to know that does not change during a run (except the delay profile,
+/// which the orchestrator may replace).
+#[derive(Debug, Clone)]
+pub struct AgentParams {
+    /// Agent index i (0-based).
+    pub id: usize,
+    /// Controller variant.
+    pub variant: Variant,
+    /// Neighbours j with weights a_ij (0-based, ascending).
+    pub neighbours: Vec<(usize, f64)>,
+    /// Leader weight b_i.
+    pub leader_weight: f64,
+    /// Step dt, s.
+    pub dt: f64,
+    /// Delay bound tau_M, s.
+    pub max_delay: f64,
+    /// Gravity g, m/s².
+    pub gravity: f64,
+    /// Mass m_i (nominal, known to the controller), kg.
+    pub mass: f64,
+    /// Inertia diagonal J_i (nominal), kg m².
+    pub inertia: [f64; 3],
+    /// Rotational drag K_iD (nominal).
+    pub drag: [f64; 3],
+    /// Torque limits (the controller knows its actuators' ranges), N m.
+    pub torque_min: [f64; 3],
+    /// Torque limits, N m.
+    pub torque_max: [f64; 3],
+    /// Initial attitude, rad (the command filter starts there).
+    pub initial_attitude: [f64; 3],
+    /// Delay profile tau_i(t).
+    pub delay: DelaySpec,
+    /// All controller gains.
+    pub gains: Controller,
+}
+
+impl AgentParams {
+    /// Parameters of agent `id` (0-based) of a validated scenario.
+    pub fn from_scenario(s: &Scenario, id: usize, variant: Variant) -> AgentParams {
+        let topo = Topology::from_scenario(s);
+        AgentParams {
+            id,
+            variant,
+            neighbours: topo.neighbours[id].clone(),
+            leader_weight: topo.leader_weights[id],
+            dt: s.simulation.dt_s,
+            max_delay: s.simulation.max_delay_s,
+            gravity: s.simulation.gravity_m_s2,
+            mass: s.vehicle.mass_kg,
+            inertia: s.vehicle.inertia_kg_m2,
+            drag: s.vehicle.rotational_drag,
+            torque_min: s.vehicle.torque_min_nm,
+            torque_max: s.vehicle.torque_max_nm,
+            initial_attitude: s.agents[id].initial_attitude_rad,
+            delay: s.agents[id].delay.clone(),
+            gains: s.controller.clone(),
+        }
+    }
+
+    /// tau_i(t), s, clamped to [0, tau_M] (Assumption 2).
+    pub fn delay_at(&self, t: f64) -> f64 {
+        let d = &self.delay;
+        (d.base_s + d.amplitude_s * (d.angular_rate_rad_s * t).sin()).clamp(0.0, self.max_delay)
+    }
+}

@@ -1,0 +1,93 @@
+//! NTDPC: the local consensus errors (8)-(9) and the position control law (14), followed by the
+//! acceleration and tilt limits we add (docs/deviations.md D5).
+
+use formation_config::scenario::PositionGains;
+
+/// Delayed information of one member of the consensus sum: position, velocity, and its formation
+/// offset Delta_0 with first and second derivatives.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Member {
+    /// Position, m.
+    pub p: [f64; 3],
+    /// Velocity, m/s.
+    pub v: [f64; 3],
+    /// Offset Delta_j0, m.
+    pub off: [f64; 3],
+    /// Offset derivative, m/s.
+    pub off_v: [f64; 3],
+    /// Offset second derivative, m/s².
+    pub off_a: [f64; 3],
+}
+
+/// Delayed leader information: P_d and its derivatives.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LeaderInfo {
+    /// P_d, m.
+    pub p: [f64; 3],
+    /// P_d', m/s.
+    pub v: [f64; 3],
+    /// P_d'', m/s².
+    pub a: [f64; 3],
+}
+
+/// Eq. (8)-(9): e_iP and e_iV from the agent's own (delayed) data, its neighbours' with weights a_ij and
+/// the leader's with weight b_i.
+pub fn consensus_errors(
+    me: &Member,
+    neighbours: impl Iterator<Item = (f64, Member)>,
+    b: f64,
+    leader: &LeaderInfo,
+) -> ([f64; 3], [f64; 3]) {
+    let mut ep = [0.0; 3];
+    let mut ev = [0.0; 3];
+    for (a, nb) in neighbours {
+        for k in 0..3 {
+            // Delta_ij = Lambda_i - Lambda_j = Delta_i0 - Delta_j0.
+            ep[k] += a * (me.p[k] - nb.p[k] - (me.off[k] - nb.off[k]));
+            ev[k] += a * (me.v[k] - nb.v[k] - (me.off_v[k] - nb.off_v[k]));
+        }
+    }
+    for k in 0..3 {
+        ep[k] += b * (me.p[k] - leader.p[k] - me.off[k]);
+        ev[k] += b * (me.v[k] - leader.v[k] - me.off_v[k]);
+    }
+    (ep, ev)
+}
+
+/// Eq. (14): U_iP = -k_P e_iP - k_V e_iV - F-hat_iP + Delta_i0'' (+ P_d'' with our feedforward,
+/// - k_L (V_i - P_d' - Delta_i0') with our leader-relative damping, D11), then
+/// the limits: horizontal norm, vertical range (keeps U_i3P + g > 0, Remark 3) and the tilt the
+/// horizontal part implies.
+pub fn control_law(
+    g: &PositionGains,
+    gravity: f64,
+    ep: [f64; 3],
+    ev: [f64; 3],
+    f_hat: [f64; 3],
+    me: &Member,
+    leader: &LeaderInfo,
+) -> [f64; 3] {
+    let mut u = [0.0; 3];
+    for k in 0..3 {
+        u[k] = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k]
+            - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k]);
+        if g.reference_acceleration_feedforward {
+            u[k] += leader.a[k];
+        }
+    }
+    limit(g, gravity, u)
+}
+
+/// The acceleration and tilt limits of D5.
+pub fn limit(g: &PositionGains, gravity: f64, mut u: [f64; 3]) -> [f64; 3] {
+    u[2] = u[2].clamp(-g.max_down_accel_m_s2, g.max_up_accel_m_s2);
+    let tilt_cap = (u[2] + gravity) * g.max_tilt_rad.tan();
+    let cap = g.max_horizontal_accel_m_s2.min(tilt_cap);
+    let h = (u[0] * u[0] + u[1] * u[1]).sqrt();
+    if h > cap {
+        let s = cap / h;
+        u[0] *= s;
+        u[1] *= s;
+    }
+    u
+}

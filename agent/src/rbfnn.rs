@@ -1,0 +1,108 @@
+//! RBFNN of eq. (11) with the update law (15), one network per axis.
+//!
+//! Input of axis k: the delayed (P_ik, V_ik), normalised by the spans of the scenario. The l centres lie
+//! on the position axis, evenly spread over [-1, 1] of the normalised position, at zero velocity;
+//! every Gaussian has the same spread (docs/deviations.md D6).
+
+/// Largest number of neurons per axis.
+pub const MAX_NEURONS: usize = 64;
+
+/// Three RBF networks (one per axis) with their weights W-hat_ik.
+#[derive(Debug, Clone)]
+pub struct Rbfnn {
+    l: usize,
+    centres: [f64; MAX_NEURONS],
+    inv_spread_sq: f64,
+    inv_pos_span: f64,
+    inv_vel_span: f64,
+    /// W-hat_ik, axis-major.
+    weights: [[f64; MAX_NEURONS]; 3],
+    /// Psi_ik of the last evaluation.
+    psi: [[f64; MAX_NEURONS]; 3],
+}
+
+impl Rbfnn {
+    /// A network of `l` neurons per axis with the given spans and spread; `initial` fills the weights.
+    pub fn new(
+        l: usize,
+        pos_span: f64,
+        vel_span: f64,
+        spread: f64,
+        initial: impl Fn(usize, usize) -> f64,
+    ) -> Rbfnn {
+        let l = l.clamp(1, MAX_NEURONS);
+        let mut centres = [0.0; MAX_NEURONS];
+        for (j, c) in centres.iter_mut().enumerate().take(l) {
+            *c = if l == 1 {
+                0.0
+            } else {
+                -1.0 + 2.0 * j as f64 / (l - 1) as f64
+            };
+        }
+        let mut weights = [[0.0; MAX_NEURONS]; 3];
+        for (k, row) in weights.iter_mut().enumerate() {
+            for (j, w) in row.iter_mut().enumerate().take(l) {
+                *w = initial(k, j);
+            }
+        }
+        Rbfnn {
+            l,
+            centres,
+            inv_spread_sq: 1.0 / (spread * spread),
+            inv_pos_span: 1.0 / pos_span,
+            inv_vel_span: 1.0 / vel_span,
+            weights,
+            psi: [[0.0; MAX_NEURONS]; 3],
+        }
+    }
+
+    /// Evaluates Psi_i at the delayed (P, V) and returns F-hat_iP = W-hat^T Psi (eq. (11)).
+    pub fn evaluate(&mut self, p: [f64; 3], v: [f64; 3]) -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for k in 0..3 {
+            let x = p[k] * self.inv_pos_span;
+            let y = v[k] * self.inv_vel_span;
+            let mut acc = 0.0;
+            for j in 0..self.l {
+                let dx = x - self.centres[j];
+                let psi = (-(dx * dx + y * y) * self.inv_spread_sq).exp();
+                self.psi[k][j] = psi;
+                acc += self.weights[k][j] * psi;
+            }
+            out[k] = acc;
+        }
+        out
+    }
+
+    /// One Euler step of the update law (15): W-hat' = kappa (Psi (K_P e_P + K_V e_V) - K_W W-hat),
+    /// with the Psi of the last [`Rbfnn::evaluate`].
+    pub fn update(&mut self, drive: [f64; 3], kappa: f64, leakage: f64, dt: f64) {
+        for k in 0..3 {
+            for j in 0..self.l {
+                let w = self.weights[k][j];
+                self.weights[k][j] = w + dt * kappa * (self.psi[k][j] * drive[k] - leakage * w);
+            }
+        }
+    }
+
+    /// Frobenius norm of the weights.
+    pub fn weight_norm(&self) -> f64 {
+        self.weights
+            .iter()
+            .flat_map(|r| r[..self.l].iter())
+            .map(|w| w * w)
+            .sum::<f64>()
+            .sqrt()
+    }
+}
+
+/// A small deterministic generator (SplitMix64) for the initial weights: the paper draws them randomly;
+/// a seed keeps runs reproducible and identical across runners.
+pub fn uniform(seed: u64, k: usize, j: usize) -> f64 {
+    let mut z =
+        seed.wrapping_add(0x9E37_79B9_7F4A_7C15_u64.wrapping_mul((k * MAX_NEURONS + j + 1) as u64));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+}

@@ -1,0 +1,235 @@
+//! Per-step metrics of `summary.json`: formation error per window, constraint violations and margins,
+//! torque saturation, coverage, and the divergence detector.
+
+use super::coverage::CoverageGrid;
+use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use formation_config::Scenario;
+
+/// Where and why a run diverged.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Divergence {
+    /// Time of the first step at which a quantity left its bounds, s.
+    pub time_s: f64,
+    /// Agent (1-based).
+    pub agent: usize,
+    /// The first quantity that left its bounds, with its value.
+    pub cause: String,
+}
+
+/// Running statistics of one window.
+#[derive(Debug, Clone, Default)]
+pub struct WindowStat {
+    sum_sq: f64,
+    count: u64,
+    max: f64,
+}
+
+impl WindowStat {
+    fn add(&mut self, e: f64) {
+        self.sum_sq += e * e;
+        self.count += 1;
+        self.max = self.max.max(e);
+    }
+    /// RMS over the window, `None` when the window saw no step.
+    pub fn rms(&self) -> Option<f64> {
+        (self.count > 0).then(|| (self.sum_sq / self.count as f64).sqrt())
+    }
+    /// Max over the window.
+    pub fn max(&self) -> Option<f64> {
+        (self.count > 0).then_some(self.max)
+    }
+}
+
+/// Per-agent accumulators.
+#[derive(Debug, Clone)]
+pub struct AgentStats {
+    /// Formation error in the cover window.
+    pub cover: WindowStat,
+    /// Formation error in the enclose window.
+    pub enclose: WindowStat,
+    /// Formation error over the whole run.
+    pub whole: WindowStat,
+    /// Steps with ||A_i|| > ||A_iC|| + margin.
+    pub attitude_violations: u64,
+    /// Steps with ||Omega_i|| > C-bar_i2.
+    pub rate_violations: u64,
+    /// min over steps of C-bar_i1 - ||A_i||.
+    pub min_attitude_margin: f64,
+    /// min over steps of C-bar_i2 - ||Omega_i||.
+    pub min_rate_margin: f64,
+    /// Steps with at least one torque channel at its limit.
+    pub saturated_steps: u64,
+    /// Latest formation error norm (for the CSV).
+    pub last_error: f64,
+}
+
+/// All metrics of a run.
+pub struct Metrics {
+    /// Per agent.
+    pub agents: Vec<AgentStats>,
+    cover_window: [f64; 2],
+    enclose_window: [f64; 2],
+    margin: f64,
+    rate_limit: f64,
+    torque_lo: [f64; 3],
+    torque_hi: [f64; 3],
+    divergence_position: f64,
+    divergence_tilt: f64,
+    grid: CoverageGrid,
+    coverage_sum: f64,
+    coverage_count: u64,
+    /// Steps recorded.
+    pub steps: u64,
+    /// The divergence, once detected.
+    pub divergence: Option<Divergence>,
+    /// Time of the last recorded step, s.
+    pub last_time: f64,
+}
+
+impl Metrics {
+    /// Empty metrics for a scenario.
+    pub fn new(s: &Scenario) -> Metrics {
+        let blank = AgentStats {
+            cover: WindowStat::default(),
+            enclose: WindowStat::default(),
+            whole: WindowStat::default(),
+            attitude_violations: 0,
+            rate_violations: 0,
+            min_attitude_margin: f64::INFINITY,
+            min_rate_margin: f64::INFINITY,
+            saturated_steps: 0,
+            last_error: 0.0,
+        };
+        Metrics {
+            agents: vec![blank; s.n_agents()],
+            cover_window: s.metrics.cover_window_s,
+            enclose_window: s.metrics.enclose_window_s,
+            margin: s.controller.attitude.attitude_margin_rad,
+            rate_limit: s.controller.attitude.rate_limit_rad_s,
+            torque_lo: s.vehicle.torque_min_nm,
+            torque_hi: s.vehicle.torque_max_nm,
+            divergence_position: s.metrics.divergence_position_m,
+            divergence_tilt: s.metrics.divergence_tilt_rad,
+            grid: CoverageGrid::new(s.metrics.target_radius_m, s.metrics.sensor_fov_deg),
+            coverage_sum: 0.0,
+            coverage_count: 0,
+            steps: 0,
+            divergence: None,
+            last_time: 0.0,
+        }
+    }
+
+    /// Mean covered share over the cover window, `None` if the window saw no step.
+    pub fn coverage_fraction(&self) -> Option<f64> {
+        (self.coverage_count > 0).then(|| self.coverage_sum / self.coverage_count as f64)
+    }
+
+    /// Accumulates step k; returns the divergence if it is first detected here.
+    pub fn record(
+        &mut self,
+        _step: u64,
+        r: &ReferenceFrame,
+        truths: &[PlantTruth],
+        commands: &[ControlCommand],
+    ) -> Option<Divergence> {
+        let t = r.t;
+        self.steps += 1;
+        self.last_time = t;
+        let in_cover = t >= self.cover_window[0] && t <= self.cover_window[1];
+        let in_enclose = t >= self.enclose_window[0] && t <= self.enclose_window[1];
+        let mut first: Option<Divergence> = None;
+        for (i, (tr, cmd)) in truths.iter().zip(commands).enumerate() {
+            let st = &tr.state;
+            let mut e2 = 0.0;
+            for k in 0..3 {
+                let e = st.position[k] - r.p_d[k] - r.offset[i][k];
+                e2 += e * e;
+            }
+            let e = e2.sqrt();
+            let a = &mut self.agents[i];
+            a.last_error = e;
+            a.whole.add(e);
+            if in_cover {
+                a.cover.add(e);
+            }
+            if in_enclose {
+                a.enclose.add(e);
+            }
+            let att = norm(st.attitude);
+            let c1_bar = norm(cmd.telemetry.attitude_cmd) + self.margin;
+            if att > c1_bar {
+                a.attitude_violations += 1;
+            }
+            a.min_attitude_margin = a.min_attitude_margin.min(c1_bar - att);
+            let rate = norm(st.rate);
+            if rate > self.rate_limit {
+                a.rate_violations += 1;
+            }
+            a.min_rate_margin = a.min_rate_margin.min(self.rate_limit - rate);
+            if (0..3).any(|k| {
+                let u = tr.torque_applied_nm[k];
+                u >= self.torque_hi[k] || u <= self.torque_lo[k]
+            }) {
+                a.saturated_steps += 1;
+            }
+            if self.divergence.is_none() && first.is_none() {
+                first =
+                    divergence_cause(tr, cmd, e, self.divergence_position, self.divergence_tilt)
+                        .map(|cause| Divergence {
+                            time_s: t,
+                            agent: i + 1,
+                            cause,
+                        });
+            }
+        }
+        if in_cover {
+            let pos = truths.iter().map(|tr| tr.state.position);
+            self.coverage_sum += self.grid.covered_fraction([r.target[0], r.target[1]], pos);
+            self.coverage_count += 1;
+        }
+        if first.is_some() {
+            self.divergence = first.clone();
+        }
+        first
+    }
+}
+
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// The first quantity of one agent that left its bounds, if any.
+fn divergence_cause(
+    tr: &PlantTruth,
+    cmd: &ControlCommand,
+    e: f64,
+    pos_bound: f64,
+    tilt_bound: f64,
+) -> Option<String> {
+    let st = &tr.state;
+    let groups: [(&str, &[f64]); 6] = [
+        ("position", &st.position),
+        ("velocity", &st.velocity),
+        ("attitude", &st.attitude),
+        ("body rate", &st.rate),
+        ("torque command U_iAC", &cmd.torque_nm),
+        ("thrust command", std::slice::from_ref(&cmd.thrust_n)),
+    ];
+    for (name, vals) in groups {
+        if vals.iter().any(|v| !v.is_finite()) {
+            return Some(format!("{name} is not finite"));
+        }
+    }
+    for (k, name) in [(0usize, "roll phi"), (1, "pitch theta")] {
+        if st.attitude[k].abs() > tilt_bound {
+            return Some(format!(
+                "{name} = {:.3} rad beyond {tilt_bound} rad",
+                st.attitude[k]
+            ));
+        }
+    }
+    if e > pos_bound {
+        return Some(format!("formation error {e:.1} m beyond {pos_bound} m"));
+    }
+    None
+}

@@ -1,0 +1,88 @@
+//! The recorder: turns the per-step messages of a run (reference frame, plant truths, control
+//! commands) into `trajectory.csv` (decimated) and `summary.json` (metrics computed on every step).
+//!
+//! Both runners feed it the same messages, so the files of an in-process run and of a lockstep run
+//! over iceoryx2 are byte-identical when the trajectories are.
+
+pub mod coverage;
+pub mod csv;
+pub mod metrics;
+pub mod summary;
+
+pub use metrics::Divergence;
+pub use summary::Summary;
+
+use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use formation_config::{Scenario, Variant};
+use std::path::{Path, PathBuf};
+
+/// Writes the outputs of one run.
+pub struct Recorder {
+    csv: csv::TrajectoryWriter,
+    metrics: metrics::Metrics,
+    decimation: u64,
+    out_dir: PathBuf,
+    scenario: String,
+    variant: Variant,
+    mode: &'static str,
+    dt: f64,
+}
+
+impl Recorder {
+    /// Creates `out_dir` and `trajectory.csv` in it.
+    pub fn create(
+        s: &Scenario,
+        variant: Variant,
+        mode: &'static str,
+        out_dir: &Path,
+    ) -> std::io::Result<Recorder> {
+        std::fs::create_dir_all(out_dir)?;
+        Ok(Recorder {
+            csv: csv::TrajectoryWriter::create(&out_dir.join("trajectory.csv"), s)?,
+            metrics: metrics::Metrics::new(s),
+            decimation: s.output_decimation(),
+            out_dir: out_dir.to_path_buf(),
+            scenario: s.name.clone(),
+            variant,
+            mode,
+            dt: s.simulation.dt_s,
+        })
+    }
+
+    /// Records step k. Returns the divergence if this step is where the run diverged (the first one).
+    pub fn record(
+        &mut self,
+        step: u64,
+        reference: &ReferenceFrame,
+        truths: &[PlantTruth],
+        commands: &[ControlCommand],
+    ) -> std::io::Result<Option<Divergence>> {
+        let div = self.metrics.record(step, reference, truths, commands);
+        if step % self.decimation == 0 || div.is_some() {
+            self.csv
+                .write_step(reference, truths, commands, &self.metrics)?;
+        }
+        Ok(div)
+    }
+
+    /// Flushes the CSV written so far (used when a run is interrupted).
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        self.csv.flush()
+    }
+
+    /// Flushes the CSV and writes `summary.json`; returns the summary.
+    pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
+        self.csv.flush()?;
+        let summary = summary::Summary::build(
+            &self.metrics,
+            &self.scenario,
+            self.variant,
+            self.mode,
+            self.dt,
+            steps,
+            wall_time_s,
+        );
+        summary.write(&self.out_dir.join("summary.json"))?;
+        Ok(summary)
+    }
+}

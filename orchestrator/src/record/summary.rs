@@ -1,0 +1,194 @@
+//! `summary.json`: the stable contract every runner writes (documented in README, "summary.json").
+
+use super::metrics::{Divergence, Metrics};
+use formation_config::Variant;
+use serde::Serialize;
+use std::path::Path;
+
+/// A value per metric window.
+#[derive(Debug, Clone, Serialize)]
+pub struct PerWindow {
+    /// Covering window.
+    pub cover: Option<f64>,
+    /// Enclosing window.
+    pub enclose: Option<f64>,
+    /// The whole run.
+    pub whole: Option<f64>,
+}
+
+/// Metrics of one agent.
+#[derive(Debug, Clone, Serialize)]
+pub struct AgentSummary {
+    /// Agent (1-based).
+    pub id: usize,
+    /// RMS of ||P_i - P_d - Delta_i0|| per window, m.
+    pub rms_formation_error_m: PerWindow,
+    /// Max of the same per window, m.
+    pub max_formation_error_m: PerWindow,
+    /// Steps with ||A_i|| > ||A_iC|| + margin.
+    pub attitude_constraint_violations: u64,
+    /// Steps with ||Omega_i|| > C-bar_i2.
+    pub rate_constraint_violations: u64,
+    /// min over steps of (||A_iC|| + margin - ||A_i||), rad.
+    pub min_attitude_margin_rad: Option<f64>,
+    /// min over steps of (C-bar_i2 - ||Omega_i||), rad/s.
+    pub min_rate_margin_rad_s: Option<f64>,
+    /// Share of steps with a torque channel at its limit.
+    pub torque_saturation_fraction: f64,
+}
+
+/// The whole summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// Scenario name.
+    pub scenario: String,
+    /// Controller variant.
+    pub variant: String,
+    /// "in-process", "lockstep" or "realtime".
+    pub mode: String,
+    /// N.
+    pub n_agents: usize,
+    /// Integration step, s.
+    pub dt_s: f64,
+    /// Simulated time reached, s.
+    pub sim_time_s: f64,
+    /// Steps simulated.
+    pub steps: u64,
+    /// Wall-clock time of the whole run, s.
+    pub wall_time_s: f64,
+    /// sim_time_s / wall_time_s.
+    pub realtime_factor: f64,
+    /// True when a quantity left its bounds (the run stopped there).
+    pub diverged: bool,
+    /// Where and why, or null.
+    pub divergence: Option<Divergence>,
+    /// Mean covered share of the target disk over the cover window.
+    pub coverage_fraction: Option<f64>,
+    /// Per-agent metrics.
+    pub agents: Vec<AgentSummary>,
+    /// Realtime timing statistics (realtime runs only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timing: Option<serde_json::Value>,
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+impl Summary {
+    /// Builds the summary from the metrics.
+    pub fn build(
+        m: &Metrics,
+        scenario: &str,
+        variant: Variant,
+        mode: &str,
+        dt: f64,
+        steps: u64,
+        wall_time_s: f64,
+    ) -> Summary {
+        let sim_time = steps as f64 * dt;
+        Summary {
+            scenario: scenario.to_string(),
+            variant: variant.name().to_string(),
+            mode: mode.to_string(),
+            n_agents: m.agents.len(),
+            dt_s: dt,
+            sim_time_s: sim_time,
+            steps,
+            wall_time_s,
+            realtime_factor: if wall_time_s > 0.0 {
+                sim_time / wall_time_s
+            } else {
+                0.0
+            },
+            diverged: m.divergence.is_some(),
+            divergence: m.divergence.clone(),
+            coverage_fraction: m.coverage_fraction(),
+            agents: m
+                .agents
+                .iter()
+                .enumerate()
+                .map(|(i, a)| AgentSummary {
+                    id: i + 1,
+                    rms_formation_error_m: PerWindow {
+                        cover: a.cover.rms(),
+                        enclose: a.enclose.rms(),
+                        whole: a.whole.rms(),
+                    },
+                    max_formation_error_m: PerWindow {
+                        cover: a.cover.max(),
+                        enclose: a.enclose.max(),
+                        whole: a.whole.max(),
+                    },
+                    attitude_constraint_violations: a.attitude_violations,
+                    rate_constraint_violations: a.rate_violations,
+                    min_attitude_margin_rad: finite(a.min_attitude_margin),
+                    min_rate_margin_rad_s: finite(a.min_rate_margin),
+                    torque_saturation_fraction: if m.steps > 0 {
+                        a.saturated_steps as f64 / m.steps as f64
+                    } else {
+                        0.0
+                    },
+                })
+                .collect(),
+            timing: None,
+        }
+    }
+
+    /// Writes it as pretty JSON.
+    pub fn write(&self, path: &Path) -> std::io::Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        std::fs::write(path, text + "\n")
+    }
+
+    /// Prints the human-readable table.
+    pub fn print_table(&self) {
+        let f = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.3}"));
+        println!(
+            "{} / {} / {}: N = {}, {:.1} s simulated in {:.2} s ({:.0}x real time), coverage {}",
+            self.scenario,
+            self.variant,
+            self.mode,
+            self.n_agents,
+            self.sim_time_s,
+            self.wall_time_s,
+            self.realtime_factor,
+            self.coverage_fraction
+                .map_or("-".into(), |c| format!("{:.1} %", 100.0 * c))
+        );
+        println!(
+            "{:>5} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9} {:>6}",
+            "agent",
+            "rms_cov",
+            "max_cov",
+            "rms_enc",
+            "max_enc",
+            "att_vio",
+            "rate_vio",
+            "att_marg",
+            "rate_marg",
+            "sat%"
+        );
+        for a in &self.agents {
+            println!(
+                "{:>5} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9} {:>6.2}",
+                a.id,
+                f(a.rms_formation_error_m.cover),
+                f(a.max_formation_error_m.cover),
+                f(a.rms_formation_error_m.enclose),
+                f(a.max_formation_error_m.enclose),
+                a.attitude_constraint_violations,
+                a.rate_constraint_violations,
+                f(a.min_attitude_margin_rad),
+                f(a.min_rate_margin_rad_s),
+                100.0 * a.torque_saturation_fraction
+            );
+        }
+        if let Some(d) = &self.divergence {
+            println!(
+                "DIVERGED at t = {:.3} s, agent {}: {}",
+                d.time_s, d.agent, d.cause
+            );
+        }
+    }
+}
