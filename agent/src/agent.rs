@@ -54,6 +54,7 @@ impl Agent {
         let amp = nn_spec.initial_weight_amplitude;
         let nn = Rbfnn::new(
             nn_spec.neurons_per_axis,
+            nn_spec.velocity_centres,
             nn_spec.position_span_m,
             nn_spec.velocity_span_m_s,
             nn_spec.spread,

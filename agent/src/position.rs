@@ -70,7 +70,8 @@ pub fn control_law(
     let mut u = [0.0; 3];
     for k in 0..3 {
         u[k] = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k]
-            - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k]);
+            - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k])
+            - g.leader_position_gain * (me.p[k] - leader.p[k] - me.off[k]);
         if g.reference_acceleration_feedforward {
             u[k] += leader.a[k];
         }

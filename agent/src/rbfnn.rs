@@ -1,7 +1,7 @@
 //! RBFNN of eq. (11) with the update law (15), one network per axis.
 //!
-//! Input of axis k: the delayed (P_ik, V_ik), normalised by the spans of the scenario. The l centres lie
-//! on the position axis, evenly spread over [-1, 1] of the normalised position, at zero velocity;
+//! Input of axis k: the delayed (P_ik, V_ik), normalised by the spans of the scenario. The l centres form
+//! a grid of (l / n_v) positions x n_v velocities evenly spread over [-1, 1]² of the normalised input;
 //! every Gaussian has the same spread (docs/deviations.md D6).
 
 /// Largest number of neurons per axis.
@@ -12,6 +12,7 @@ pub const MAX_NEURONS: usize = 64;
 pub struct Rbfnn {
     l: usize,
     centres: [f64; MAX_NEURONS],
+    vel_centres: [f64; MAX_NEURONS],
     inv_spread_sq: f64,
     inv_pos_span: f64,
     inv_vel_span: f64,
@@ -22,22 +23,31 @@ pub struct Rbfnn {
 }
 
 impl Rbfnn {
-    /// A network of `l` neurons per axis with the given spans and spread; `initial` fills the weights.
+    /// A network of `l` neurons per axis (`n_v` velocity values) with the given spans and spread;
+    /// `initial` fills the weights.
     pub fn new(
         l: usize,
+        n_v: usize,
         pos_span: f64,
         vel_span: f64,
         spread: f64,
         initial: impl Fn(usize, usize) -> f64,
     ) -> Rbfnn {
         let l = l.clamp(1, MAX_NEURONS);
-        let mut centres = [0.0; MAX_NEURONS];
-        for (j, c) in centres.iter_mut().enumerate().take(l) {
-            *c = if l == 1 {
+        let n_v = n_v.clamp(1, l);
+        let n_p = (l / n_v).max(1);
+        let spaced = |j: usize, n: usize| {
+            if n == 1 {
                 0.0
             } else {
-                -1.0 + 2.0 * j as f64 / (l - 1) as f64
-            };
+                -1.0 + 2.0 * j as f64 / (n - 1) as f64
+            }
+        };
+        let mut centres = [0.0; MAX_NEURONS];
+        let mut vel_centres = [0.0; MAX_NEURONS];
+        for j in 0..l {
+            centres[j] = spaced(j / n_v % n_p, n_p);
+            vel_centres[j] = spaced(j % n_v, n_v);
         }
         let mut weights = [[0.0; MAX_NEURONS]; 3];
         for (k, row) in weights.iter_mut().enumerate() {
@@ -48,6 +58,7 @@ impl Rbfnn {
         Rbfnn {
             l,
             centres,
+            vel_centres,
             inv_spread_sq: 1.0 / (spread * spread),
             inv_pos_span: 1.0 / pos_span,
             inv_vel_span: 1.0 / vel_span,
@@ -65,7 +76,8 @@ impl Rbfnn {
             let mut acc = 0.0;
             for j in 0..self.l {
                 let dx = x - self.centres[j];
-                let psi = (-(dx * dx + y * y) * self.inv_spread_sq).exp();
+                let dy = y - self.vel_centres[j];
+                let psi = (-(dx * dx + dy * dy) * self.inv_spread_sq).exp();
                 self.psi[k][j] = psi;
                 acc += self.weights[k][j] * psi;
             }

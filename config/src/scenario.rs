@@ -237,6 +237,9 @@ pub struct PositionGains {
     /// Ours: see docs/deviations.md (D11) — lifts the slowest consensus mode above the negative damping
     /// of the uncertainties (61) without speeding up the fastest one.
     pub leader_velocity_damping: f64,
+    /// Leader-relative position gain k_LP: U_iP gets -k_LP (P_i - P_d - Delta_i0) on the delayed leader
+    /// broadcast, 1/s². Paper: 0. Ours: see docs/deviations.md (D11).
+    pub leader_position_gain: f64,
     /// Largest horizontal norm of U_iP, m/s². Paper: none (infinite). Ours: 3.0 (D5).
     pub max_horizontal_accel_m_s2: f64,
     /// Largest upward U_i3P, m/s². Paper: none. Ours: 4.0 (D5).
@@ -259,6 +262,10 @@ pub struct RbfnnSpec {
     pub position_span_m: f64,
     /// Centres are spread over [-span, span] of velocity, m/s. Paper: not given.
     pub velocity_span_m_s: f64,
+    /// Number of distinct velocity values of the centres; the l centres form a grid of
+    /// (l / velocity_centres) positions x velocity_centres velocities over [-1, 1]² of the normalised
+    /// (P, V). Paper: not given. Ours: 5 (D6).
+    pub velocity_centres: usize,
     /// Spread mu_k of every Gaussian (in units of the normalised input), dimensionless.
     /// Paper: not given.
     pub spread: f64,

@@ -309,6 +309,17 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         );
     }
     c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    let nv = ctl.rbfnn.velocity_centres;
+    if nv == 0 || ctl.rbfnn.neurons_per_axis % nv.max(1) != 0 {
+        c.push(
+            "controller.rbfnn.velocity_centres",
+            CTRL,
+            format!(
+                "must be >= 1 and divide neurons_per_axis = {}, got {nv}",
+                ctl.rbfnn.neurons_per_axis
+            ),
+        );
+    }
     c.positive(
         "controller.rbfnn.position_span_m",
         ctl.rbfnn.position_span_m,
