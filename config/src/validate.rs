@@ -120,6 +120,8 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         }
     }
     c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
+    c.positive("metrics.divergence_position_m", s.metrics.divergence_position_m, SIM);
+    c.positive("metrics.divergence_tilt_rad", s.metrics.divergence_tilt_rad, SIM);
     if !(s.metrics.sensor_fov_deg > 0.0 && s.metrics.sensor_fov_deg < 180.0) {
         c.push("metrics.sensor_fov_deg", PHYS, format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg));
     }
@@ -159,7 +161,20 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         );
     }
     let mut graph_ok = s.graph.leader_weights.len() == n && n > 0;
+    let mut seen_edges: Vec<(usize, usize)> = Vec::with_capacity(s.graph.edges.len());
     for (k, e) in s.graph.edges.iter().enumerate() {
+        // An undirected edge carries one weight a_ij = a_ji: listing (a, b) and (b, a), or (a, b)
+        // twice, would silently add the weights in L.
+        let pair = (e.a.min(e.b), e.a.max(e.b));
+        if let Some(first) = seen_edges.iter().position(|&p| p == pair) {
+            c.push(
+                format!("graph.edges[{k}]"),
+                A1,
+                format!("edge ({}, {}) repeats graph.edges[{first}]: list each undirected edge once (a_ij = a_ji)", e.a, e.b),
+            );
+            graph_ok = false;
+        }
+        seen_edges.push(pair);
         for (end, idx) in [("a", e.a), ("b", e.b)] {
             if idx < 1 || idx > n {
                 c.push(format!("graph.edges[{k}].{end}"), INDEX, format!("agent {idx} is not in 1..={n}"));
@@ -209,6 +224,7 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         c.push("controller.rbfnn.neurons_per_axis", CTRL, format!("must be in 1..=64, got {}", ctl.rbfnn.neurons_per_axis));
     }
     c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    c.non_negative("controller.rbfnn.initial_weight_amplitude", ctl.rbfnn.initial_weight_amplitude, CTRL);
     c.positive("controller.rbfnn.position_span_m", ctl.rbfnn.position_span_m, CTRL);
     c.positive("controller.rbfnn.velocity_span_m_s", ctl.rbfnn.velocity_span_m_s, CTRL);
     for (name, f) in [
