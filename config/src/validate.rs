@@ -140,6 +140,16 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         }
     }
     c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
+    c.positive(
+        "metrics.divergence_position_m",
+        s.metrics.divergence_position_m,
+        SIM,
+    );
+    c.positive(
+        "metrics.divergence_tilt_rad",
+        s.metrics.divergence_tilt_rad,
+        SIM,
+    );
     if !(s.metrics.sensor_fov_deg > 0.0 && s.metrics.sensor_fov_deg < 180.0) {
         c.push(
             "metrics.sensor_fov_deg",
@@ -205,7 +215,20 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         );
     }
     let mut graph_ok = s.graph.leader_weights.len() == n && n > 0;
+    let mut seen_edges: Vec<(usize, usize)> = Vec::with_capacity(s.graph.edges.len());
     for (k, e) in s.graph.edges.iter().enumerate() {
+        // An undirected edge carries one weight a_ij = a_ji: listing (a, b) and (b, a), or (a, b)
+        // twice, would silently add the weights in L.
+        let pair = (e.a.min(e.b), e.a.max(e.b));
+        if let Some(first) = seen_edges.iter().position(|&p| p == pair) {
+            c.push(
+                format!("graph.edges[{k}]"),
+                A1,
+                format!("edge ({}, {}) repeats graph.edges[{first}]: list each undirected edge once (a_ij = a_ji)", e.a, e.b),
+            );
+            graph_ok = false;
+        }
+        seen_edges.push(pair);
         for (end, idx) in [("a", e.a), ("b", e.b)] {
             if idx < 1 || idx > n {
                 c.push(
@@ -320,6 +343,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
             ),
         );
     }
+    c.non_negative(
+        "controller.rbfnn.initial_weight_amplitude",
+        ctl.rbfnn.initial_weight_amplitude,
+        CTRL,
+    );
     c.positive(
         "controller.rbfnn.position_span_m",
         ctl.rbfnn.position_span_m,

@@ -1,1 +1,33 @@
 //! Helpers for the end-to-end tests: locating the built binaries, temporary output directories.
+#![warn(missing_docs)]
+
+use std::path::PathBuf;
+
+/// Path of the workspace binary `name` (e.g. `formation`) of the same profile as the running test.
+///
+/// Test executables live in `target/<profile>/deps/`; the binaries in `target/<profile>/`. Cargo does
+/// not build another package's binaries for a test, so this panics with instructions when the binary
+/// is missing.
+pub fn bin(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("the test executable has a path");
+    let profile_dir = exe
+        .parent()
+        .and_then(|deps| deps.parent())
+        .expect("the test executable lives in target/<profile>/deps/");
+    let path = profile_dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    if !path.is_file() {
+        panic!(
+            "binary `{name}` not found at {}: build it first: cargo build --workspace",
+            path.display()
+        );
+    }
+    path
+}
+
+/// A fresh empty directory under the system temporary directory, unique to this process and `tag`.
+pub fn temp_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("formation-tests-{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("can create a temporary directory");
+    dir
+}

@@ -1,0 +1,282 @@
+//! `formation check [SCENARIO] [--json]`: what decides whether a gain set can work.
+//!
+//! Pure computations live in the submodules (each unit-tested); this module assembles the
+//! [`Report`], derives one [`Verdict`] per check, and prints it as text or as one JSON object.
+//!
+//! * [`spectrum`]: eigenvalues of L + B, positive definiteness (Lemma 1, Assumption 1).
+//! * [`theorem1`]: the matrix M of eq. (18) (read as symmetric: the printed upper triangle mirrored),
+//!   the (M1, M2) maximising its smallest eigenvalue, the printed ties, necessary conditions.
+//! * [`outer`]: consensus modes s² + lambda k_V s + lambda k_P, uncertainty slopes (61), the RBFNN's
+//!   leakage; [`inner`]: BLF gains near z = 0, time-scale ratios and phase margins of the cascade;
+//!   [`freq`]: the linear-systems helpers both use.
+//! * [`barrier`]: roll/pitch authority after the worst faults vs what the attitude command demands.
+//!
+//! Exit code: 0 when the report was produced (whatever the verdicts), 2 on an invalid scenario.
+//!
+//! # JSON fields (`--json`; stable names, units in the names or in the item docs)
+//! * `scenario`: scenario name.
+//! * `graph`: [`spectrum::Spectrum`] — `eigenvalues` (ascending), `positive_definite`,
+//!   `lambda_min`, `lambda_max`, `sigma_max_g_inv`, `sigma_min_b_inv`.
+//! * `theorem1`: [`theorem1::Theorem1`] — `inputs` {`k_p`, `k_v`, `nn_k_p`, `nn_k_v`, `k_w`, `tau_m`,
+//!   `psi_m`, `sigma_max_g_inv`, `sigma_min_b_inv`}, `psi_m_bound`, `reading`, `search`
+//!   {`positive_definite`, `best_min_eigenvalue`, `m1`, `m2`, `diagonal`, `at_search_boundary`,
+//!   `range`}, `ties` {`nn_ratio`, `required_ratio`, `m2_from_nn_k_p`, `m2_from_nn_k_v`, `hold`},
+//!   `necessary` [{`name`, `condition`, `lhs`, `rhs`, `holds`}]. Absent (`null`) when L + B is not
+//!   positive definite.
+//! * `outer`: [`OuterReport`] — `modes` [{`lambda`, `roots` [[re, im], [re, im]],
+//!   `natural_frequency_rad_s`, `damping_ratio`}], `fastest_mode_rad_s`, `slowest_decay_rate`,
+//!   `slowest_damping_rate`, `slowest_stiffness`, `delay_phase_deg`, `delay_only`
+//!   {`crossover_rad_s`, `phase_margin_deg`}, `uncertainty` {...}, `quadratic_break_even_speed_m_s`,
+//!   `rbfnn` {`forgetting_rate`, `static_p_gain_bound`, `static_d_gain_bound`}.
+//! * `filters`: {`attitude`, `rate`}: [`freq::FilterPoles`] — `natural_frequency_rad_s`, `damping`,
+//!   `poles`, `complex`, `slowest_rad_s`.
+//! * `cascade_model`: the linear model behind the margins of `inner` (text).
+//! * `inner`: [[`inner::InnerLoop`]; 2] for `constrained` and `unconstrained` — `gain_set`, `rule`,
+//!   `attitude_gain`, `rate_gain`, `attitude_over_fastest_outer`, `rate_over_attitude`,
+//!   `rate_filter_over_rate`, `rate_filter_over_attitude`, `attitude_loop`, `cascade`.
+//! * `barrier`: [`barrier::Barrier`].
+//! * `verdicts`: [{`check`, `level` ("OK" | "WARN" | "FAIL"), `why`}]; `worst`: the worst level.
+
+pub mod barrier;
+pub mod freq;
+pub mod inner;
+pub mod outer;
+mod render;
+pub mod spectrum;
+pub mod theorem1;
+pub mod verdict;
+mod verdicts;
+
+use crate::cli::load_scenario;
+use formation_config::graph::Topology;
+use formation_config::Scenario;
+use serde::Serialize;
+use std::process::ExitCode;
+pub use verdict::{Level, Verdict};
+
+/// Arguments of `formation check`.
+#[derive(clap::Args, Debug, Default)]
+pub struct CheckArgs {
+    /// Scenario: `paper` (default), `paper-exact`, or a path to a TOML file.
+    pub scenario: Option<String>,
+    /// Print the report as one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Outer-loop part of the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OuterReport {
+    /// One closed-loop mode per eigenvalue of L + B (no delay).
+    pub modes: Vec<outer::OuterMode>,
+    /// Magnitude of the fastest root, rad/s.
+    pub fastest_mode_rad_s: f64,
+    /// Decay rate of the slowest root, 1/s.
+    pub slowest_decay_rate: f64,
+    /// lambda_min k_V: the damping the slowest mode has against the uncertainty's negative damping, 1/s.
+    pub slowest_damping_rate: f64,
+    /// lambda_min k_P: the stiffness of the slowest mode, 1/s².
+    pub slowest_stiffness: f64,
+    /// Phase lost to tau_M at the fastest mode: tau_M * fastest_mode_rad_s, degrees.
+    pub delay_phase_deg: f64,
+    /// Margin of the fastest mode with the delay only (ideal inner loop).
+    pub delay_only: Option<freq::Margin>,
+    /// Slopes of the uncertainty (61).
+    pub uncertainty: outer::UncertaintySlopes,
+    /// For velocity power 2, |∂f/∂V| = 2 |gain| |V| exceeds lambda_min k_V above this speed, m/s.
+    pub quadratic_break_even_speed_m_s: Option<f64>,
+    /// The RBFNN's forgetting rate and equivalent gains.
+    pub rbfnn: outer::RbfnnRole,
+}
+
+/// Poles of both command filters.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Filters {
+    /// Command filter 1 (attitude command).
+    pub attitude: freq::FilterPoles,
+    /// Rate command filter (virtual control alpha).
+    pub rate: freq::FilterPoles,
+}
+
+/// The whole report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    /// Scenario name.
+    pub scenario: String,
+    /// Spectrum of L + B.
+    pub graph: spectrum::Spectrum,
+    /// Theorem 1 (absent when L + B is not positive definite).
+    pub theorem1: Option<theorem1::Theorem1>,
+    /// Outer loop.
+    pub outer: OuterReport,
+    /// Command filters.
+    pub filters: Filters,
+    /// The linear model the inner-loop and cascade margins come from.
+    pub cascade_model: &'static str,
+    /// Inner loops of the constrained and unconstrained gain sets.
+    pub inner: Vec<inner::InnerLoop>,
+    /// Barrier feasibility.
+    pub barrier: barrier::Barrier,
+    /// One verdict per check.
+    pub verdicts: Vec<Verdict>,
+    /// Worst verdict level.
+    pub worst: Level,
+}
+
+/// Computes the whole report of a (validated) scenario.
+pub fn report(s: &Scenario) -> Report {
+    let graph = spectrum::spectrum(&Topology::from_scenario(s));
+    let pos = &s.controller.position;
+    let tau = s.simulation.max_delay_s;
+    let theorem1 = match (graph.sigma_max_g_inv, graph.sigma_min_b_inv) {
+        (Some(g_inv), Some(b_inv)) => Some(theorem1::analyse(theorem1::Theorem1Inputs {
+            k_p: pos.k_p,
+            k_v: pos.k_v,
+            nn_k_p: pos.nn_k_p,
+            nn_k_v: pos.nn_k_v,
+            k_w: pos.nn_leakage,
+            tau_m: tau,
+            psi_m: theorem1::psi_bound(s.controller.rbfnn.neurons_per_axis),
+            sigma_max_g_inv: g_inv,
+            sigma_min_b_inv: b_inv,
+        })),
+        _ => None,
+    };
+    let modes = outer::outer_modes(&graph.eigenvalues, pos.k_p, pos.k_v);
+    let fastest = outer::fastest_root(&modes);
+    let uncertainty = outer::uncertainty_slopes(&s.agents);
+    let slowest_damping = graph.lambda_min * pos.k_v;
+    let outer = OuterReport {
+        fastest_mode_rad_s: fastest,
+        slowest_decay_rate: outer::slowest_decay(&modes),
+        slowest_damping_rate: slowest_damping,
+        slowest_stiffness: graph.lambda_min * pos.k_p,
+        delay_phase_deg: (tau * fastest).to_degrees(),
+        delay_only: freq::phase_margin(|w| {
+            inner::outer_loop_delay_only(graph.lambda_max, pos.k_p, pos.k_v, tau, w)
+        }),
+        quadratic_break_even_speed_m_s: (uncertainty.quadratic_slope_per_m_s > 0.0)
+            .then(|| slowest_damping / uncertainty.quadratic_slope_per_m_s),
+        uncertainty,
+        rbfnn: outer::rbfnn_role(
+            pos.nn_learning_rate,
+            pos.nn_k_p,
+            pos.nn_k_v,
+            pos.nn_leakage,
+            s.controller.rbfnn.neurons_per_axis,
+        ),
+        modes,
+    };
+    let (fa, fr) = (
+        &s.controller.attitude_command_filter,
+        &s.controller.rate_command_filter,
+    );
+    let filters = Filters {
+        attitude: freq::filter_poles(fa.natural_frequency_rad_s, fa.damping),
+        rate: freq::filter_poles(fr.natural_frequency_rad_s, fr.damping),
+    };
+    let cascade = inner::CascadeInputs {
+        lambda_max: graph.lambda_max,
+        fastest_outer_rad_s: fastest,
+        outer: (pos.k_p, pos.k_v, tau),
+        f1: inner::Filter {
+            w: fa.natural_frequency_rad_s,
+            xi: fa.damping,
+        },
+        f2: inner::Filter {
+            w: fr.natural_frequency_rad_s,
+            xi: fr.damping,
+        },
+        rate_filter_slowest_rad_s: filters.rate.slowest_rad_s,
+    };
+    let att = &s.controller.attitude;
+    let un = &s.controller.unconstrained;
+    let inner = vec![
+        inner::analyse(
+            "constrained",
+            inner::BLF_RULE,
+            inner::blf_attitude_gain(att.k1_alpha, att.eps1_c),
+            inner::blf_rate_gain(att.k2_phi, att.eps2_c),
+            &cascade,
+        ),
+        inner::analyse(
+            "unconstrained",
+            inner::UNCONSTRAINED_RULE,
+            un.attitude_gain,
+            un.rate_gain,
+            &cascade,
+        ),
+    ];
+    let barrier = barrier::analyse(s);
+    let mut r = Report {
+        scenario: s.name.clone(),
+        graph,
+        theorem1,
+        outer,
+        filters,
+        cascade_model: inner::CASCADE_MODEL,
+        inner,
+        barrier,
+        verdicts: Vec::new(),
+        worst: Level::Ok,
+    };
+    r.verdicts = verdicts::all(&r);
+    r.worst = r
+        .verdicts
+        .iter()
+        .map(|v| v.level)
+        .max_by_key(|l| *l as u8)
+        .unwrap_or(Level::Ok);
+    r
+}
+
+/// Entry point of `formation check`.
+pub fn main(args: CheckArgs) -> ExitCode {
+    let s = match load_scenario(args.scenario.as_deref()) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
+    let r = report(&s);
+    if args.json {
+        match serde_json::to_string_pretty(&r) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("error: cannot write the report as JSON: {e}");
+                return ExitCode::from(1);
+            }
+        }
+    } else {
+        print!("{}", render::text(&r));
+    }
+    ExitCode::SUCCESS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_exact_report_fails_theorem1_and_the_time_scale_separation() {
+        let r = report(&Scenario::paper_exact());
+        let find = |name: &str| r.verdicts.iter().find(|v| v.check == name).unwrap().level;
+        assert_eq!(find("graph.positive_definite"), Level::Ok);
+        assert_eq!(find("theorem1.m_positive_definite"), Level::Fail);
+        assert_eq!(find("theorem1.ties"), Level::Fail);
+        assert_eq!(find("inner.constrained.attitude_over_outer"), Level::Fail);
+        assert_eq!(r.worst, Level::Fail);
+    }
+
+    #[test]
+    fn report_serialises_to_json_with_stable_top_level_fields() {
+        let r = report(&Scenario::paper());
+        let v: serde_json::Value = serde_json::to_value(&r).unwrap();
+        for key in [
+            "scenario", "graph", "theorem1", "outer", "filters", "inner", "barrier", "verdicts",
+            "worst",
+        ] {
+            assert!(v.get(key).is_some(), "missing {key}");
+        }
+        assert_eq!(v["inner"][1]["gain_set"], "unconstrained");
+        assert!(v["graph"]["eigenvalues"].as_array().unwrap().len() == 5);
+    }
+}
