@@ -143,6 +143,9 @@ fn run(
     let run_dir = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
     std::fs::write(run_dir.join("scenario.toml"), scenario.to_toml_string())
         .map_err(|e| format!("cannot write {}/scenario.toml: {e}", run_dir.display()))?;
+    if let Err(e) = cleanup::write_iox2_config(&run_dir, prefix) {
+        eprintln!("warning: {e}");
+    }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
     let services = services::RunServices::create(&node, n)?;
     let ports = driver::Ports::open(&node, n)?;
