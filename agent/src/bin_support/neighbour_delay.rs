@@ -8,12 +8,14 @@ use formation_agent::delay::delay_steps;
 use formation_config::scenario::{DelaySpec, Scenario};
 use formation_config::wire::DelayInjection;
 
+/// Neighbour j, its scenario profile, and its runtime override (from step on).
+type Profile = (usize, DelaySpec, Option<(u64, DelaySpec)>);
+
 /// The delay profiles of this agent's neighbours, with their runtime overrides.
 pub struct NeighbourDelays {
     dt: f64,
     max_delay: f64,
-    /// (agent j, profile, override from step on).
-    profiles: Vec<(usize, DelaySpec, Option<(u64, DelaySpec)>)>,
+    profiles: Vec<Profile>,
 }
 
 impl NeighbourDelays {

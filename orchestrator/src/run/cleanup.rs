@@ -23,7 +23,8 @@ pub fn remove(prefix: &str) -> Result<(), String> {
 /// run's nodes and services while it is running.
 pub fn write_iox2_config(run_dir: &std::path::Path, prefix: &str) -> Result<(), String> {
     let cfg = ipc::config_for_prefix(prefix).map_err(|e| e.to_string())?;
-    let text = toml::to_string(&cfg).map_err(|e| format!("cannot serialise the iceoryx2 config: {e}"))?;
+    let text =
+        toml::to_string(&cfg).map_err(|e| format!("cannot serialise the iceoryx2 config: {e}"))?;
     let dir = run_dir.join("iox2").join("config");
     std::fs::create_dir_all(&dir)
         .and_then(|_| std::fs::write(dir.join("iceoryx2.toml"), text))

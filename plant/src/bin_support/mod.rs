@@ -95,7 +95,7 @@ pub fn run() -> Result<(), String> {
             got = 0;
             states_out = false;
             k += 1;
-            if k % ACK_EVERY == 0 || k == steps {
+            if k.is_multiple_of(ACK_EVERY) || k == steps {
                 poke(&ports.orchestrator_wake);
             }
         }
