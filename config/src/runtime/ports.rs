@@ -3,7 +3,7 @@
 
 use crate::ipc::service_name;
 use core::fmt::Debug;
-use iceoryx2::port::listener::Listener;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
@@ -115,12 +115,13 @@ impl Wake {
     }
 
     /// Sleeps until notified or `timeout`, consuming every pending notification. The caller then
-    /// drains all its subscribers (notifications coalesce).
+    /// drains all its subscribers (notifications coalesce). A signal (e.g. Ctrl-C) ends the sleep
+    /// early without an error; the caller checks its flags.
     pub fn wait(&self, timeout: Duration) -> Result<(), String> {
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map(|_| ())
-            .map_err(|e| format!("event wait failed: {e:?}"))
+        match self.listener.timed_wait(|_| {}, timeout) {
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+            Err(e) => Err(format!("event wait failed: {e:?}")),
+        }
     }
 
     /// Consumes pending notifications without sleeping.
