@@ -1,0 +1,352 @@
+//! Shared look of the figures: the embedded font, agent colours, and a time-series panel.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use std::sync::OnceLock;
+
+/// DejaVu Sans, embedded so that figures render without any system font (licence beside the file).
+static FONT_TTF: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+
+/// The font family every text of the figures uses.
+pub const FONT: &str = "sans-serif";
+
+/// Registers the embedded font with plotters' ab_glyph text renderer (once per process).
+/// Every family name plotters may ask for maps to the same face.
+pub fn register_fonts() -> Result<(), String> {
+    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
+    DONE.get_or_init(|| {
+        for family in ["sans-serif", "serif", "monospace"] {
+            for style in [FontStyle::Normal, FontStyle::Bold] {
+                plotters::style::register_font(family, style, FONT_TTF).map_err(|_| {
+                    "the embedded font DejaVuSans.ttf could not be parsed".to_string()
+                })?;
+            }
+        }
+        Ok(())
+    })
+    .clone()
+}
+
+/// Error type of the drawing code.
+pub type DrawResult = Result<(), Box<dyn std::error::Error>>;
+
+/// The drawing area type every figure draws on.
+pub type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+/// Colour of agent `id` (1-based): a ten-colour qualitative palette, cycled.
+pub fn agent_color(id: u32) -> RGBColor {
+    const PALETTE: [RGBColor; 10] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(127, 127, 127),
+        RGBColor(188, 189, 34),
+        RGBColor(23, 190, 207),
+    ];
+    PALETTE[(id.max(1) as usize - 1) % PALETTE.len()]
+}
+
+/// Dark grey for reference signals (target, constraints).
+pub const REFERENCE: RGBColor = RGBColor(30, 30, 30);
+
+/// How a series is stroked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stroke {
+    /// Solid line.
+    Solid,
+    /// Dashed line.
+    Dashed,
+    /// Dotted line (short dashes).
+    Dotted,
+}
+
+/// One line of a panel.
+pub struct Line {
+    /// Legend text (`None`: no legend entry).
+    pub label: Option<String>,
+    /// Colour.
+    pub color: RGBColor,
+    /// Stroke pattern.
+    pub stroke: Stroke,
+    /// Line width, px.
+    pub width: u32,
+    /// Points (non-finite points are dropped).
+    pub points: Vec<(f64, f64)>,
+}
+
+impl Line {
+    /// A solid 2-px line with a legend entry.
+    pub fn new(label: impl Into<String>, color: RGBColor, points: Vec<(f64, f64)>) -> Line {
+        Line {
+            label: Some(label.into()),
+            color,
+            stroke: Stroke::Solid,
+            width: 2,
+            points,
+        }
+    }
+
+    /// The same line, dashed.
+    pub fn dashed(mut self) -> Line {
+        self.stroke = Stroke::Dashed;
+        self
+    }
+
+    /// The same line, dotted.
+    pub fn dotted(mut self) -> Line {
+        self.stroke = Stroke::Dotted;
+        self
+    }
+
+    /// The same line without a legend entry.
+    pub fn unlabelled(mut self) -> Line {
+        self.label = None;
+        self
+    }
+
+    /// The same line with another width.
+    pub fn width(mut self, w: u32) -> Line {
+        self.width = w;
+        self
+    }
+}
+
+/// Where the legend of a panel goes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Legend {
+    /// No legend.
+    None,
+    /// Upper right corner, inside the plot.
+    UpperRight,
+    /// Lower right corner, inside the plot.
+    LowerRight,
+}
+
+/// A time-series panel: title, axis descriptions, lines, optional vertical markers.
+pub struct Panel<'a> {
+    /// Panel caption.
+    pub title: String,
+    /// x-axis description (with unit).
+    pub x_desc: &'a str,
+    /// y-axis description (with unit).
+    pub y_desc: String,
+    /// Lines to draw.
+    pub lines: Vec<Line>,
+    /// Vertical dotted markers (x, text), e.g. the phase changes T1, T2, T3.
+    pub markers: &'a [(f64, String)],
+    /// Legend placement.
+    pub legend: Legend,
+    /// Fixed y range; `None` fits the data.
+    pub y_range: Option<(f64, f64)>,
+    /// Fixed x range; `None` fits the data.
+    pub x_range: Option<(f64, f64)>,
+}
+
+/// Largest number of points drawn per line; longer lines keep each bucket's min and max.
+const MAX_POINTS: usize = 4000;
+
+/// Drops non-finite points and reduces long lines to the min/max envelope of buckets.
+pub fn thin(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let finite: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    if finite.len() <= MAX_POINTS {
+        return finite;
+    }
+    let bucket = finite.len().div_ceil(MAX_POINTS / 2);
+    let mut out = Vec::with_capacity(MAX_POINTS + 2);
+    for chunk in finite.chunks(bucket) {
+        let (mut imin, mut imax) = (0, 0);
+        for (i, p) in chunk.iter().enumerate() {
+            if p.1 < chunk[imin].1 {
+                imin = i;
+            }
+            if p.1 > chunk[imax].1 {
+                imax = i;
+            }
+        }
+        let (a, b) = (imin.min(imax), imin.max(imax));
+        out.push(chunk[a]);
+        if b != a {
+            out.push(chunk[b]);
+        }
+    }
+    out
+}
+
+/// A padded range covering the finite values, never empty.
+pub fn fit_range(values: impl Iterator<Item = f64>, pad_fraction: f64) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if lo > hi {
+        return (-1.0, 1.0);
+    }
+    let span = hi - lo;
+    let pad = if span > 1e-12 {
+        span * pad_fraction
+    } else {
+        (hi.abs() * 0.1).max(1e-3)
+    };
+    (lo - pad, hi + pad)
+}
+
+/// The y range of several panels together (to share a scale across a row).
+pub fn lines_y_range(lines: &[&Line]) -> (f64, f64) {
+    fit_range(
+        lines.iter().flat_map(|l| l.points.iter().map(|p| p.1)),
+        0.06,
+    )
+}
+
+/// Draws a time-series panel into `area`.
+pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
+    let lines: Vec<Line> = panel
+        .lines
+        .into_iter()
+        .map(|mut l| {
+            l.points = thin(&l.points);
+            l
+        })
+        .collect();
+    let x_range = panel
+        .x_range
+        .unwrap_or_else(|| fit_range(lines.iter().flat_map(|l| l.points.iter().map(|p| p.0)), 0.0));
+    let y_range = panel
+        .y_range
+        .unwrap_or_else(|| lines_y_range(&lines.iter().collect::<Vec<_>>()));
+
+    let mut chart = ChartBuilder::on(area)
+        .caption(&panel.title, (FONT, 20))
+        .margin(8)
+        .margin_right(16)
+        .x_label_area_size(44)
+        .y_label_area_size(72)
+        .build_cartesian_2d(x_range.0..x_range.1, y_range.0..y_range.1)?;
+    chart
+        .configure_mesh()
+        .x_desc(panel.x_desc)
+        .y_desc(panel.y_desc.as_str())
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .x_labels(10)
+        .y_labels(6)
+        .y_label_formatter(&|v| format_tick(*v))
+        .draw()?;
+
+    for (x, text) in panel.markers {
+        if *x < x_range.0 || *x > x_range.1 {
+            continue;
+        }
+        let grey = RGBColor(120, 120, 120);
+        chart.draw_series(DashedLineSeries::new(
+            vec![(*x, y_range.0), (*x, y_range.1)],
+            4,
+            4,
+            grey.stroke_width(1),
+        ))?;
+        let top = y_range.1 - (y_range.1 - y_range.0) * 0.02;
+        chart.draw_series(std::iter::once(Text::new(
+            text.clone(),
+            (*x, top),
+            (FONT, 13).into_font().color(&grey),
+        )))?;
+    }
+
+    for line in &lines {
+        let style = line.color.stroke_width(line.width);
+        let anno = match line.stroke {
+            Stroke::Solid => {
+                chart.draw_series(LineSeries::new(line.points.iter().copied(), style))?
+            }
+            Stroke::Dashed => chart.draw_series(DashedLineSeries::new(
+                line.points.iter().copied(),
+                9,
+                5,
+                style,
+            ))?,
+            Stroke::Dotted => chart.draw_series(DashedLineSeries::new(
+                line.points.iter().copied(),
+                3,
+                4,
+                style,
+            ))?,
+        };
+        if let Some(label) = &line.label {
+            let seg = legend_segments(line.stroke);
+            let style = line.color.stroke_width(line.width);
+            anno.label(label.clone()).legend(move |(x, y)| {
+                let piece = |k: usize| PathElement::new(vec![(seg[k].0, 0), (seg[k].1, 0)], style);
+                EmptyElement::at((x, y)) + piece(0) + piece(1) + piece(2) + piece(3)
+            });
+        }
+    }
+
+    let position = match panel.legend {
+        Legend::None => return Ok(()),
+        Legend::UpperRight => SeriesLabelPosition::UpperRight,
+        Legend::LowerRight => SeriesLabelPosition::LowerRight,
+    };
+    if lines.iter().any(|l| l.label.is_some()) {
+        chart
+            .configure_series_labels()
+            .position(position)
+            .label_font((FONT, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(160, 160, 160))
+            .legend_area_size(30)
+            .draw()?;
+    }
+    Ok(())
+}
+
+/// The legend sample of a line: four 24-px-wide segments (x0, x1) showing its stroke pattern.
+fn legend_segments(stroke: Stroke) -> [(i32, i32); 4] {
+    match stroke {
+        Stroke::Solid => [(0, 6), (6, 12), (12, 18), (18, 24)],
+        Stroke::Dashed => [(0, 9), (0, 9), (15, 24), (15, 24)],
+        Stroke::Dotted => [(0, 3), (7, 10), (14, 17), (21, 24)],
+    }
+}
+
+/// Tick labels: few significant digits, scientific notation for very small or large magnitudes.
+pub fn format_tick(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        "0".to_string()
+    } else if !(1e-3..1e5).contains(&a) {
+        format!("{v:.1e}")
+    } else if a >= 100.0 {
+        format!("{v:.0}")
+    } else if a >= 1.0 {
+        let s = format!("{v:.2}");
+        trim_zeros(s)
+    } else {
+        trim_zeros(format!("{v:.4}"))
+    }
+}
+
+fn trim_zeros(s: String) -> String {
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Draws a figure title across the top of `root` and returns the area below it.
+pub fn titled<'a>(root: &Area<'a>, title: &str) -> Result<Area<'a>, Box<dyn std::error::Error>> {
+    root.fill(&WHITE)?;
+    Ok(root.titled(title, (FONT, 26))?)
+}
