@@ -5,8 +5,10 @@ use super::Figure;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// Colour of constraint bounds.
-const BOUND: RGBColor = RGBColor(200, 30, 30);
+/// Colour of constraint bounds (black: distinct from every agent colour).
+const BOUND: RGBColor = RGBColor(0, 0, 0);
+/// Colour of the commanded / virtual-control norms.
+const COMMAND: RGBColor = RGBColor(110, 110, 110);
 /// Colour of the compared run's trace.
 const OTHER: RGBColor = RGBColor(150, 150, 150);
 
@@ -42,7 +44,7 @@ pub fn attitude(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
                         .width(1),
                     ],
                     markers: &fig.geometry.phases,
-                    legend: Legend::UpperRight,
+                    legend: Legend::Side,
                     y_range: None,
                     x_range: None,
                 },
@@ -99,9 +101,9 @@ fn constraint_figure(
     for (cell, a) in cells.iter().zip(&fig.run.agents) {
         let mut lines = vec![
             Line::new(bound.1, BOUND, a.series(bound.0)).width(3),
-            Line::new(command.1, REFERENCE, a.series(command.0))
+            Line::new(command.1, COMMAND, a.series(command.0))
                 .dashed()
-                .width(1),
+                .width(2),
             Line::new(state.1, agent_color(a.id), a.series(state.0)),
         ];
         if let Some(other) = fig
@@ -123,7 +125,7 @@ fn constraint_figure(
                 y_desc: format!("norm ({unit})"),
                 lines,
                 markers: &fig.geometry.phases,
-                legend: Legend::UpperRight,
+                legend: Legend::Side,
                 y_range: None,
                 x_range: None,
             },

@@ -52,10 +52,13 @@ pub fn position_errors(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResul
                     y_desc: format!("e_{axis} (m)"),
                     lines,
                     markers: &fig.geometry.phases,
-                    legend: if row == 0 {
-                        Legend::UpperRight
-                    } else {
+                    // Only the rightmost column carries the legend.
+                    legend: if c + 1 < runs.len() {
                         Legend::None
+                    } else if row == 0 {
+                        Legend::Side
+                    } else {
+                        Legend::Blank
                     },
                     y_range: Some(y_range),
                     x_range: None,
@@ -90,9 +93,9 @@ pub fn rbfnn_error(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
                 lines,
                 markers: &fig.geometry.phases,
                 legend: if row == 0 {
-                    Legend::UpperRight
+                    Legend::Side
                 } else {
-                    Legend::None
+                    Legend::Blank
                 },
                 y_range: None,
                 x_range: None,

@@ -39,7 +39,7 @@ pub fn disturbance(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             y_desc: "D_hat, ‖D_iA‖ (N m)".to_string(),
             lines,
             markers: &fig.geometry.phases,
-            legend: Legend::UpperRight,
+            legend: Legend::Side,
             y_range: None,
             x_range: None,
         },
@@ -112,9 +112,9 @@ fn per_channel(
                 lines,
                 markers: &fig.geometry.phases,
                 legend: if row == 0 {
-                    Legend::UpperRight
+                    Legend::Side
                 } else {
-                    Legend::None
+                    Legend::Blank
                 },
                 y_range: None,
                 x_range: None,

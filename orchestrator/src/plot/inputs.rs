@@ -45,9 +45,9 @@ pub fn inputs(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
                 lines,
                 markers: &fig.geometry.phases,
                 legend: if row == 0 {
-                    Legend::UpperRight
+                    Legend::Side
                 } else {
-                    Legend::None
+                    Legend::Blank
                 },
                 y_range: None,
                 x_range: None,

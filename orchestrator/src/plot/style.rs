@@ -61,8 +61,6 @@ pub enum Stroke {
     Solid,
     /// Dashed line.
     Dashed,
-    /// Dotted line (short dashes).
-    Dotted,
 }
 
 /// One line of a panel.
@@ -97,12 +95,6 @@ impl Line {
         self
     }
 
-    /// The same line, dotted.
-    pub fn dotted(mut self) -> Line {
-        self.stroke = Stroke::Dotted;
-        self
-    }
-
     /// The same line without a legend entry.
     pub fn unlabelled(mut self) -> Line {
         self.label = None;
@@ -119,13 +111,16 @@ impl Line {
 /// Where the legend of a panel goes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Legend {
-    /// No legend.
+    /// No legend and no space reserved for one.
     None,
-    /// Upper right corner, inside the plot.
-    UpperRight,
-    /// Lower right corner, inside the plot.
-    LowerRight,
+    /// A legend column at the right of the plot (never over the data).
+    Side,
+    /// The space of a legend column, left blank (aligns the panel with panels that have one).
+    Blank,
 }
+
+/// Width of the legend column, px.
+pub const LEGEND_WIDTH: u32 = 170;
 
 /// A time-series panel: title, axis descriptions, lines, optional vertical markers.
 pub struct Panel<'a> {
@@ -225,7 +220,15 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
         .y_range
         .unwrap_or_else(|| lines_y_range(&lines.iter().collect::<Vec<_>>()));
 
-    let mut chart = ChartBuilder::on(area)
+    let (plot_area, side) = match panel.legend {
+        Legend::None => (area.clone(), None),
+        Legend::Side | Legend::Blank => {
+            let w = area.dim_in_pixel().0;
+            let (p, side) = area.split_horizontally(w.saturating_sub(LEGEND_WIDTH));
+            (p, Some(side))
+        }
+    };
+    let mut chart = ChartBuilder::on(&plot_area)
         .caption(&panel.title, (FONT, 20))
         .margin(8)
         .margin_right(16)
@@ -242,7 +245,9 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
         .bold_line_style(RGBColor(215, 215, 215))
         .x_labels(10)
         .y_labels(6)
+        .x_label_formatter(&|v| format_tick(*v))
         .y_label_formatter(&|v| format_tick(*v))
+        .max_light_lines(2)
         .draw()?;
 
     for (x, text) in panel.markers {
@@ -259,54 +264,38 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
         let top = y_range.1 - (y_range.1 - y_range.0) * 0.02;
         chart.draw_series(std::iter::once(Text::new(
             text.clone(),
-            (*x, top),
+            (*x + (x_range.1 - x_range.0) * 0.004, top),
             (FONT, 13).into_font().color(&grey),
         )))?;
     }
 
     for line in &lines {
         let style = line.color.stroke_width(line.width);
-        let anno = match line.stroke {
-            Stroke::Solid => {
-                chart.draw_series(LineSeries::new(line.points.iter().copied(), style))?
-            }
-            Stroke::Dashed => chart.draw_series(DashedLineSeries::new(
-                line.points.iter().copied(),
-                9,
-                5,
-                style,
-            ))?,
-            Stroke::Dotted => chart.draw_series(DashedLineSeries::new(
-                line.points.iter().copied(),
-                3,
-                4,
-                style,
-            ))?,
+        let points = line.points.iter().copied();
+        match line.stroke {
+            Stroke::Solid => chart.draw_series(LineSeries::new(points, style))?,
+            Stroke::Dashed => chart.draw_series(DashedLineSeries::new(points, 9, 5, style))?,
         };
-        if let Some(label) = &line.label {
-            let seg = legend_segments(line.stroke);
-            let style = line.color.stroke_width(line.width);
-            anno.label(label.clone()).legend(move |(x, y)| {
-                let piece = |k: usize| PathElement::new(vec![(seg[k].0, 0), (seg[k].1, 0)], style);
-                EmptyElement::at((x, y)) + piece(0) + piece(1) + piece(2) + piece(3)
-            });
-        }
     }
 
-    let position = match panel.legend {
-        Legend::None => return Ok(()),
-        Legend::UpperRight => SeriesLabelPosition::UpperRight,
-        Legend::LowerRight => SeriesLabelPosition::LowerRight,
-    };
-    if lines.iter().any(|l| l.label.is_some()) {
-        chart
-            .configure_series_labels()
-            .position(position)
-            .label_font((FONT, 14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .legend_area_size(30)
-            .draw()?;
+    if let (Legend::Side, Some(side)) = (panel.legend, side) {
+        draw_side_legend(&side, &lines)?;
+    }
+    Ok(())
+}
+
+/// Draws the labelled lines' samples and names in a column, from the top.
+fn draw_side_legend(side: &Area, lines: &[Line]) -> DrawResult {
+    let font = (FONT, 15).into_font().color(&BLACK);
+    let mut y = 48;
+    for line in lines {
+        let Some(label) = &line.label else { continue };
+        let style = line.color.stroke_width(line.width.max(2));
+        for (x0, x1) in legend_segments(line.stroke) {
+            side.draw(&PathElement::new(vec![(6 + x0, y), (6 + x1, y)], style))?;
+        }
+        side.draw_text(label, &font, (38, y - 9))?;
+        y += 24;
     }
     Ok(())
 }
@@ -316,14 +305,14 @@ fn legend_segments(stroke: Stroke) -> [(i32, i32); 4] {
     match stroke {
         Stroke::Solid => [(0, 6), (6, 12), (12, 18), (18, 24)],
         Stroke::Dashed => [(0, 9), (0, 9), (15, 24), (15, 24)],
-        Stroke::Dotted => [(0, 3), (7, 10), (14, 17), (21, 24)],
     }
 }
 
 /// Tick labels: few significant digits, scientific notation for very small or large magnitudes.
 pub fn format_tick(v: f64) -> String {
     let a = v.abs();
-    if a == 0.0 {
+    if a < 1e-10 {
+        // Also hides floating-point noise of tick positions (6.9e-18 for 0).
         "0".to_string()
     } else if !(1e-3..1e5).contains(&a) {
         format!("{v:.1e}")
@@ -349,4 +338,24 @@ fn trim_zeros(s: String) -> String {
 pub fn titled<'a>(root: &Area<'a>, title: &str) -> Result<Area<'a>, Box<dyn std::error::Error>> {
     root.fill(&WHITE)?;
     Ok(root.titled(title, (FONT, 26))?)
+}
+
+/// Splits a polyline into the runs of points inside a window (plotters clamps points outside the
+/// plotting area onto its border instead of clipping them, which draws false lines along the edge).
+pub fn clip_runs(points: &[(f64, f64)], x: (f64, f64), y: (f64, f64)) -> Vec<Vec<(f64, f64)>> {
+    let inside = |p: &(f64, f64)| p.0 >= x.0 && p.0 <= x.1 && p.1 >= y.0 && p.1 <= y.1;
+    let mut runs = Vec::new();
+    let mut current: Vec<(f64, f64)> = Vec::new();
+    for p in points.iter().filter(|p| p.0.is_finite() && p.1.is_finite()) {
+        if inside(p) {
+            current.push(*p);
+        } else if !current.is_empty() {
+            runs.push(std::mem::take(&mut current));
+        }
+    }
+    if !current.is_empty() {
+        runs.push(current);
+    }
+    runs.retain(|r| r.len() > 1);
+    runs
 }

@@ -2,14 +2,16 @@
 
 use super::data::AgentTrace;
 use super::style::{
-    agent_color, fit_range, format_tick, thin, titled, DrawResult, FONT, REFERENCE,
+    agent_color, clip_runs, fit_range, format_tick, thin, titled, DrawResult, FONT, REFERENCE,
 };
 use super::Figure;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// Colour of the target disk.
-const DISK: RGBColor = RGBColor(220, 50, 47);
+/// Colour of the target disk (outline; the fill is a light tint). Distinct from every agent colour.
+const DISK: RGBColor = RGBColor(20, 20, 20);
+/// Length of the trail drawn before a snapshot, s.
+const TRAIL_S: f64 = 5.0;
 
 /// Fig. 5 (left): trajectories of all agents and the target's path in 3D.
 pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
@@ -87,13 +89,35 @@ pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult 
                 PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2))
             });
     }
-    // Axis names at the far ends of the axes.
-    let text = (FONT, 18).into_font().color(&BLACK);
-    chart.draw_series([
-        Text::new("x (m)", (cx + half, z0, cy - half), text.clone()),
-        Text::new("y (m)", (cx - half, z0, cy + half), text.clone()),
-        Text::new("z (m)", (cx - half, z1, cy - half), text),
-    ])?;
+    // Axis names beside the middle of the tick-labelled edges: the bottom edges that meet at the
+    // corner nearest the viewer (lowest on screen), and the vertical edge at the leftmost corner.
+    let (xr, yr) = ((cx - half, cx + half), (cy - half, cy + half));
+    let px = |x: f64, h: f64, y: f64| chart.as_coord_spec().translate(&(x, h, y));
+    let corners = [(xr.0, yr.0), (xr.0, yr.1), (xr.1, yr.0), (xr.1, yr.1)];
+    let front = corners
+        .iter()
+        .copied()
+        .max_by_key(|c| px(c.0, z0, c.1).1)
+        .unwrap_or(corners[0]);
+    let left = corners
+        .iter()
+        .copied()
+        .min_by_key(|c| px(c.0, z0, c.1).0)
+        .unwrap_or(corners[0]);
+    let other = |v: f64, r: (f64, f64)| if v == r.0 { r.1 } else { r.0 };
+    let mid = px(cx, (z0 + z1) / 2.0, cy);
+    let outward = |p: (i32, i32), d: f64| {
+        let (dx, dy) = ((p.0 - mid.0) as f64, (p.1 - mid.1) as f64);
+        let n = dx.hypot(dy).max(1.0);
+        (p.0 + (dx / n * d) as i32, p.1 + (dy / n * d) as i32)
+    };
+    let label = (FONT, 20).into_font().color(&BLACK);
+    let x_mid = px((front.0 + other(front.0, xr)) / 2.0, z0, front.1);
+    let y_mid = px(front.0, z0, (front.1 + other(front.1, yr)) / 2.0);
+    let z_top = px(left.0, z1, left.1);
+    root.draw_text("x (m)", &label, outward(x_mid, 70.0))?;
+    root.draw_text("y (m)", &label, outward(y_mid, 70.0))?;
+    root.draw_text("z (m)", &label, (z_top.0 - 20, z_top.1 - 40))?;
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
@@ -241,16 +265,26 @@ pub fn top_view(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
 
     // Overview: everything.
     let run = fig.run;
+    // The range covers the trajectories, the target path, the disks (and their labels) and
+    // the footprints of the snapshots.
+    let rd = fig.geometry.target_radius_m;
+    let mut extent: Vec<(f64, f64, f64)> = Vec::new();
+    for s in &snaps {
+        extent.push((s.target.0, s.target.1, 1.6 * rd));
+        extent.extend(s.agents.iter().map(|&(_, x, y, r)| (x, y, r)));
+    }
     let xs = run
         .agents
         .iter()
-        .flat_map(|a| a.col("px").iter().chain(a.col("tx")));
+        .flat_map(|a| a.col("px").iter().chain(a.col("tx")).copied());
     let ys = run
         .agents
         .iter()
-        .flat_map(|a| a.col("py").iter().chain(a.col("ty")));
-    let (x0, x1) = fit_range(xs.copied(), 0.08);
-    let (y0, y1) = fit_range(ys.copied(), 0.08);
+        .flat_map(|a| a.col("py").iter().chain(a.col("ty")).copied());
+    let xs = xs.chain(extent.iter().flat_map(|e| [e.0 - e.2, e.0 + e.2]));
+    let ys = ys.chain(extent.iter().flat_map(|e| [e.1 - e.2, e.1 + e.2]));
+    let (x0, x1) = fit_range(xs, 0.03);
+    let (y0, y1) = fit_range(ys, 0.03);
     let half = (x1 - x0).max(y1 - y0) / 2.0;
     let centre = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
     top_panel(
@@ -330,22 +364,27 @@ fn top_panel(
 
     let run = fig.run;
     let target = &run.agents[0];
-    chart
-        .draw_series(DashedLineSeries::new(
-            thin(
-                &target
-                    .col("tx")
-                    .iter()
-                    .copied()
-                    .zip(target.col("ty").iter().copied())
-                    .collect::<Vec<_>>(),
-            ),
-            8,
-            5,
-            REFERENCE.stroke_width(2),
-        ))?
-        .label("target path")
-        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], REFERENCE.stroke_width(2)));
+    let window = (
+        (centre.0 - hx, centre.0 + hx),
+        (centre.1 - hy, centre.1 + hy),
+    );
+    let target_path: Vec<(f64, f64)> = target
+        .col("tx")
+        .iter()
+        .copied()
+        .zip(target.col("ty").iter().copied())
+        .collect();
+    for (k, part) in clip_runs(&thin(&target_path), window.0, window.1)
+        .into_iter()
+        .enumerate()
+    {
+        let s = chart.draw_series(DashedLineSeries::new(part, 8, 5, REFERENCE.stroke_width(2)))?;
+        if k == 0 && legend {
+            s.label("target path").legend(|(x, y)| {
+                PathElement::new(vec![(x, y), (x + 24, y)], REFERENCE.stroke_width(2))
+            });
+        }
+    }
 
     // Trajectories: the whole run (overview) or the last seconds before the snapshot.
     for a in &run.agents {
@@ -354,15 +393,20 @@ fn top_panel(
             .t()
             .iter()
             .zip(a.col("px").iter().zip(a.col("py")))
-            .filter(|(t, _)| trail_until.is_none_or(|te| **t <= te && **t >= te - 5.0))
+            .filter(|(t, _)| trail_until.is_none_or(|te| **t <= te && **t >= te - TRAIL_S))
             .map(|(_, (x, y))| (*x, *y))
             .collect();
-        let s = chart.draw_series(LineSeries::new(thin(&pts), color.mix(0.75).stroke_width(2)))?;
-        if legend {
-            s.label(format!("quadrotor {}", a.id))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
-                });
+        for (k, part) in clip_runs(&thin(&pts), window.0, window.1)
+            .into_iter()
+            .enumerate()
+        {
+            let s = chart.draw_series(LineSeries::new(part, color.mix(0.75).stroke_width(2)))?;
+            if legend && k == 0 {
+                s.label(format!("quadrotor {}", a.id))
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))
+                    });
+            }
         }
     }
 
@@ -370,15 +414,15 @@ fn top_panel(
         let disk = circle(s.target, fig.geometry.target_radius_m);
         chart.draw_series(std::iter::once(Polygon::new(
             disk.clone(),
-            DISK.mix(0.18).filled(),
+            DISK.mix(0.10).filled(),
         )))?;
         let d = chart.draw_series(std::iter::once(PathElement::new(
             disk,
             DISK.stroke_width(3),
         )))?;
-        if legend {
+        if legend && std::ptr::eq(s, &snaps[0]) {
             d.label("target disk at snapshots").legend(|(x, y)| {
-                Rectangle::new([(x, y - 6), (x + 24, y + 6)], DISK.mix(0.4).filled())
+                Rectangle::new([(x, y - 6), (x + 24, y + 6)], DISK.mix(0.25).filled())
             });
         }
         for &(id, x, y, r) in &s.agents {
@@ -400,10 +444,8 @@ fn top_panel(
             DISK.stroke_width(3),
         )))?;
         if trail_until.is_none() {
-            let label_pos = (
-                s.target.0 + fig.geometry.target_radius_m * 0.75,
-                s.target.1 + fig.geometry.target_radius_m * 1.05,
-            );
+            let r = fig.geometry.target_radius_m;
+            let label_pos = (s.target.0 - 0.45 * r, s.target.1 + 1.5 * r);
             chart.draw_series(std::iter::once(Text::new(
                 format!("t = {:.0} s", s.t),
                 label_pos,
