@@ -67,6 +67,7 @@ pub fn attitude_constraint(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawR
         ("att_cmd_norm", "‖A_iC‖"),
         ("c1_bar", "C1_bar"),
         "rad",
+        true,
     )
 }
 
@@ -81,6 +82,7 @@ pub fn rate_constraint(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResul
         ("alpha_norm", "‖α_i‖"),
         ("c2_bar", "C2_bar"),
         "rad/s",
+        false,
     )
 }
 
@@ -94,6 +96,7 @@ fn constraint_figure(
     command: (&str, &str),
     bound: (&str, &str),
     unit: &str,
+    with_compare: bool,
 ) -> DrawResult {
     let root = BitMapBackend::new(path, size).into_drawing_area();
     let area = titled(&root, &format!("{title} ({})", fig.run.title()))?;
@@ -106,14 +109,12 @@ fn constraint_figure(
                 .width(2),
             Line::new(state.1, agent_color(a.id), a.series(state.0)),
         ];
-        if let Some(other) = fig
-            .compare
-            .and_then(|r| r.agents.iter().find(|b| b.id == a.id))
-        {
+        let compare = fig.compare.filter(|_| with_compare);
+        if let Some(other) = compare.and_then(|r| r.agents.iter().find(|b| b.id == a.id)) {
             let label = format!(
                 "{} ({})",
                 state.1,
-                fig.compare.map(|r| r.label()).unwrap_or_default()
+                compare.map(|r| r.label()).unwrap_or_default()
             );
             lines.insert(0, Line::new(label, OTHER, other.series(state.0)).width(1));
         }

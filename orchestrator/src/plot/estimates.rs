@@ -31,6 +31,7 @@ pub fn disturbance(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
                 .unlabelled(),
         );
     }
+    lines.push(true_value_key());
     draw_panel(
         &area,
         Panel {
@@ -103,6 +104,7 @@ fn per_channel(
                     .unlabelled(),
             );
         }
+        lines.push(true_value_key());
         draw_panel(
             cell,
             Panel {
@@ -123,4 +125,11 @@ fn per_channel(
     }
     root.present()?;
     Ok(())
+}
+
+/// A legend-only entry explaining the dashed lines.
+fn true_value_key() -> Line {
+    Line::new("true (dashed)", RGBColor(90, 90, 90), Vec::new())
+        .dashed()
+        .width(2)
 }

@@ -261,7 +261,8 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
             4,
             grey.stroke_width(1),
         ))?;
-        let top = y_range.1 - (y_range.1 - y_range.0) * 0.02;
+        // Labels at the bottom, where bounds and legends are least likely to be.
+        let top = y_range.0 + (y_range.1 - y_range.0) * 0.09;
         chart.draw_series(std::iter::once(Text::new(
             text.clone(),
             (*x + (x_range.1 - x_range.0) * 0.004, top),
@@ -269,19 +270,69 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
         )))?;
     }
 
+    // Lines are stroked segment by segment in pixel space: plotters joins thick polylines with
+    // mitres, which shoot far out of the panel where a noisy signal turns back sharply.
+    let canvas = chart.plotting_area().strip_coord_spec();
+    let base = canvas.get_base_pixel();
     for line in &lines {
         let style = line.color.stroke_width(line.width);
-        let points = line.points.iter().copied();
-        match line.stroke {
-            Stroke::Solid => chart.draw_series(LineSeries::new(points, style))?,
-            Stroke::Dashed => chart.draw_series(DashedLineSeries::new(points, 9, 5, style))?,
+        let mut pixels: Vec<(i32, i32)> = line
+            .points
+            .iter()
+            .map(|p| {
+                let (x, y) = chart.backend_coord(p);
+                (x - base.0, y - base.1)
+            })
+            .collect();
+        pixels.dedup();
+        let pieces = match line.stroke {
+            Stroke::Solid => pixels.windows(2).map(|w| (w[0], w[1])).collect(),
+            Stroke::Dashed => dash(&pixels, 9.0, 5.0),
         };
+        for (a, b) in pieces {
+            canvas.draw(&PathElement::new(vec![a, b], style))?;
+        }
     }
 
     if let (Legend::Side, Some(side)) = (panel.legend, side) {
         draw_side_legend(&side, &lines)?;
     }
     Ok(())
+}
+
+/// Cuts a pixel polyline into dashes of `on` px separated by gaps of `off` px; returns the
+/// straight pieces to stroke.
+fn dash(pixels: &[(i32, i32)], on: f64, off: f64) -> Vec<((i32, i32), (i32, i32))> {
+    let mut out = Vec::new();
+    let (mut drawing, mut left) = (true, on);
+    for w in pixels.windows(2) {
+        let (a, b) = (
+            (w[0].0 as f64, w[0].1 as f64),
+            (w[1].0 as f64, w[1].1 as f64),
+        );
+        let len = (b.0 - a.0).hypot(b.1 - a.1);
+        let mut s = 0.0;
+        while s < len {
+            let step = left.min(len - s);
+            if drawing {
+                let p = |u: f64| {
+                    let f = u / len;
+                    (
+                        (a.0 + (b.0 - a.0) * f).round() as i32,
+                        (a.1 + (b.1 - a.1) * f).round() as i32,
+                    )
+                };
+                out.push((p(s), p(s + step)));
+            }
+            s += step;
+            left -= step;
+            if left <= 1e-9 {
+                drawing = !drawing;
+                left = if drawing { on } else { off };
+            }
+        }
+    }
+    out
 }
 
 /// Draws the labelled lines' samples and names in a column, from the top.

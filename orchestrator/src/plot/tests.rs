@@ -135,7 +135,7 @@ fn row(step: usize, t: f64, i: usize, n: usize, rbfnn: bool) -> Vec<f64> {
         0.4 * (0.2 * t).cos(),
         0.1 * (0.7 * t).sin(),
     ];
-    let fh = |k: usize| f[k] * (1.0 - (-1.0 * t).exp());
+    let fh = |k: usize| f[k] * (1.0 - (-t).exp());
     let mut v = vec![0.0; HEADER.len()];
     let mut set = |name: &str, x: f64| {
         let k = HEADER
