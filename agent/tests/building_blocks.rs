@@ -65,7 +65,10 @@ fn command_filter_respects_its_magnitude_and_rate_limits() {
     assert!(max_rate <= 0.5 + 1e-9, "rate {max_rate}");
     let v = f.value();
     assert!((v[0] - 0.3).abs() < 1e-6 && (v[1] + 0.3).abs() < 1e-6);
-    assert!((v[2] - 0.2).abs() < 1e-6, "an unlimited channel settles on its input");
+    assert!(
+        (v[2] - 0.2).abs() < 1e-6,
+        "an unlimited channel settles on its input"
+    );
 }
 
 #[test]
@@ -78,7 +81,11 @@ fn delay_buffer_returns_the_exact_step_or_the_newest_before_it() {
     assert!(h.has(19) && h.has(12) && !h.has(11));
     assert_eq!(h.at_or_before(15), Some(150));
     assert_eq!(h.at_or_before(25), Some(190));
-    assert_eq!(h.at_or_before(2), Some(120), "older than held: the oldest value");
+    assert_eq!(
+        h.at_or_before(2),
+        Some(120),
+        "older than held: the oldest value"
+    );
     assert_eq!(delay_steps(0.0256, 1e-3), 26);
     assert_eq!(delay_steps(0.0254, 1e-3), 25);
     assert_eq!(delay_steps(-1.0, 1e-3), 0);
@@ -93,7 +100,12 @@ fn command_conversion_inverts_the_thrust_direction_of_eq_1() {
     let axis = formation_plant::kinematics::thrust_axis(&Vector3::from(a));
     let acc = axis * (t / m) - Vector3::new(0.0, 0.0, g);
     for k in 0..3 {
-        assert!((acc[k] - u[k]).abs() < 1e-12, "axis {k}: {} vs {}", acc[k], u[k]);
+        assert!(
+            (acc[k] - u[k]).abs() < 1e-12,
+            "axis {k}: {} vs {}",
+            acc[k],
+            u[k]
+        );
     }
 }
 
