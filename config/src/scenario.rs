@@ -371,6 +371,9 @@ pub struct UnconstrainedGains {
     pub attitude_gain: f64,
     /// Rate proportional gain, 1/s.
     pub rate_gain: f64,
+    /// Rate limit of its attitude-command filter, rad/s: the comparison controller tracks the command
+    /// without the constraint-aware shaping of the proposed design. Ours: 20 (effectively unlimited).
+    pub command_rate_limit_rad_s: f64,
 }
 
 /// Per-agent data: initial state, delay, faults, uncertainty, disturbance, model perturbation.
