@@ -66,7 +66,12 @@ pub const CTRL: &str = "controller gains must be positive where the paper requir
 struct Collector(Vec<ValidationError>);
 
 impl Collector {
-    fn push(&mut self, field: impl Into<String>, assumption: &'static str, message: impl Into<String>) {
+    fn push(
+        &mut self,
+        field: impl Into<String>,
+        assumption: &'static str,
+        message: impl Into<String>,
+    ) {
         self.0.push(ValidationError {
             field: field.into(),
             assumption,
@@ -104,11 +109,19 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         c.push(
             "simulation.output_rate_hz",
             SIM,
-            format!("output rate {} Hz exceeds the step rate {} Hz", sim.output_rate_hz, 1.0 / sim.dt_s),
+            format!(
+                "output rate {} Hz exceeds the step rate {} Hz",
+                sim.output_rate_hz,
+                1.0 / sim.dt_s
+            ),
         );
     }
     if sim.max_delay_s > 0.0 && sim.dt_s > 0.0 && sim.max_delay_s / sim.dt_s > 100_000.0 {
-        c.push("simulation.max_delay_s", A2, "delay bound spans more than 100000 steps");
+        c.push(
+            "simulation.max_delay_s",
+            A2,
+            "delay bound spans more than 100000 steps",
+        );
     }
     // Metrics windows.
     for (name, w) in [
@@ -116,24 +129,46 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         ("metrics.enclose_window_s", s.metrics.enclose_window_s),
     ] {
         if !(w[0] >= 0.0 && w[1] > w[0]) {
-            c.push(name, SIM, format!("window must satisfy 0 <= start < end, got [{}, {}]", w[0], w[1]));
+            c.push(
+                name,
+                SIM,
+                format!(
+                    "window must satisfy 0 <= start < end, got [{}, {}]",
+                    w[0], w[1]
+                ),
+            );
         }
     }
     c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
     if !(s.metrics.sensor_fov_deg > 0.0 && s.metrics.sensor_fov_deg < 180.0) {
-        c.push("metrics.sensor_fov_deg", PHYS, format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg));
+        c.push(
+            "metrics.sensor_fov_deg",
+            PHYS,
+            format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg),
+        );
     }
     // Vehicle.
     let v = &s.vehicle;
     c.positive("vehicle.mass_kg", v.mass_kg, PHYS);
     for k in 0..3 {
-        c.positive(&format!("vehicle.inertia_kg_m2[{k}]"), v.inertia_kg_m2[k], PHYS);
-        c.non_negative(&format!("vehicle.rotational_drag[{k}]"), v.rotational_drag[k], PHYS);
+        c.positive(
+            &format!("vehicle.inertia_kg_m2[{k}]"),
+            v.inertia_kg_m2[k],
+            PHYS,
+        );
+        c.non_negative(
+            &format!("vehicle.rotational_drag[{k}]"),
+            v.rotational_drag[k],
+            PHYS,
+        );
         if !(v.torque_min_nm[k] < v.torque_max_nm[k]) {
             c.push(
                 format!("vehicle.torque_min_nm[{k}]"),
                 SAT,
-                format!("U_min {} must be below U_max {}", v.torque_min_nm[k], v.torque_max_nm[k]),
+                format!(
+                    "U_min {} must be below U_max {}",
+                    v.torque_min_nm[k], v.torque_max_nm[k]
+                ),
             );
         }
     }
@@ -141,7 +176,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         c.push(
             "vehicle.thrust_max_n",
             PHYS,
-            format!("{} N cannot lift m g = {:.3} N", v.thrust_max_n, v.mass_kg * sim.gravity_m_s2),
+            format!(
+                "{} N cannot lift m g = {:.3} N",
+                v.thrust_max_n,
+                v.mass_kg * sim.gravity_m_s2
+            ),
         );
     }
     // Graph.
@@ -149,29 +188,48 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         c.push("agents", A1, "at least one agent is needed");
     }
     if n > MAX_AGENTS {
-        c.push("agents", INDEX, format!("{n} agents exceed the supported maximum {MAX_AGENTS}"));
+        c.push(
+            "agents",
+            INDEX,
+            format!("{n} agents exceed the supported maximum {MAX_AGENTS}"),
+        );
     }
     if s.graph.leader_weights.len() != n {
         c.push(
             "graph.leader_weights",
             INDEX,
-            format!("has {} entries for {n} agents", s.graph.leader_weights.len()),
+            format!(
+                "has {} entries for {n} agents",
+                s.graph.leader_weights.len()
+            ),
         );
     }
     let mut graph_ok = s.graph.leader_weights.len() == n && n > 0;
     for (k, e) in s.graph.edges.iter().enumerate() {
         for (end, idx) in [("a", e.a), ("b", e.b)] {
             if idx < 1 || idx > n {
-                c.push(format!("graph.edges[{k}].{end}"), INDEX, format!("agent {idx} is not in 1..={n}"));
+                c.push(
+                    format!("graph.edges[{k}].{end}"),
+                    INDEX,
+                    format!("agent {idx} is not in 1..={n}"),
+                );
                 graph_ok = false;
             }
         }
         if e.a == e.b {
-            c.push(format!("graph.edges[{k}]"), A1, format!("self-loop on agent {} (a_ii = 0)", e.a));
+            c.push(
+                format!("graph.edges[{k}]"),
+                A1,
+                format!("self-loop on agent {} (a_ii = 0)", e.a),
+            );
             graph_ok = false;
         }
         if !(e.weight > 0.0) {
-            c.push(format!("graph.edges[{k}].weight"), A1, format!("a_ij must be > 0, got {}", e.weight));
+            c.push(
+                format!("graph.edges[{k}].weight"),
+                A1,
+                format!("a_ij must be > 0, got {}", e.weight),
+            );
             graph_ok = false;
         }
     }
@@ -184,76 +242,174 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
             c.push("graph.edges", A1, "the follower graph is not connected");
         }
         if !topo.leader_reaches_all() {
-            c.push("graph.leader_weights", A1, "no agent with b_i > 0 reaches every agent (the leader is unreachable)");
+            c.push(
+                "graph.leader_weights",
+                A1,
+                "no agent with b_i > 0 reaches every agent (the leader is unreachable)",
+            );
         }
     }
     // Controller.
     let ctl = &s.controller;
-    c.positive("controller.position.k_p", ctl.position.k_p, "Theorem 1: k_P > 0");
-    c.positive("controller.position.k_v", ctl.position.k_v, "Theorem 1: k_V > 0");
-    c.non_negative("controller.position.nn_learning_rate", ctl.position.nn_learning_rate, CTRL);
-    c.non_negative("controller.position.nn_leakage", ctl.position.nn_leakage, CTRL);
-    c.positive("controller.position.max_horizontal_accel_m_s2", ctl.position.max_horizontal_accel_m_s2, CTRL);
-    c.positive("controller.position.max_up_accel_m_s2", ctl.position.max_up_accel_m_s2, CTRL);
-    if !(ctl.position.max_down_accel_m_s2 > 0.0 && ctl.position.max_down_accel_m_s2 < sim.gravity_m_s2) {
+    c.positive(
+        "controller.position.k_p",
+        ctl.position.k_p,
+        "Theorem 1: k_P > 0",
+    );
+    c.positive(
+        "controller.position.k_v",
+        ctl.position.k_v,
+        "Theorem 1: k_V > 0",
+    );
+    c.non_negative(
+        "controller.position.nn_learning_rate",
+        ctl.position.nn_learning_rate,
+        CTRL,
+    );
+    c.non_negative(
+        "controller.position.nn_leakage",
+        ctl.position.nn_leakage,
+        CTRL,
+    );
+    c.positive(
+        "controller.position.max_horizontal_accel_m_s2",
+        ctl.position.max_horizontal_accel_m_s2,
+        CTRL,
+    );
+    c.positive(
+        "controller.position.max_up_accel_m_s2",
+        ctl.position.max_up_accel_m_s2,
+        CTRL,
+    );
+    if !(ctl.position.max_down_accel_m_s2 > 0.0
+        && ctl.position.max_down_accel_m_s2 < sim.gravity_m_s2)
+    {
         c.push(
             "controller.position.max_down_accel_m_s2",
             "Remark 3: U_i3P + g > 0",
-            format!("must be in (0, g), got {}", ctl.position.max_down_accel_m_s2),
+            format!(
+                "must be in (0, g), got {}",
+                ctl.position.max_down_accel_m_s2
+            ),
         );
     }
-    if !(ctl.position.max_tilt_rad > 0.0 && ctl.position.max_tilt_rad < std::f64::consts::FRAC_PI_2) {
-        c.push("controller.position.max_tilt_rad", CTRL, format!("must be in (0, pi/2), got {}", ctl.position.max_tilt_rad));
+    if !(ctl.position.max_tilt_rad > 0.0 && ctl.position.max_tilt_rad < std::f64::consts::FRAC_PI_2)
+    {
+        c.push(
+            "controller.position.max_tilt_rad",
+            CTRL,
+            format!("must be in (0, pi/2), got {}", ctl.position.max_tilt_rad),
+        );
     }
     if ctl.rbfnn.neurons_per_axis == 0 || ctl.rbfnn.neurons_per_axis > 64 {
-        c.push("controller.rbfnn.neurons_per_axis", CTRL, format!("must be in 1..=64, got {}", ctl.rbfnn.neurons_per_axis));
+        c.push(
+            "controller.rbfnn.neurons_per_axis",
+            CTRL,
+            format!("must be in 1..=64, got {}", ctl.rbfnn.neurons_per_axis),
+        );
     }
     c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
-    c.positive("controller.rbfnn.position_span_m", ctl.rbfnn.position_span_m, CTRL);
-    c.positive("controller.rbfnn.velocity_span_m_s", ctl.rbfnn.velocity_span_m_s, CTRL);
+    c.positive(
+        "controller.rbfnn.position_span_m",
+        ctl.rbfnn.position_span_m,
+        CTRL,
+    );
+    c.positive(
+        "controller.rbfnn.velocity_span_m_s",
+        ctl.rbfnn.velocity_span_m_s,
+        CTRL,
+    );
     for (name, f) in [
-        ("controller.attitude_command_filter", &ctl.attitude_command_filter),
+        (
+            "controller.attitude_command_filter",
+            &ctl.attitude_command_filter,
+        ),
         ("controller.rate_command_filter", &ctl.rate_command_filter),
     ] {
-        c.positive(&format!("{name}.natural_frequency_rad_s"), f.natural_frequency_rad_s, CTRL);
+        c.positive(
+            &format!("{name}.natural_frequency_rad_s"),
+            f.natural_frequency_rad_s,
+            CTRL,
+        );
         c.positive(&format!("{name}.damping"), f.damping, CTRL);
         if sim.dt_s > 0.0 && f.natural_frequency_rad_s * sim.dt_s > 0.5 {
             c.push(
                 format!("{name}.natural_frequency_rad_s"),
                 SIM,
-                format!("omega_B dt = {:.3} > 0.5: the filter is not resolved by the step", f.natural_frequency_rad_s * sim.dt_s),
+                format!(
+                    "omega_B dt = {:.3} > 0.5: the filter is not resolved by the step",
+                    f.natural_frequency_rad_s * sim.dt_s
+                ),
             );
         }
         for k in 0..3 {
-            c.positive(&format!("{name}.magnitude_limit[{k}]"), f.magnitude_limit[k], CTRL);
+            c.positive(
+                &format!("{name}.magnitude_limit[{k}]"),
+                f.magnitude_limit[k],
+                CTRL,
+            );
             c.positive(&format!("{name}.rate_limit[{k}]"), f.rate_limit[k], CTRL);
         }
     }
     let att = &ctl.attitude;
-    c.positive("controller.attitude.k1_alpha", att.k1_alpha, "eq. (34): K_i1alpha > 2 K_i1C > 0");
-    c.positive("controller.attitude.k2_phi", att.k2_phi, "eq. (45): K_i2Phi > 2 K_i2C > 0");
+    c.positive(
+        "controller.attitude.k1_alpha",
+        att.k1_alpha,
+        "eq. (34): K_i1alpha > 2 K_i1C > 0",
+    );
+    c.positive(
+        "controller.attitude.k2_phi",
+        att.k2_phi,
+        "eq. (45): K_i2Phi > 2 K_i2C > 0",
+    );
     c.positive("controller.attitude.eps1_c", att.eps1_c, CTRL);
     c.positive("controller.attitude.eps2_c", att.eps2_c, CTRL);
     if att.k1_alpha > 0.0 && att.eps1_c > 0.0 && !(att.k1_alpha > 2.0 * att.eps1_c.sqrt()) {
-        c.push("controller.attitude.k1_alpha", "eq. (34): K_i1alpha > 2 K_i1C", "K_i1alpha must exceed 2 sqrt(eps1_c)");
+        c.push(
+            "controller.attitude.k1_alpha",
+            "eq. (34): K_i1alpha > 2 K_i1C",
+            "K_i1alpha must exceed 2 sqrt(eps1_c)",
+        );
     }
     if att.k2_phi > 0.0 && att.eps2_c > 0.0 && !(att.k2_phi > 2.0 * att.eps2_c.sqrt()) {
-        c.push("controller.attitude.k2_phi", "eq. (45): K_i2Phi > 2 K_i2C", "K_i2Phi must exceed 2 sqrt(eps2_c)");
+        c.push(
+            "controller.attitude.k2_phi",
+            "eq. (45): K_i2Phi > 2 K_i2C",
+            "K_i2Phi must exceed 2 sqrt(eps2_c)",
+        );
     }
     c.positive("controller.attitude.mu2", att.mu2, CTRL);
-    c.positive("controller.attitude.attitude_margin_rad", att.attitude_margin_rad, A4);
-    c.positive("controller.attitude.rate_limit_rad_s", att.rate_limit_rad_s, A4);
+    c.positive(
+        "controller.attitude.attitude_margin_rad",
+        att.attitude_margin_rad,
+        A4,
+    );
+    c.positive(
+        "controller.attitude.rate_limit_rad_s",
+        att.rate_limit_rad_s,
+        A4,
+    );
     let alpha_bound = norm3(ctl.rate_command_filter.magnitude_limit);
     if att.rate_limit_rad_s > 0.0 && !(alpha_bound < att.rate_limit_rad_s) {
         c.push(
             "controller.rate_command_filter.magnitude_limit",
             "eq. (40): C_i2 = C-bar_i2 - alpha-bar_i > 0",
-            format!("||alpha||max = {alpha_bound:.4} must be below the rate constraint {:.4}", att.rate_limit_rad_s),
+            format!(
+                "||alpha||max = {alpha_bound:.4} must be below the rate constraint {:.4}",
+                att.rate_limit_rad_s
+            ),
         );
     }
     let ad = &ctl.adaptive;
     if !(ad.gamma_min > 0.0 && ad.gamma_min <= ad.gamma_max) {
-        c.push("controller.adaptive.gamma_min", A5, format!("need 0 < Gamma_min <= Gamma_max, got [{}, {}]", ad.gamma_min, ad.gamma_max));
+        c.push(
+            "controller.adaptive.gamma_min",
+            A5,
+            format!(
+                "need 0 < Gamma_min <= Gamma_max, got [{}, {}]",
+                ad.gamma_min, ad.gamma_max
+            ),
+        );
     }
     for (name, val) in [
         ("controller.adaptive.model_rate", ad.model_rate),
@@ -263,20 +419,38 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         ("controller.adaptive.gamma_rate", ad.gamma_rate),
         ("controller.adaptive.gamma_leakage", ad.gamma_leakage),
         ("controller.adaptive.disturbance_rate", ad.disturbance_rate),
-        ("controller.adaptive.disturbance_leakage", ad.disturbance_leakage),
+        (
+            "controller.adaptive.disturbance_leakage",
+            ad.disturbance_leakage,
+        ),
     ] {
         c.non_negative(name, val, CTRL);
     }
     if !(ad.gamma_hat_initial >= ad.gamma_min && ad.gamma_hat_initial <= ad.gamma_max) {
-        c.push("controller.adaptive.gamma_hat_initial", A5, format!("{} lies outside [Gamma_min, Gamma_max]", ad.gamma_hat_initial));
+        c.push(
+            "controller.adaptive.gamma_hat_initial",
+            A5,
+            format!(
+                "{} lies outside [Gamma_min, Gamma_max]",
+                ad.gamma_hat_initial
+            ),
+        );
     }
     let aux = &ctl.auxiliary;
     c.non_negative("controller.auxiliary.k1_e", aux.k1_e, CTRL);
     c.non_negative("controller.auxiliary.k2_e", aux.k2_e, CTRL);
     c.positive("controller.auxiliary.e1_threshold", aux.e1_threshold, CTRL);
     c.positive("controller.auxiliary.e2_threshold", aux.e2_threshold, CTRL);
-    c.positive("controller.unconstrained.attitude_gain", ctl.unconstrained.attitude_gain, CTRL);
-    c.positive("controller.unconstrained.rate_gain", ctl.unconstrained.rate_gain, CTRL);
+    c.positive(
+        "controller.unconstrained.attitude_gain",
+        ctl.unconstrained.attitude_gain,
+        CTRL,
+    );
+    c.positive(
+        "controller.unconstrained.rate_gain",
+        ctl.unconstrained.rate_gain,
+        CTRL,
+    );
     // Agents.
     for (i, a) in s.agents.iter().enumerate() {
         check_agent(s, i, a, &mut c);
@@ -298,11 +472,20 @@ fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
         c.push(
             format!("{p}.delay"),
             A2,
-            format!("tau_{} reaches {:.4} s above tau_M = {:.4} s", i + 1, hi, s.simulation.max_delay_s),
+            format!(
+                "tau_{} reaches {:.4} s above tau_M = {:.4} s",
+                i + 1,
+                hi,
+                s.simulation.max_delay_s
+            ),
         );
     }
     if lo < 0.0 {
-        c.push(format!("{p}.delay"), A2, format!("tau_{} goes negative ({lo:.4} s)", i + 1));
+        c.push(
+            format!("{p}.delay"),
+            A2,
+            format!("tau_{} goes negative ({lo:.4} s)", i + 1),
+        );
     }
     // Assumption 4: initial attitude inside the constraints. With C-bar_i1 = ||A_iC|| + margin and the
     // command starting at the initial attitude, the roll/pitch must stay clear of the R_r singularity
@@ -314,7 +497,10 @@ fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
             c.push(
                 format!("{p}.initial_attitude_rad[{k}]"),
                 A4,
-                format!("initial {name} = {} rad exceeds the tilt limit {tilt_limit} rad", att[k]),
+                format!(
+                    "initial {name} = {} rad exceeds the tilt limit {tilt_limit} rad",
+                    att[k]
+                ),
             );
         }
     }
@@ -326,23 +512,45 @@ fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
         let g_start = f.gamma_final[k] + f.gamma_initial_excess[k];
         let (g_lo, g_hi) = (g_final.min(g_start), g_final.max(g_start));
         if !(g_lo > 0.0) {
-            c.push(format!("{p}.fault.gamma_final[{k}]"), A5, format!("Gamma_{}{} reaches {g_lo} <= 0 (total failure)", i + 1, k + 1));
+            c.push(
+                format!("{p}.fault.gamma_final[{k}]"),
+                A5,
+                format!(
+                    "Gamma_{}{} reaches {g_lo} <= 0 (total failure)",
+                    i + 1,
+                    k + 1
+                ),
+            );
         } else if g_lo < ad.gamma_min - 1e-12 {
             c.push(
                 format!("{p}.fault.gamma_final[{k}]"),
                 A5,
-                format!("Gamma_{}{} reaches {g_lo} below Gamma_min = {}", i + 1, k + 1, ad.gamma_min),
+                format!(
+                    "Gamma_{}{} reaches {g_lo} below Gamma_min = {}",
+                    i + 1,
+                    k + 1,
+                    ad.gamma_min
+                ),
             );
         }
         if g_hi > ad.gamma_max + 1e-12 {
             c.push(
                 format!("{p}.fault.gamma_initial_excess[{k}]"),
                 A5,
-                format!("Gamma_{}{} reaches {g_hi} above Gamma_max = {}", i + 1, k + 1, ad.gamma_max),
+                format!(
+                    "Gamma_{}{} reaches {g_hi} above Gamma_max = {}",
+                    i + 1,
+                    k + 1,
+                    ad.gamma_max
+                ),
             );
         }
     }
-    c.non_negative(&format!("{p}.fault.gamma_decay_rate"), f.gamma_decay_rate, A5);
+    c.non_negative(
+        &format!("{p}.fault.gamma_decay_rate"),
+        f.gamma_decay_rate,
+        A5,
+    );
     c.non_negative(&format!("{p}.fault.delta_ramp_rate"), f.delta_ramp_rate, A5);
     for k in 0..3 {
         for (name, v) in [
@@ -351,25 +559,42 @@ fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
             ("delta_osc_decay", f.delta_osc_decay[k]),
             ("delta_bias_decay", f.delta_bias_decay[k]),
         ] {
-            c.non_negative(&format!("{p}.fault.{name}[{k}]"), v, "Assumption 5: delta_i(t) is bounded");
+            c.non_negative(
+                &format!("{p}.fault.{name}[{k}]"),
+                v,
+                "Assumption 5: delta_i(t) is bounded",
+            );
         }
         let span = s.vehicle.torque_max_nm[k] - s.vehicle.torque_min_nm[k];
-        let bound = f.delta_ramp_nm[k].abs() + f.delta_osc_amplitude_nm[k].abs() + f.delta_bias_nm[k].abs();
+        let bound =
+            f.delta_ramp_nm[k].abs() + f.delta_osc_amplitude_nm[k].abs() + f.delta_bias_nm[k].abs();
         if span > 0.0 && bound >= 0.5 * span {
             c.push(
                 format!("{p}.fault.delta_ramp_nm[{k}]"),
                 "Assumption 5 with eq. (3): the additive fault must leave torque authority",
-                format!("|delta_{}{}| can reach {bound:.3} N m, half the torque range or more", i + 1, k + 1),
+                format!(
+                    "|delta_{}{}| can reach {bound:.3} N m, half the torque range or more",
+                    i + 1,
+                    k + 1
+                ),
             );
         }
     }
     for k in 0..3 {
         if !(a.uncertainty.velocity_power[k] == 1 || a.uncertainty.velocity_power[k] == 2) {
-            c.push(format!("{p}.uncertainty.velocity_power[{k}]"), PHYS, "must be 1 or 2 (eq. (61))");
+            c.push(
+                format!("{p}.uncertainty.velocity_power[{k}]"),
+                PHYS,
+                "must be 1 or 2 (eq. (61))",
+            );
         }
     }
     if norm3(a.disturbance.direction) == 0.0 {
-        c.push(format!("{p}.disturbance.direction"), PHYS, "must be a non-zero vector");
+        c.push(
+            format!("{p}.disturbance.direction"),
+            PHYS,
+            "must be a non-zero vector",
+        );
     }
 }
 
@@ -397,7 +622,11 @@ fn check_finite(s: &Scenario, c: &mut Collector) {
             }
             toml::Value::Table(t) => {
                 for (k, it) in t {
-                    let p = if path.is_empty() { k.clone() } else { format!("{path}.{k}") };
+                    let p = if path.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{path}.{k}")
+                    };
                     walk(&p, it, c);
                 }
             }
