@@ -94,7 +94,7 @@ pub fn recv(
             }
             polls = polls.wrapping_add(1);
             std::hint::spin_loop();
-            if polls % 4096 != 0 {
+            if !polls.is_multiple_of(4096) {
                 continue;
             }
         } else {

@@ -120,9 +120,15 @@ impl Peers {
 
     /// True while every peer is still running.
     pub fn all_alive(&mut self) -> bool {
-        self.children
-            .iter_mut()
-            .all(|c| matches!(c.try_wait(), Ok(None)))
+        let mut alive = true;
+        for c in &mut self.children {
+            if !matches!(c.try_wait(), Ok(None)) {
+                // Reaped now: never signal this pid again (it may be reused).
+                forget_pid(c.id() as i32);
+                alive = false;
+            }
+        }
+        alive
     }
 
     /// Waits up to `timeout` for every peer to exit by itself, then kills the rest. Returns an
@@ -169,10 +175,14 @@ fn reap(mut child: Child, deadline: Instant) -> io::Result<std::process::ExitSta
             }
         }
     };
+    forget_pid(pid);
+    result
+}
+
+fn forget_pid(pid: i32) {
     if let Ok(mut pids) = LIVE_PIDS.lock() {
         pids.retain(|&p| p != pid);
     }
-    result
 }
 
 impl Drop for Peers {
