@@ -5,10 +5,12 @@
 //! * [`validate`]: checks of the paper's assumptions with errors naming the field and the assumption.
 //! * [`wire`]: `#[repr(C)]` zero-copy messages exchanged over iceoryx2, stamped with step and time.
 //! * [`services`]: service names under a per-run prefix.
+//! * [`ipc`]: iceoryx2 plumbing: nodes under a run prefix, services sized for N, residue cleanup.
 //! * [`graph`]: the communication graph (Laplacian `L`, leader weights `B`) built from a scenario.
 #![warn(missing_docs)]
 
 pub mod graph;
+pub mod ipc;
 pub mod scenario;
 pub mod services;
 pub mod validate;

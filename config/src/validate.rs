@@ -490,6 +490,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         ctl.unconstrained.rate_gain,
         CTRL,
     );
+    c.positive(
+        "controller.unconstrained.command_rate_limit_rad_s",
+        ctl.unconstrained.command_rate_limit_rad_s,
+        CTRL,
+    );
     // Agents.
     for (i, a) in s.agents.iter().enumerate() {
         check_agent(s, i, a, &mut c);

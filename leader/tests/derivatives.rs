@@ -78,7 +78,10 @@ fn offsets_are_centred_and_on_the_ring() {
     let fm = &s.mission.formation;
     let pre = -fm.spin_rate_rad_s / (std::f64::consts::PI * fm.spin_onset_sharpness);
     let angle = f.offset[0][1].atan2(f.offset[0][0]);
-    assert!((angle - (std::f64::consts::FRAC_PI_2 + pre)).abs() < 0.02, "angle {angle}");
+    assert!(
+        (angle - (std::f64::consts::FRAC_PI_2 + pre)).abs() < 0.02,
+        "angle {angle}"
+    );
 }
 
 #[test]

@@ -35,6 +35,9 @@ enum Command {
     Check(check::CheckArgs),
     /// Measure IPC latency and jitter (iceoryx2, Unix domain sockets, UDP loopback).
     Bench(bench::BenchArgs),
+    /// Internal: one agent process of `formation bench`.
+    #[command(hide = true)]
+    BenchPeer(bench::PeerArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
+        Some(Command::BenchPeer(a)) => bench::peer_main(a),
         None => sim::main(sim::SimArgs::default()),
     }
 }

@@ -1,0 +1,307 @@
+//! Reusable iceoryx2 plumbing for formation processes.
+//!
+//! * [`config_for_prefix`] / [`node`]: a node under a per-run prefix, with an explicit in-memory
+//!   config (iceoryx2 never reads `config/iceoryx2.toml`, which matters because this repository has a
+//!   top-level `config/` directory) and a quiet log ([`quiet_log`]).
+//! * [`Limits`], [`pubsub_with_limits`], [`event_with_limits`]: services sized for the number of
+//!   processes (the defaults allow only 2 publishers and 8 subscribers per service). Limits are fixed
+//!   by whichever process *creates* a service, so one process should create every service before the
+//!   others open them.
+//! * [`remove_residue`]: deletes the files a run leaves under its prefix in `/dev/shm` and under the
+//!   iceoryx2 root directory (`/tmp/iceoryx2`), even after a clean exit.
+
+use core::fmt::Debug;
+use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::prelude::*;
+use iceoryx2::service::builder::{event, publish_subscribe};
+use std::path::Path as StdPath;
+
+/// Where POSIX shared memory objects live on Linux.
+pub const SHM_DIR: &str = "/dev/shm";
+
+/// Longest prefix accepted by [`config_for_prefix`]; it becomes part of every file name.
+pub const MAX_PREFIX_LEN: usize = 32;
+
+/// Errors of the helpers in this module.
+#[derive(Debug)]
+pub enum IpcError {
+    /// The prefix is empty, too long, or has characters other than `[A-Za-z0-9_-]`.
+    BadPrefix(String),
+    /// The service or node name is not valid for iceoryx2.
+    BadName(String),
+    /// iceoryx2 could not create the node.
+    Node(NodeCreationFailure),
+}
+
+impl core::fmt::Display for IpcError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            IpcError::BadPrefix(p) => write!(
+                f,
+                "invalid iceoryx2 prefix '{p}': use 1..={MAX_PREFIX_LEN} characters of [A-Za-z0-9_-]"
+            ),
+            IpcError::BadName(n) => write!(f, "invalid iceoryx2 name '{n}'"),
+            IpcError::Node(e) => write!(f, "cannot create iceoryx2 node: {e:?}"),
+        }
+    }
+}
+
+impl std::error::Error for IpcError {}
+
+/// Raises iceoryx2's log level to `Error` (overridable with the `IOX2_LOG_LEVEL` environment
+/// variable), so processes do not print "No config file was loaded" and similar notices.
+pub fn quiet_log() {
+    set_log_level_from_env_or(LogLevel::Error);
+}
+
+/// True when `prefix` is usable as an iceoryx2 global prefix by [`config_for_prefix`].
+pub fn is_valid_prefix(prefix: &str) -> bool {
+    !prefix.is_empty()
+        && prefix.len() <= MAX_PREFIX_LEN
+        && prefix
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+}
+
+/// The default iceoryx2 config with `global.prefix = prefix`, built in memory (no config file is
+/// read). Nodes created with it only see services of the same prefix.
+pub fn config_for_prefix(prefix: &str) -> Result<Config, IpcError> {
+    if !is_valid_prefix(prefix) {
+        return Err(IpcError::BadPrefix(prefix.to_string()));
+    }
+    let mut cfg = Config::default();
+    cfg.global.prefix =
+        FileName::new(prefix.as_bytes()).map_err(|_| IpcError::BadPrefix(prefix.to_string()))?;
+    Ok(cfg)
+}
+
+/// Creates an inter-process node named `name` under `prefix`, with a quiet log and without
+/// iceoryx2's own SIGINT/SIGTERM handling (the process decides how to react to signals).
+pub fn node(prefix: &str, name: &str) -> Result<Node<ipc::Service>, IpcError> {
+    quiet_log();
+    let cfg = config_for_prefix(prefix)?;
+    let node_name = NodeName::new(name).map_err(|_| IpcError::BadName(name.to_string()))?;
+    NodeBuilder::new()
+        .config(&cfg)
+        .name(&node_name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(IpcError::Node)
+}
+
+/// Converts a string into a [`ServiceName`].
+pub fn service_name(name: &str) -> Result<ServiceName, IpcError> {
+    ServiceName::new(name).map_err(|_| IpcError::BadName(name.to_string()))
+}
+
+/// Upper bounds a service is created with. Openers of an existing service cannot raise them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Nodes that may open the service.
+    pub nodes: usize,
+    /// Publishers (publish-subscribe) or notifiers (event).
+    pub senders: usize,
+    /// Subscribers (publish-subscribe) or listeners (event).
+    pub receivers: usize,
+    /// Samples a subscriber can hold before the oldest is overwritten (publish-subscribe only).
+    pub buffer: usize,
+}
+
+impl Limits {
+    /// Limits for a service that `processes` processes open, each with at most one port of each
+    /// kind: every process may send and receive, and a subscriber buffers one sample per sender.
+    pub fn for_processes(processes: usize) -> Self {
+        let p = processes.max(1);
+        Limits {
+            nodes: p + 1,
+            senders: p,
+            receivers: p,
+            buffer: p.max(2),
+        }
+    }
+}
+
+/// Applies `limits` to a publish-subscribe builder (any payload and user header).
+pub fn pubsub_with_limits<P, H>(
+    builder: publish_subscribe::Builder<P, H, ipc::Service>,
+    limits: &Limits,
+) -> publish_subscribe::Builder<P, H, ipc::Service>
+where
+    P: Debug + IceoryxSend + ?Sized,
+    H: Debug + ZeroCopySend,
+{
+    builder
+        .max_nodes(limits.nodes)
+        .max_publishers(limits.senders)
+        .max_subscribers(limits.receivers)
+        .subscriber_max_buffer_size(limits.buffer)
+        .history_size(0)
+}
+
+/// Applies `limits` to an event builder.
+pub fn event_with_limits(
+    builder: event::Builder<ipc::Service>,
+    limits: &Limits,
+) -> event::Builder<ipc::Service> {
+    builder
+        .max_nodes(limits.nodes)
+        .max_notifiers(limits.senders)
+        .max_listeners(limits.receivers)
+}
+
+/// Deletes every file whose name starts with `prefix` directly in `/dev/shm` and anywhere below the
+/// iceoryx2 root directory of the default config (`/tmp/iceoryx2`). Directories are left alone
+/// (they are shared by all runs). Call it after every node of the run has been dropped and every
+/// process of the run has exited. Returns the number of files removed; missing directories are not
+/// an error.
+pub fn remove_residue(prefix: &str) -> std::io::Result<usize> {
+    if !is_valid_prefix(prefix) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            IpcError::BadPrefix(prefix.to_string()).to_string(),
+        ));
+    }
+    let cfg = Config::default();
+    let root = cfg.global.root_path().to_string();
+    let mut removed = remove_prefixed(StdPath::new(SHM_DIR), prefix, false)?;
+    removed += remove_prefixed(StdPath::new(&root), prefix, true)?;
+    Ok(removed)
+}
+
+/// The files [`remove_residue`] would delete for `prefix` (for checks and diagnostics).
+pub fn residue(prefix: &str) -> std::io::Result<Vec<std::path::PathBuf>> {
+    let cfg = Config::default();
+    let root = cfg.global.root_path().to_string();
+    let mut out = Vec::new();
+    collect_prefixed(StdPath::new(SHM_DIR), prefix, false, &mut out)?;
+    collect_prefixed(StdPath::new(&root), prefix, true, &mut out)?;
+    Ok(out)
+}
+
+fn remove_prefixed(dir: &StdPath, prefix: &str, recurse: bool) -> std::io::Result<usize> {
+    remove_prefixed_at(dir, prefix, recurse, 0)
+}
+
+/// Removes `prefix*` files below `dir`; a directory two or more levels below the starting one
+/// (per-node directories such as `nodes/<node id>/`) is removed too once it is empty and something
+/// of the prefix was removed from it. Shared top-level directories are never removed.
+fn remove_prefixed_at(
+    dir: &StdPath,
+    prefix: &str,
+    recurse: bool,
+    depth: usize,
+) -> std::io::Result<usize> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(e),
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let Ok(ft) = entry.file_type() else { continue };
+        let path = entry.path();
+        if ft.is_dir() {
+            if recurse {
+                let inner = remove_prefixed_at(&path, prefix, recurse, depth + 1)?;
+                if inner > 0 && depth >= 1 {
+                    // Fails harmlessly when other runs' files are still in it.
+                    let _ = std::fs::remove_dir(&path);
+                }
+                removed += inner;
+            }
+        } else if entry.file_name().to_string_lossy().starts_with(prefix) {
+            match std::fs::remove_file(&path) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            }
+        }
+    }
+    Ok(removed)
+}
+
+fn collect_prefixed(
+    dir: &StdPath,
+    prefix: &str,
+    recurse: bool,
+    out: &mut Vec<std::path::PathBuf>,
+) -> std::io::Result<()> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(e),
+    };
+    for entry in entries.flatten() {
+        let Ok(ft) = entry.file_type() else { continue };
+        if ft.is_dir() {
+            if recurse {
+                collect_prefixed(&entry.path(), prefix, recurse, out)?;
+            }
+        } else if entry.file_name().to_string_lossy().starts_with(prefix) {
+            out.push(entry.path());
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prefixes_with_path_characters_are_rejected() {
+        assert!(config_for_prefix("fm1_").is_ok());
+        assert!(config_for_prefix("").is_err());
+        assert!(config_for_prefix("a/b").is_err());
+        assert!(config_for_prefix(&"x".repeat(MAX_PREFIX_LEN + 1)).is_err());
+    }
+
+    #[test]
+    fn limits_scale_with_the_number_of_processes() {
+        let l = Limits::for_processes(50);
+        assert!(l.nodes > 50 && l.senders >= 50 && l.receivers >= 50 && l.buffer >= 50);
+    }
+
+    #[test]
+    fn remove_residue_leaves_nothing_of_a_prefix_behind() {
+        let prefix = format!("fmt{}_", std::process::id());
+        {
+            let node = node(&prefix, "residue-test").unwrap();
+            let limits = Limits::for_processes(3);
+            let svc = pubsub_with_limits(
+                node.service_builder(&service_name("t/data").unwrap())
+                    .publish_subscribe::<[u8]>(),
+                &limits,
+            )
+            .create()
+            .unwrap();
+            let ev = event_with_limits(
+                node.service_builder(&service_name("t/ev").unwrap()).event(),
+                &limits,
+            )
+            .create()
+            .unwrap();
+            let publisher = svc
+                .publisher_builder()
+                .initial_max_slice_len(8)
+                .create()
+                .unwrap();
+            let subscriber = svc.subscriber_builder().create().unwrap();
+            let notifier = ev.notifier_builder().create().unwrap();
+            let listener = ev.listener_builder().create().unwrap();
+            publisher
+                .loan_slice_uninit(8)
+                .unwrap()
+                .write_from_slice(&[1u8; 8])
+                .send()
+                .unwrap();
+            notifier.notify().unwrap();
+            assert!(subscriber.receive().unwrap().is_some());
+            listener.try_wait(|_| {}).unwrap();
+            eprintln!("while running: {:?}", residue(&prefix).unwrap());
+        }
+        eprintln!("after drop: {:?}", residue(&prefix).unwrap());
+        remove_residue(&prefix).unwrap();
+        assert!(residue(&prefix).unwrap().is_empty());
+    }
+}
