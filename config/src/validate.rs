@@ -332,6 +332,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         );
     }
     c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    c.positive(
+        "controller.rbfnn.max_weight_norm",
+        ctl.rbfnn.max_weight_norm,
+        CTRL,
+    );
     let nv = ctl.rbfnn.velocity_centres;
     if nv == 0 || ctl.rbfnn.neurons_per_axis % nv.max(1) != 0 {
         c.push(
