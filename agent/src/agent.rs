@@ -8,7 +8,7 @@ use crate::command_filter::CommandFilter;
 use crate::conversion::thrust_and_attitude;
 use crate::delay::{delay_steps, StepHistory};
 use crate::params::AgentParams;
-use crate::position::{consensus_errors, control_law, LeaderInfo, Member};
+use crate::position::{consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
 use formation_config::scenario::{DelaySpec, Scenario};
 use formation_config::wire::{
@@ -221,8 +221,10 @@ impl Agent {
         } else {
             [0.0; 3]
         };
-        let u_p = control_law(&g.position, self.p.gravity, ep, ev, f_hat, &me, &leader);
-        if use_nn {
+        let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader);
+        let u_p = limit(&g.position, self.p.gravity, u_raw);
+        let saturated = u_p != u_raw;
+        if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
             let drive = [
                 pg.nn_k_p * ep[0] + pg.nn_k_v * ev[0],

@@ -67,6 +67,18 @@ pub fn control_law(
     me: &Member,
     leader: &LeaderInfo,
 ) -> [f64; 3] {
+    limit(g, gravity, raw_law(g, ep, ev, f_hat, me, leader))
+}
+
+/// U_iP of eq. (14) before the limits of D5.
+pub fn raw_law(
+    g: &PositionGains,
+    ep: [f64; 3],
+    ev: [f64; 3],
+    f_hat: [f64; 3],
+    me: &Member,
+    leader: &LeaderInfo,
+) -> [f64; 3] {
     let mut u = [0.0; 3];
     for k in 0..3 {
         u[k] = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k]
@@ -76,7 +88,7 @@ pub fn control_law(
             u[k] += leader.a[k];
         }
     }
-    limit(g, gravity, u)
+    u
 }
 
 /// The acceleration and tilt limits of D5.

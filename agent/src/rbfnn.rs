@@ -97,6 +97,20 @@ impl Rbfnn {
         }
     }
 
+    /// Projection onto ||W-hat_k|| <= `bound` for every axis (scales a weight vector that left the ball
+    /// back onto its surface).
+    pub fn project(&mut self, bound: f64) {
+        for row in self.weights.iter_mut() {
+            let n = row[..self.l].iter().map(|w| w * w).sum::<f64>().sqrt();
+            if n > bound {
+                let s = bound / n;
+                for w in row[..self.l].iter_mut() {
+                    *w *= s;
+                }
+            }
+        }
+    }
+
     /// Frobenius norm of the weights.
     pub fn weight_norm(&self) -> f64 {
         self.weights

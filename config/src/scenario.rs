@@ -269,6 +269,12 @@ pub struct RbfnnSpec {
     /// Spread mu_k of every Gaussian (in units of the normalised input), dimensionless.
     /// Paper: not given.
     pub spread: f64,
+    /// Projection bound W_M on the weight norm of each axis, ||W-hat_ik|| <= W_M (Remark 1's bound made
+    /// explicit). Paper: not given. Ours: see docs/deviations.md (D15).
+    pub max_weight_norm: f64,
+    /// Stop the update (15) while the acceleration limit of U_iP is active (conditional-integration
+    /// anti-windup). Paper: false (no limit). Ours: true (D15).
+    pub freeze_when_saturated: bool,
     /// Initial weights are drawn uniformly from [-a, a]. Paper: "randomly". Ours: a = 0.05.
     pub initial_weight_amplitude: f64,
     /// Seed of the initial weights (each agent adds its id). Ours: 7.
@@ -371,6 +377,9 @@ pub struct UnconstrainedGains {
     pub attitude_gain: f64,
     /// Rate proportional gain, 1/s.
     pub rate_gain: f64,
+    /// Rate limit of its attitude-command filter, rad/s: the comparison controller tracks the command
+    /// without the constraint-aware shaping of the proposed design. Ours: 20 (effectively unlimited).
+    pub command_rate_limit_rad_s: f64,
 }
 
 /// Per-agent data: initial state, delay, faults, uncertainty, disturbance, model perturbation.

@@ -332,6 +332,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         );
     }
     c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    c.positive(
+        "controller.rbfnn.max_weight_norm",
+        ctl.rbfnn.max_weight_norm,
+        CTRL,
+    );
     let nv = ctl.rbfnn.velocity_centres;
     if nv == 0 || ctl.rbfnn.neurons_per_axis % nv.max(1) != 0 {
         c.push(
@@ -488,6 +493,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     c.positive(
         "controller.unconstrained.rate_gain",
         ctl.unconstrained.rate_gain,
+        CTRL,
+    );
+    c.positive(
+        "controller.unconstrained.command_rate_limit_rad_s",
+        ctl.unconstrained.command_rate_limit_rad_s,
         CTRL,
     );
     // Agents.

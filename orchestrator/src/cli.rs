@@ -7,27 +7,6 @@ use std::process::ExitCode;
 /// Exit code for invalid input (bad scenario, bad arguments).
 pub const EXIT_INVALID: u8 = 2;
 
-/// Loads (`paper`, `paper-exact` or a path) and validates a scenario; prints the errors and returns
-/// exit code 2 on failure.
-pub fn load_scenario(name: Option<&str>) -> Result<Scenario, ExitCode> {
-    let name = name.unwrap_or("paper");
-    let s = match Scenario::load(name) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return Err(ExitCode::from(EXIT_INVALID));
-        }
-    };
-    if let Err(errs) = validate(&s) {
-        eprintln!("error: scenario '{name}' is invalid:");
-        for e in &errs.0 {
-            eprintln!("  {e}");
-        }
-        return Err(ExitCode::from(EXIT_INVALID));
-    }
-    Ok(s)
-}
-
 /// Applies `--set path=value` overrides (TOML paths such as `controller.position.k_p` or
 /// `agents[2].delay.base_s`; values in TOML syntax) to a scenario.
 pub fn apply_overrides(s: Scenario, sets: &[String]) -> Result<Scenario, String> {

@@ -41,6 +41,9 @@ enum Command {
     Check(check::CheckArgs),
     /// Measure IPC latency and jitter (iceoryx2, Unix domain sockets, UDP loopback).
     Bench(bench::BenchArgs),
+    /// Internal: one agent process of `formation bench`.
+    #[command(hide = true)]
+    BenchPeer(bench::PeerArgs),
 }
 
 fn main() -> ExitCode {
@@ -52,6 +55,7 @@ fn main() -> ExitCode {
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
+        Some(Command::BenchPeer(a)) => bench::peer_main(a),
         None => run::main(run::RunArgs::default()),
     }
 }

@@ -50,6 +50,10 @@ pub fn main(args: SimArgs) -> ExitCode {
     let out = args
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}", scenario.name, variant.name())));
+    if let Err(e) = write_resolved_scenario(&scenario, &out) {
+        eprintln!("error: cannot write {}/scenario.toml: {e}", out.display());
+        return ExitCode::from(1);
+    }
     match run_in_process(&scenario, variant, &out) {
         Ok(summary) => {
             if args.quiet {
@@ -71,6 +75,13 @@ pub fn main(args: SimArgs) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// Writes the scenario as run (after `--set` overrides) to `out/scenario.toml`, so that a run directory
+/// is self-describing (the figures read it, and it can be run again as is).
+pub fn write_resolved_scenario(scenario: &Scenario, out: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(out)?;
+    std::fs::write(out.join("scenario.toml"), scenario.to_toml_string())
 }
 
 /// Runs the closed loop of `scenario` with `variant` in this process, writing the outputs to `out`.

@@ -47,7 +47,7 @@ pub mod theorem1;
 pub mod verdict;
 mod verdicts;
 
-use crate::cli::load_scenario;
+use crate::cli::load_with_overrides;
 use formation_config::graph::Topology;
 use formation_config::Scenario;
 use serde::Serialize;
@@ -62,6 +62,9 @@ pub struct CheckArgs {
     /// Print the report as one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Override a scenario parameter, e.g. `--set controller.position.k_v=2` (repeatable).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub sets: Vec<String>,
 }
 
 /// Outer-loop part of the report.
@@ -232,7 +235,7 @@ pub fn report(s: &Scenario) -> Report {
 
 /// Entry point of `formation check`.
 pub fn main(args: CheckArgs) -> ExitCode {
-    let s = match load_scenario(args.scenario.as_deref()) {
+    let s = match load_with_overrides(args.scenario.as_deref(), &args.sets) {
         Ok(s) => s,
         Err(code) => return code,
     };

@@ -141,7 +141,7 @@ fn run(
     let mut recorder = Recorder::create(scenario, variant, "lockstep", out)
         .map_err(|e| format!("cannot write outputs to {}: {e}", out.display()))?;
     let run_dir = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
-    std::fs::write(run_dir.join("scenario.toml"), scenario.to_toml_string())
+    crate::sim::write_resolved_scenario(scenario, &run_dir)
         .map_err(|e| format!("cannot write {}/scenario.toml: {e}", run_dir.display()))?;
     if let Err(e) = cleanup::write_iox2_config(&run_dir, prefix) {
         eprintln!("warning: {e}");

@@ -1,0 +1,146 @@
+//! Runs one case from the plant's side (this process): pins itself, creates the transport, spawns
+//! the agent processes, measures, stops and reaps them.
+
+use super::iox::{self, IoxLink, Ports, Services};
+use super::link::{self, Budget, Link, Wait};
+use super::plan::{Case, Transport};
+use super::procs::{self, Peers};
+use super::sock::{self, SockLink};
+use hdrhistogram::Histogram;
+use iceoryx2::prelude::*;
+use std::cell::{Cell, RefCell};
+use std::time::{Duration, Instant};
+
+/// Everything a case needs besides the case itself.
+pub struct Ctx<'a> {
+    /// The run's iceoryx2 node (under the run prefix).
+    pub node: &'a Node<ipc::Service>,
+    /// The run's iceoryx2 prefix (also names the Unix sockets).
+    pub prefix: &'a str,
+    /// Message size, bytes.
+    pub payload: usize,
+    /// Measuring time and warm-up.
+    pub budget: Budget,
+    /// This process's CPUs before any pinning (restored after each case).
+    pub allowed: &'a [usize],
+}
+
+fn wait_arg(w: Wait) -> Vec<String> {
+    match w {
+        Wait::Block => vec!["--wait".into(), "block".into()],
+        Wait::Busy => vec!["--wait".into(), "busy".into()],
+        Wait::SpinBlock(d) => vec![
+            "--wait".into(),
+            "spin-block".into(),
+            "--spin-us".into(),
+            d.as_micros().to_string(),
+        ],
+    }
+}
+
+/// Command lines of the `n` agents of case number `idx`.
+fn agent_args(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Vec<Vec<String>> {
+    (0..case.n)
+        .map(|i| {
+            let mut a = vec![
+                "--transport".into(),
+                case.transport.name().into(),
+                "--prefix".into(),
+                ctx.prefix.into(),
+                "--case".into(),
+                idx.to_string(),
+                "--index".into(),
+                i.to_string(),
+                "--payload".into(),
+                ctx.payload.to_string(),
+            ];
+            a.extend(wait_arg(case.wait));
+            if let Some(cpu) = case.placement.cpu_of(i + 1) {
+                a.extend(["--cpu".into(), cpu.to_string()]);
+            }
+            if let Some(p) = udp_port {
+                a.extend(["--plant-port".into(), p.to_string()]);
+            }
+            a
+        })
+        .collect()
+}
+
+/// Measures case number `idx`; the histogram holds one value (ns) per round trip or step.
+pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String> {
+    if let Some(cpu) = case.placement.cpu_of(0) {
+        procs::set_affinity(&[cpu]).map_err(|e| format!("pin to cpu {cpu}: {e}"))?;
+    }
+    let result = run_pinned(ctx, idx, case);
+    let _ = procs::set_affinity(ctx.allowed);
+    result
+}
+
+fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String> {
+    match case.transport {
+        Transport::IoxEvent | Transport::IoxWaitSet | Transport::IoxPoll => {
+            let services =
+                Services::create(ctx.node, idx, case.n).map_err(|e| format!("iceoryx2: {e}"))?;
+            let notify = case.transport != Transport::IoxPoll;
+            let ports = Ports::plant(&services, ctx.payload, notify)
+                .map_err(|e| format!("iceoryx2: {e}"))?;
+            let peers = spawn(ctx, idx, case, None)?;
+            if case.transport == Transport::IoxWaitSet {
+                let ws = iox::waitset().map_err(|e| format!("iceoryx2: {e}"))?;
+                let _guard = ws
+                    .attach_notification(&ports.listener)
+                    .map_err(|e| format!("iceoryx2: attach listener: {e:?}"))?;
+                let mut link = IoxLink::new(&ports, Some(&ws), u32::MAX, ctx.payload);
+                measure(ctx, case, &mut link, peers)
+            } else {
+                let mut link = IoxLink::new(&ports, None, u32::MAX, ctx.payload);
+                measure(ctx, case, &mut link, peers)
+            }
+        }
+        Transport::Uds => {
+            let addr = sock::uds_addr(ctx.prefix, idx, None).map_err(|e| format!("uds: {e}"))?;
+            let s = sock::bind_uds(&addr).map_err(|e| format!("uds bind: {e}"))?;
+            let mut link = SockLink::plant(s, case.n, ctx.payload, case.wait)
+                .map_err(|e| format!("uds: {e}"))?;
+            let peers = spawn(ctx, idx, case, None)?;
+            measure(ctx, case, &mut link, peers)
+        }
+        Transport::Udp => {
+            let s = sock::bind_udp(0).map_err(|e| format!("udp bind: {e}"))?;
+            let port = s.local_addr().map_err(|e| format!("udp: {e}"))?.port();
+            let mut link = SockLink::plant(s, case.n, ctx.payload, case.wait)
+                .map_err(|e| format!("udp: {e}"))?;
+            let peers = spawn(ctx, idx, case, Some(port))?;
+            measure(ctx, case, &mut link, peers)
+        }
+    }
+}
+
+fn spawn(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Result<Peers, String> {
+    Peers::spawn(agent_args(ctx, idx, case, udp_port))
+        .map_err(|e| format!("spawn peer processes: {e}"))
+}
+
+fn measure(
+    ctx: &Ctx,
+    case: &Case,
+    link: &mut dyn Link,
+    peers: Peers,
+) -> Result<Histogram<u64>, String> {
+    let peers = RefCell::new(peers);
+    let last_check = Cell::new(Instant::now());
+    let alive = || {
+        // waitpid for every peer at most every 20 ms (busy loops call this often).
+        if last_check.get().elapsed() < Duration::from_millis(20) {
+            return true;
+        }
+        last_check.set(Instant::now());
+        peers.borrow_mut().all_alive()
+    };
+    let hist = link::run_plant(link, case.n, case.wait, ctx.budget, &alive)?;
+    peers
+        .into_inner()
+        .finish(Duration::from_secs(5))
+        .map_err(|e| format!("peers: {e}"))?;
+    Ok(hist)
+}

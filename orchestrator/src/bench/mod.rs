@@ -1,0 +1,259 @@
+//! `formation bench`: IPC latency and jitter between processes, in one run: iceoryx2 (event
+//! listener, WaitSet, busy-poll) vs Unix datagram sockets vs UDP loopback; ping-pong and fan-out;
+//! blocking, spin-then-block, pinned and all-on-one-core.
+//!
+//! This process plays the plant (it measures); the agents are child processes running the hidden
+//! `formation bench-peer` subcommand. Every run uses its own iceoryx2 prefix and removes its files
+//! from /dev/shm and /tmp/iceoryx2 at the end; children are reaped, killed on failure or Ctrl-C,
+//! and die with this process.
+//!
+//! * [`plan`]: which cases run (and which are skipped, and why).
+//! * [`case`]: one case from the plant's side; [`peer`]: the agent side.
+//! * [`link`]: message header, waiting strategies, the plant and agent loops.
+//! * [`iox`], [`sock`]: the transports. [`procs`]: child processes and CPU pinning.
+//! * [`report`]: percentiles, table, JSON.
+
+mod case;
+mod iox;
+mod link;
+mod peer;
+mod plan;
+mod procs;
+mod report;
+mod sock;
+
+pub use peer::{main as peer_main, PeerArgs};
+
+use crate::cli::EXIT_INVALID;
+use formation_config::ipc as fipc;
+use formation_config::services::run_prefix;
+use link::{Budget, MAX_PAYLOAD, MIN_PAYLOAD};
+use plan::{PlanInput, Transport};
+use std::process::ExitCode;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+/// Largest `--n` (agent processes).
+pub const MAX_N: usize = 200;
+
+/// Arguments of `formation bench`.
+#[derive(clap::Args, Debug)]
+pub struct BenchArgs {
+    /// Agent processes of the fan-out cases.
+    #[arg(long, default_value_t = 5)]
+    pub n: usize,
+    /// Message size, bytes (16..=60000), the same for every transport.
+    #[arg(long, default_value_t = 256)]
+    pub payload: usize,
+    /// Measured time per case, s (a warm-up of 10 %, at most 0.25 s, is discarded first).
+    #[arg(long, default_value_t = 1.5)]
+    pub seconds: f64,
+    /// Pin processes round-robin to these CPUs (e.g. `0,1` or `0-1`); the plant gets the first.
+    /// Without it processes are not pinned (except in the `/one-core` cases).
+    #[arg(long)]
+    pub cpu: Option<String>,
+    /// Spin budget of the spin-then-block strategy, µs.
+    #[arg(long, default_value_t = 50)]
+    pub spin_us: u64,
+    /// Only these transports (comma-separated: iox2-event, iox2-waitset, iox2-poll, uds-dgram, udp).
+    #[arg(long)]
+    pub transports: Option<String>,
+    /// Print `{"results": [...]}` on stdout instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Parses `0,1`, `0-3`, `2,4-5` into a CPU list; every CPU must be in `allowed`.
+fn parse_cpus(s: &str, allowed: &[usize]) -> Result<Vec<usize>, String> {
+    let mut out = Vec::new();
+    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (lo, hi) = match part.split_once('-') {
+            Some((a, b)) => (a.trim(), b.trim()),
+            None => (part, part),
+        };
+        let lo: usize = lo.parse().map_err(|_| format!("bad CPU '{part}'"))?;
+        let hi: usize = hi.parse().map_err(|_| format!("bad CPU '{part}'"))?;
+        if lo > hi {
+            return Err(format!("bad CPU range '{part}'"));
+        }
+        for c in lo..=hi {
+            if !allowed.contains(&c) {
+                return Err(format!("CPU {c} is not available (allowed: {allowed:?})"));
+            }
+            if !out.contains(&c) {
+                out.push(c);
+            }
+        }
+    }
+    if out.is_empty() {
+        return Err("empty CPU list".into());
+    }
+    Ok(out)
+}
+
+fn parse_transports(s: &str) -> Result<Vec<Transport>, String> {
+    s.split(',')
+        .map(str::trim)
+        .filter(|p| !p.is_empty())
+        .map(|p| Transport::parse(p).ok_or_else(|| format!("unknown transport '{p}'")))
+        .collect()
+}
+
+fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
+    if a.n == 0 || a.n > MAX_N {
+        return Err(format!("--n must be in 1..={MAX_N}, got {}", a.n));
+    }
+    if !(MIN_PAYLOAD..=MAX_PAYLOAD).contains(&a.payload) {
+        return Err(format!(
+            "--payload must be in {MIN_PAYLOAD}..={MAX_PAYLOAD} bytes, got {}",
+            a.payload
+        ));
+    }
+    if !a.seconds.is_finite() || a.seconds <= 0.0 || a.seconds > 3600.0 {
+        return Err(format!("--seconds must be in (0, 3600], got {}", a.seconds));
+    }
+    if a.spin_us > 1_000_000 {
+        return Err(format!(
+            "--spin-us must be at most 1000000, got {}",
+            a.spin_us
+        ));
+    }
+    let cpus = a
+        .cpu
+        .as_deref()
+        .map(|s| parse_cpus(s, allowed))
+        .transpose()?;
+    let only = match a.transports.as_deref() {
+        Some(s) => parse_transports(s)?,
+        None => Vec::new(),
+    };
+    Ok(PlanInput {
+        n: a.n,
+        spin: Duration::from_micros(a.spin_us),
+        cpus,
+        allowed: allowed.to_vec(),
+        only,
+    })
+}
+
+/// A prefix unique to this run: process id plus clock.
+fn unique_prefix() -> String {
+    let t = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0);
+    run_prefix(&format!("b{}t{:x}", std::process::id(), t & 0xff_ffff))
+}
+
+/// Entry point of `formation bench`: 0 on success, 1 if a case failed, 2 on bad arguments, 130
+/// when interrupted.
+pub fn main(args: BenchArgs) -> ExitCode {
+    let allowed = procs::allowed_cpus();
+    let input = match validate(&args, &allowed) {
+        Ok(i) => i,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let (cases, skipped) = plan::plan(&input);
+    procs::install_interrupt_handler();
+    let prefix = unique_prefix();
+    let warmup = Duration::from_secs_f64((args.seconds * 0.1).clamp(0.02, 0.25));
+    let budget = Budget {
+        measure: Duration::from_secs_f64(args.seconds),
+        warmup,
+        min_warmup_samples: 20,
+    };
+    eprintln!(
+        "formation bench: iceoryx2 prefix {prefix}, {} cases x {:.2} s (+{:.2} s warm-up)",
+        cases.len(),
+        args.seconds,
+        warmup.as_secs_f64()
+    );
+    let node = match fipc::node(&prefix, "bench-plant") {
+        Ok(n) => n,
+        Err(e) => {
+            eprintln!("error: {e}");
+            let _ = fipc::remove_residue(&prefix);
+            return ExitCode::from(1);
+        }
+    };
+    let ctx = case::Ctx {
+        node: &node,
+        prefix: &prefix,
+        payload: args.payload,
+        budget,
+        allowed: &allowed,
+    };
+    let mut rows = Vec::new();
+    let mut failures = 0;
+    for (idx, c) in cases.iter().enumerate() {
+        if procs::aborted() {
+            break;
+        }
+        let what = format!(
+            "{} {} {} n={}",
+            c.transport.name(),
+            c.pattern.name(),
+            c.wait_label(),
+            c.n
+        );
+        match case::run(&ctx, idx, c) {
+            Ok(h) if h.is_empty() => {
+                eprintln!("  {what}: no samples");
+                failures += 1;
+            }
+            Ok(h) => {
+                let row = report::Row::new(c, args.payload, &h);
+                eprintln!(
+                    "  {what}: p50 {:.1} µs ({} samples)",
+                    row.p50_us, row.samples
+                );
+                rows.push(row);
+            }
+            Err(e) if procs::aborted() => eprintln!("  {what}: interrupted ({e})"),
+            Err(e) => {
+                eprintln!("  {what}: FAILED: {e}");
+                failures += 1;
+            }
+        }
+    }
+    drop(node);
+    match fipc::remove_residue(&prefix) {
+        Ok(_) => {}
+        Err(e) => eprintln!("warning: could not remove iceoryx2 files of {prefix}: {e}"),
+    }
+    if procs::aborted() {
+        eprintln!("formation bench: interrupted");
+        return ExitCode::from(130);
+    }
+    if args.json {
+        println!("{}", report::json(&rows));
+    } else {
+        print!("{}", report::table(&rows, &skipped));
+    }
+    if failures > 0 {
+        eprintln!("formation bench: {failures} case(s) failed");
+        return ExitCode::from(1);
+    }
+    ExitCode::SUCCESS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cpu_lists_accept_ranges_and_reject_unavailable_cpus() {
+        assert_eq!(parse_cpus("0-1", &[0, 1]), Ok(vec![0, 1]));
+        assert_eq!(parse_cpus("1,0,1", &[0, 1]), Ok(vec![1, 0]));
+        assert!(parse_cpus("7", &[0, 1]).is_err());
+        assert!(parse_cpus("x", &[0, 1]).is_err());
+        assert!(parse_cpus("", &[0, 1]).is_err());
+    }
+
+    #[test]
+    fn unique_prefix_is_a_valid_iceoryx2_prefix() {
+        assert!(fipc::is_valid_prefix(&unique_prefix()));
+    }
+}

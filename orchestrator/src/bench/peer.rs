@@ -1,0 +1,122 @@
+//! The agent side of a case, run in a child process (`formation bench-peer ...`).
+
+use super::iox::{self, IoxLink, Ports, Services};
+use super::link::{self, Wait, MAX_PAYLOAD, MIN_PAYLOAD};
+use super::plan::Transport;
+use super::procs;
+use super::sock::{self, SockLink};
+use formation_config::ipc as fipc;
+use std::net::SocketAddr;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// Arguments of the hidden `formation bench-peer` (started by `formation bench` only).
+#[derive(clap::Args, Debug)]
+pub struct PeerArgs {
+    /// Transport name (`iox2-event`, `iox2-waitset`, `iox2-poll`, `uds-dgram`, `udp`).
+    #[arg(long)]
+    pub transport: String,
+    /// iceoryx2 prefix of the run (also names the Unix sockets).
+    #[arg(long)]
+    pub prefix: String,
+    /// Case number (names the services and sockets of the case).
+    #[arg(long)]
+    pub case: usize,
+    /// Agent index (0-based).
+    #[arg(long)]
+    pub index: u32,
+    /// Message size, bytes.
+    #[arg(long)]
+    pub payload: usize,
+    /// `block`, `spin-block` or `busy`.
+    #[arg(long)]
+    pub wait: String,
+    /// Spin budget of `spin-block`, µs.
+    #[arg(long, default_value_t = 50)]
+    pub spin_us: u64,
+    /// Pin this process to this CPU.
+    #[arg(long)]
+    pub cpu: Option<usize>,
+    /// UDP port of the plant on 127.0.0.1.
+    #[arg(long)]
+    pub plant_port: Option<u16>,
+}
+
+/// Entry point of `formation bench-peer`: exit 0 after STOP, 1 on failure, 2 on bad arguments.
+pub fn main(a: PeerArgs) -> ExitCode {
+    let bad = |msg: String| {
+        eprintln!("formation bench-peer: {msg}");
+        ExitCode::from(2)
+    };
+    let Some(transport) = Transport::parse(&a.transport) else {
+        return bad(format!("unknown transport '{}'", a.transport));
+    };
+    let wait = match a.wait.as_str() {
+        "block" => Wait::Block,
+        "busy" => Wait::Busy,
+        "spin-block" => Wait::SpinBlock(Duration::from_micros(a.spin_us)),
+        w => return bad(format!("unknown wait strategy '{w}'")),
+    };
+    if !(MIN_PAYLOAD..=MAX_PAYLOAD).contains(&a.payload) {
+        return bad(format!("payload {} out of range", a.payload));
+    }
+    if !fipc::is_valid_prefix(&a.prefix) {
+        return bad(format!("invalid prefix '{}'", a.prefix));
+    }
+    if let Some(cpu) = a.cpu {
+        if let Err(e) = procs::set_affinity(&[cpu]) {
+            return bad(format!("cannot pin to cpu {cpu}: {e}"));
+        }
+    }
+    match run(&a, transport, wait) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!(
+                "formation bench-peer {} #{} (case {}): {e}",
+                a.transport, a.index, a.case
+            );
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn run(a: &PeerArgs, transport: Transport, wait: Wait) -> Result<(), String> {
+    match transport {
+        Transport::IoxEvent | Transport::IoxWaitSet | Transport::IoxPoll => {
+            let node = fipc::node(&a.prefix, &format!("bench-agent-{}", a.index))
+                .map_err(|e| e.to_string())?;
+            let services = Services::open(&node, a.case).map_err(|e| e.to_string())?;
+            let notify = transport != Transport::IoxPoll;
+            let ports = Ports::agent(&services, a.payload, notify).map_err(|e| e.to_string())?;
+            if transport == Transport::IoxWaitSet {
+                let ws = iox::waitset().map_err(|e| e.to_string())?;
+                let _guard = ws
+                    .attach_notification(&ports.listener)
+                    .map_err(|e| format!("attach listener: {e:?}"))?;
+                link::run_agent(
+                    &mut IoxLink::new(&ports, Some(&ws), a.index, a.payload),
+                    wait,
+                )
+            } else {
+                link::run_agent(&mut IoxLink::new(&ports, None, a.index, a.payload), wait)
+            }
+        }
+        Transport::Uds => {
+            let me = sock::uds_addr(&a.prefix, a.case, Some(a.index as usize))
+                .map_err(|e| e.to_string())?;
+            let plant = sock::uds_addr(&a.prefix, a.case, None).map_err(|e| e.to_string())?;
+            let s = sock::bind_uds(&me).map_err(|e| format!("uds bind: {e}"))?;
+            let mut l =
+                SockLink::agent(s, plant, a.index, a.payload, wait).map_err(|e| e.to_string())?;
+            link::run_agent(&mut l, wait)
+        }
+        Transport::Udp => {
+            let port = a.plant_port.ok_or("--plant-port is required for udp")?;
+            let plant = SocketAddr::from(([127, 0, 0, 1], port));
+            let s = sock::bind_udp(0).map_err(|e| format!("udp bind: {e}"))?;
+            let mut l =
+                SockLink::agent(s, plant, a.index, a.payload, wait).map_err(|e| e.to_string())?;
+            link::run_agent(&mut l, wait)
+        }
+    }
+}

@@ -1,0 +1,104 @@
+//! Result rows: percentiles from the HDR histograms, printed as a table or as JSON.
+
+use super::plan::{Case, Pattern};
+use hdrhistogram::Histogram;
+use serde::Serialize;
+
+/// One result row (also the JSON object of one case).
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    /// Transport name.
+    pub transport: String,
+    /// `ping-pong` (full round trip per sample) or `fan-out` (one step per sample).
+    pub pattern: String,
+    /// Waiting strategy and CPU placement.
+    pub wait: String,
+    /// Agent processes.
+    pub n: usize,
+    /// Message size, bytes.
+    pub payload_bytes: usize,
+    /// Median, µs.
+    pub p50_us: f64,
+    /// 99th percentile, µs.
+    pub p99_us: f64,
+    /// 99.9th percentile, µs.
+    pub p999_us: f64,
+    /// Largest sample, µs.
+    pub max_us: f64,
+    /// Samples recorded (after the warm-up).
+    pub samples: u64,
+}
+
+fn us(ns: u64) -> f64 {
+    (ns as f64 / 100.0).round() / 10.0
+}
+
+impl Row {
+    /// Summarises the histogram (values in ns) of `case`.
+    pub fn new(case: &Case, payload: usize, h: &Histogram<u64>) -> Row {
+        Row {
+            transport: case.transport.name().to_string(),
+            pattern: case.pattern.name().to_string(),
+            wait: case.wait_label(),
+            n: case.n,
+            payload_bytes: payload,
+            p50_us: us(h.value_at_quantile(0.5)),
+            p99_us: us(h.value_at_quantile(0.99)),
+            p999_us: us(h.value_at_quantile(0.999)),
+            max_us: us(h.max()),
+            samples: h.len(),
+        }
+    }
+}
+
+/// `{"results": [...]}`.
+pub fn json(rows: &[Row]) -> String {
+    serde_json::json!({ "results": rows }).to_string()
+}
+
+/// A fixed-width table, with a note on what a sample is.
+pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
+    let mut s = format!(
+        "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
+        "transport",
+        "pattern",
+        "wait",
+        "n",
+        "payload",
+        "p50 µs",
+        "p99 µs",
+        "p99.9 µs",
+        "max µs",
+        "1-way p50",
+        "samples"
+    );
+    for r in rows {
+        let one_way = if r.pattern == Pattern::PingPong.name() {
+            format!("{:.1}", r.p50_us / 2.0)
+        } else {
+            "-".to_string()
+        };
+        s.push_str(&format!(
+            "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9} {:>8}\n",
+            r.transport,
+            r.pattern,
+            r.wait,
+            r.n,
+            r.payload_bytes,
+            r.p50_us,
+            r.p99_us,
+            r.p999_us,
+            r.max_us,
+            one_way,
+            r.samples
+        ));
+    }
+    s.push_str(
+        "ping-pong: full round trip per sample (one-way = RTT/2); fan-out: time per step \
+         (publish to n agents, wait for all n replies).\n",
+    );
+    for (what, why) in skipped {
+        s.push_str(&format!("skipped {what}: {why}\n"));
+    }
+    s
+}

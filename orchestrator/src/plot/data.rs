@@ -1,0 +1,283 @@
+//! Loading a run directory: `trajectory.csv` (columns read by name) and the optional `summary.json`.
+
+use super::PlotError;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Columns every figure family together needs (docs/formats.md).
+pub const REQUIRED_COLUMNS: &[&str] = &[
+    "t",
+    "agent",
+    "px",
+    "py",
+    "pz",
+    "phi",
+    "theta",
+    "ex",
+    "ey",
+    "ez",
+    "tx",
+    "ty",
+    "thrust",
+    "phi_c",
+    "theta_c",
+    "att_norm",
+    "att_cmd_norm",
+    "c1_bar",
+    "rate_norm",
+    "alpha_norm",
+    "c2_bar",
+    "u_a_x",
+    "u_a_y",
+    "u_a_z",
+    "gamma_x",
+    "gamma_y",
+    "gamma_z",
+    "gamma_hat_x",
+    "gamma_hat_y",
+    "gamma_hat_z",
+    "delta_x",
+    "delta_y",
+    "delta_z",
+    "delta_hat_x",
+    "delta_hat_y",
+    "delta_hat_z",
+    "d_norm",
+    "d_hat",
+    "f_x",
+    "f_y",
+    "f_z",
+    "f_hat_x",
+    "f_hat_y",
+    "f_hat_z",
+];
+
+/// The time series of one agent: one vector per column of [`REQUIRED_COLUMNS`].
+#[derive(Debug, Clone)]
+pub struct AgentTrace {
+    /// Agent index as written in the CSV (1-based).
+    pub id: u32,
+    columns: Vec<Vec<f64>>,
+}
+
+/// One run directory, loaded.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// The directory it was read from.
+    pub dir: PathBuf,
+    /// `scenario` from `summary.json`, if present.
+    pub scenario: Option<String>,
+    /// `variant` from `summary.json`, if present.
+    pub variant: Option<String>,
+    /// Agents in ascending index order.
+    pub agents: Vec<AgentTrace>,
+}
+
+fn column_index(name: &str) -> usize {
+    REQUIRED_COLUMNS
+        .iter()
+        .position(|c| *c == name)
+        .unwrap_or_else(|| panic!("internal: column '{name}' is not in REQUIRED_COLUMNS"))
+}
+
+impl AgentTrace {
+    /// The values of a required column (panics only on a programming error: a name missing from
+    /// [`REQUIRED_COLUMNS`], never on user input, which is validated at load time).
+    pub fn col(&self, name: &str) -> &[f64] {
+        &self.columns[column_index(name)]
+    }
+
+    /// Time stamps, s.
+    pub fn t(&self) -> &[f64] {
+        self.col("t")
+    }
+
+    /// (t, column) pairs.
+    pub fn series(&self, name: &str) -> Vec<(f64, f64)> {
+        self.t()
+            .iter()
+            .copied()
+            .zip(self.col(name).iter().copied())
+            .collect()
+    }
+
+    /// (t, f(row)) pairs for a function of several columns.
+    pub fn derived(&self, names: &[&str], f: impl Fn(&[f64]) -> f64) -> Vec<(f64, f64)> {
+        let cols: Vec<&[f64]> = names.iter().map(|n| self.col(n)).collect();
+        let mut row = vec![0.0; cols.len()];
+        (0..self.t().len())
+            .map(|k| {
+                for (r, c) in row.iter_mut().zip(&cols) {
+                    *r = c[k];
+                }
+                (self.t()[k], f(&row))
+            })
+            .collect()
+    }
+}
+
+impl Run {
+    /// Loads `DIR/trajectory.csv` and, if present, `DIR/summary.json`.
+    pub fn load(dir: &Path) -> Result<Run, PlotError> {
+        if !dir.is_dir() {
+            return Err(PlotError::Input(format!(
+                "run directory '{}' does not exist or is not a directory",
+                dir.display()
+            )));
+        }
+        let csv = dir.join("trajectory.csv");
+        let text = std::fs::read_to_string(&csv)
+            .map_err(|e| PlotError::Input(format!("cannot read '{}': {e}", csv.display())))?;
+        let agents =
+            parse_csv(&text).map_err(|e| PlotError::Input(format!("{}: {e}", csv.display())))?;
+        let (scenario, variant) = read_summary(&dir.join("summary.json"));
+        Ok(Run {
+            dir: dir.to_path_buf(),
+            scenario,
+            variant,
+            agents,
+        })
+    }
+
+    /// A short name for titles and legends: the variant, else the scenario, else the directory name.
+    pub fn label(&self) -> String {
+        self.variant
+            .clone()
+            .or_else(|| self.scenario.clone())
+            .or_else(|| {
+                self.dir
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+            })
+            .unwrap_or_else(|| "run".to_string())
+    }
+
+    /// "scenario / variant" for figure titles (whatever is known).
+    pub fn title(&self) -> String {
+        match (&self.scenario, &self.variant) {
+            (Some(s), Some(v)) => format!("scenario {s}, variant {v}"),
+            (Some(s), None) => format!("scenario {s}"),
+            (None, Some(v)) => format!("variant {v}"),
+            (None, None) => self.label(),
+        }
+    }
+
+    /// First and last time stamp over all agents.
+    pub fn time_span(&self) -> (f64, f64) {
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for a in &self.agents {
+            for &t in a.t() {
+                if t.is_finite() {
+                    lo = lo.min(t);
+                    hi = hi.max(t);
+                }
+            }
+        }
+        if lo <= hi {
+            (lo, hi)
+        } else {
+            (0.0, 1.0)
+        }
+    }
+}
+
+/// Parses the long-format CSV into per-agent column vectors. Errors name the line and column.
+fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines.next().ok_or("the file is empty (no header)")?;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let index: HashMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (*n, i)).collect();
+    let missing: Vec<&str> = REQUIRED_COLUMNS
+        .iter()
+        .copied()
+        .filter(|c| !index.contains_key(c))
+        .collect();
+    if !missing.is_empty() {
+        return Err(format!("missing column(s): {}", missing.join(", ")));
+    }
+    let wanted: Vec<usize> = REQUIRED_COLUMNS.iter().map(|c| index[c]).collect();
+    let agent_col = column_index("agent");
+
+    let mut by_agent: Vec<AgentTrace> = Vec::new();
+    let mut values = vec![0.0; REQUIRED_COLUMNS.len()];
+    for (lineno, line) in lines {
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cells.len() != names.len() {
+            return Err(format!(
+                "line {}: {} fields, the header has {}",
+                lineno + 1,
+                cells.len(),
+                names.len()
+            ));
+        }
+        for (v, (&src, name)) in values.iter_mut().zip(wanted.iter().zip(REQUIRED_COLUMNS)) {
+            *v = parse_number(cells[src]).ok_or_else(|| {
+                format!(
+                    "line {}: column '{name}': not a number: '{}'",
+                    lineno + 1,
+                    cells[src]
+                )
+            })?;
+        }
+        let a = values[agent_col];
+        if !(a >= 1.0 && a.fract() == 0.0 && a < u32::MAX as f64) {
+            return Err(format!(
+                "line {}: agent index must be a positive integer, got {a}",
+                lineno + 1
+            ));
+        }
+        let id = a as u32;
+        let trace = match by_agent.iter_mut().position(|t| t.id == id) {
+            Some(p) => &mut by_agent[p],
+            None => {
+                by_agent.push(AgentTrace {
+                    id,
+                    columns: vec![Vec::new(); REQUIRED_COLUMNS.len()],
+                });
+                by_agent.last_mut().ok_or("internal: empty agent list")?
+            }
+        };
+        for (c, v) in trace.columns.iter_mut().zip(&values) {
+            c.push(*v);
+        }
+    }
+    if by_agent.is_empty() {
+        return Err("no data rows after the header".to_string());
+    }
+    by_agent.sort_by_key(|t| t.id);
+    Ok(by_agent)
+}
+
+/// A number, accepting the usual spellings of non-finite values (which are then skipped when drawn).
+fn parse_number(s: &str) -> Option<f64> {
+    match s.to_ascii_lowercase().as_str() {
+        "" | "nan" | "-nan" => Some(f64::NAN),
+        _ => s.parse().ok(),
+    }
+}
+
+/// `scenario` and `variant` of `summary.json`; absent or unreadable files give `None`s.
+fn read_summary(path: &Path) -> (Option<String>, Option<String>) {
+    let Ok(text) = std::fs::read_to_string(path) else {
+        return (None, None);
+    };
+    let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) else {
+        eprintln!(
+            "warning: '{}' is not valid JSON; ignoring it",
+            path.display()
+        );
+        return (None, None);
+    };
+    let field = |k: &str| match v.get(k) {
+        Some(serde_json::Value::String(s)) => Some(s.clone()),
+        Some(serde_json::Value::Object(o)) => {
+            o.get("name").and_then(|n| n.as_str()).map(str::to_string)
+        }
+        _ => None,
+    };
+    (field("scenario"), field("variant"))
+}

@@ -1,0 +1,107 @@
+//! Figs. 6 and 7: formation errors (optionally two variants side by side) and RBFNN approximation error.
+
+use super::style::{
+    agent_color, draw_panel, lines_y_range, titled, DrawResult, Legend, Line, Panel,
+};
+use super::{Figure, Run};
+use plotters::prelude::*;
+use std::path::Path;
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+/// Lines of one column of one run, one per agent.
+fn per_agent(run: &Run, f: impl Fn(&super::data::AgentTrace) -> Vec<(f64, f64)>) -> Vec<Line> {
+    run.agents
+        .iter()
+        .map(|a| Line::new(format!("quadrotor {}", a.id), agent_color(a.id), f(a)))
+        .collect()
+}
+
+/// Fig. 6: formation error components per agent; with `--compare`, both variants side by side on
+/// the same scales.
+pub fn position_errors(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let runs: Vec<&Run> = std::iter::once(fig.run).chain(fig.compare).collect();
+    let title = if runs.len() == 2 {
+        format!(
+            "Fig. 6 — formation errors P_i − P_d − Δ_i0: {} (left) vs {} (right)",
+            runs[0].label(),
+            runs[1].label()
+        )
+    } else {
+        format!(
+            "Fig. 6 — formation errors P_i − P_d − Δ_i0 ({})",
+            fig.run.title()
+        )
+    };
+    let area = titled(&root, &title)?;
+    let cells = area.split_evenly((3, runs.len()));
+    for (row, axis) in AXES.iter().enumerate() {
+        let col = format!("e{axis}");
+        let lines: Vec<Vec<Line>> = runs
+            .iter()
+            .map(|r| per_agent(r, |a| a.series(&col)))
+            .collect();
+        let y_range = lines_y_range(&lines.iter().flatten().collect::<Vec<_>>());
+        for (c, (run, lines)) in runs.iter().zip(lines).enumerate() {
+            draw_panel(
+                &cells[row * runs.len() + c],
+                Panel {
+                    title: format!("e_{axis} — {}", run.label()),
+                    x_desc: "t (s)",
+                    y_desc: format!("e_{axis} (m)"),
+                    lines,
+                    markers: &fig.geometry.phases,
+                    // Only the rightmost column carries the legend.
+                    legend: if c + 1 < runs.len() {
+                        Legend::None
+                    } else if row == 0 {
+                        Legend::Side
+                    } else {
+                        Legend::Blank
+                    },
+                    y_range: Some(y_range),
+                    x_range: None,
+                },
+            )?;
+        }
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// Fig. 7: RBFNN approximation error F_iP − F̂_iP on the three axes.
+pub fn rbfnn_error(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let area = titled(
+        &root,
+        &format!(
+            "Fig. 7 — RBFNN approximation error F − F_hat ({})",
+            fig.run.title()
+        ),
+    )?;
+    let cells = area.split_evenly((3, 1));
+    for (row, axis) in AXES.iter().enumerate() {
+        let (f, fh) = (format!("f_{axis}"), format!("f_hat_{axis}"));
+        let lines = per_agent(fig.run, |a| a.derived(&[&f, &fh], |r| r[0] - r[1]));
+        draw_panel(
+            &cells[row],
+            Panel {
+                title: format!("{axis} axis"),
+                x_desc: "t (s)",
+                y_desc: format!("F_{axis} − F_hat_{axis} (m/s²)"),
+                lines,
+                markers: &fig.geometry.phases,
+                legend: if row == 0 {
+                    Legend::Side
+                } else {
+                    Legend::Blank
+                },
+                y_range: None,
+                x_range: None,
+            },
+        )?;
+    }
+    root.present()?;
+    Ok(())
+}

@@ -1,0 +1,59 @@
+//! Fig. 11: control inputs applied to the quadrotors (torques after faults and saturation, thrust).
+
+use super::style::{agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::Figure;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// Fig. 11: applied torques U_iA (x, y, z) and total thrust, all agents.
+pub fn inputs(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let area = titled(
+        &root,
+        &format!(
+            "Fig. 11 — applied inputs U_iA (after faults and saturation) and thrust ({})",
+            fig.run.title()
+        ),
+    )?;
+    let rows = [
+        ("u_a_x", "roll torque U_A,x", "U_A,x (N m)"),
+        ("u_a_y", "pitch torque U_A,y", "U_A,y (N m)"),
+        ("u_a_z", "yaw torque U_A,z", "U_A,z (N m)"),
+        ("thrust", "total thrust T", "T (N)"),
+    ];
+    let cells = area.split_evenly((rows.len(), 1));
+    for (row, (cell, (col, title, y))) in cells.iter().zip(rows).enumerate() {
+        let lines = fig
+            .run
+            .agents
+            .iter()
+            .map(|a| {
+                Line::new(
+                    format!("quadrotor {}", a.id),
+                    agent_color(a.id),
+                    a.series(col),
+                )
+                .width(1)
+            })
+            .collect();
+        draw_panel(
+            cell,
+            Panel {
+                title: title.to_string(),
+                x_desc: "t (s)",
+                y_desc: y.to_string(),
+                lines,
+                markers: &fig.geometry.phases,
+                legend: if row == 0 {
+                    Legend::Side
+                } else {
+                    Legend::Blank
+                },
+                y_range: None,
+                x_range: None,
+            },
+        )?;
+    }
+    root.present()?;
+    Ok(())
+}
