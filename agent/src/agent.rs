@@ -100,9 +100,15 @@ impl Agent {
             t: s.t,
             agent: self.p.id as u32,
             _pad: 0,
+            sent_ns: 0,
             position: s.position,
             velocity: s.velocity,
         }
+    }
+
+    /// True when the own state of `step` has been observed (and is still held).
+    pub fn has_own(&self, step: u64) -> bool {
+        self.own.has(step)
     }
 
     /// Records a neighbour's shared state (messages from non-neighbours are ignored).
@@ -255,6 +261,7 @@ impl Agent {
             t: own.t,
             agent: self.p.id as u32,
             _pad: 0,
+            sent_ns: 0,
             thrust_n: thrust,
             torque_nm: out.torque.into(),
             telemetry: ControllerTelemetry {

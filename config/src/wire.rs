@@ -22,7 +22,7 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Plant -> agent i: the state of quadrotor i at step k (eq. (1)-(2) states).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.VehicleState")]
+#[type_name("formation.v2.VehicleState")]
 pub struct VehicleState {
     /// Simulation step k.
     pub step: u64,
@@ -32,6 +32,8 @@ pub struct VehicleState {
     pub agent: u32,
     /// Padding, zero.
     pub _pad: u32,
+    /// CLOCK_MONOTONIC time the sender published this message, ns (realtime runs; 0 in lockstep).
+    pub sent_ns: u64,
     /// Position P_i, m (inertial frame).
     pub position: [f64; 3],
     /// Velocity V_i, m/s.
@@ -45,7 +47,7 @@ pub struct VehicleState {
 /// Agent i -> neighbours: the information the paper exchanges, (P_i, V_i) at step k.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.NeighborState")]
+#[type_name("formation.v2.NeighborState")]
 pub struct NeighborState {
     /// Simulation step k at which the state was measured.
     pub step: u64,
@@ -55,6 +57,8 @@ pub struct NeighborState {
     pub agent: u32,
     /// Padding, zero.
     pub _pad: u32,
+    /// CLOCK_MONOTONIC time the sender published this message, ns (realtime runs; 0 in lockstep).
+    pub sent_ns: u64,
     /// Position P_j, m.
     pub position: [f64; 3],
     /// Velocity V_j, m/s.
@@ -161,7 +165,7 @@ pub struct ControllerTelemetry {
 /// Agent i -> plant: total thrust and torque command U_iAC for step k, with the telemetry.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.ControlCommand")]
+#[type_name("formation.v2.ControlCommand")]
 pub struct ControlCommand {
     /// Simulation step k the command is for.
     pub step: u64,
@@ -171,6 +175,8 @@ pub struct ControlCommand {
     pub agent: u32,
     /// Padding, zero.
     pub _pad: u32,
+    /// CLOCK_MONOTONIC time the sender published this message, ns (realtime runs; 0 in lockstep).
+    pub sent_ns: u64,
     /// Total thrust T_iC, eq. (28), N.
     pub thrust_n: f64,
     /// Torque command U_iAC, eq. (43), N m (before the actuator faults and saturation).
@@ -182,7 +188,7 @@ pub struct ControlCommand {
 /// Plant -> recorder: the true quantities of quadrotor i at step k that only the plant knows.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.PlantTruth")]
+#[type_name("formation.v2.PlantTruth")]
 pub struct PlantTruth {
     /// The state at step k.
     pub state: VehicleState,

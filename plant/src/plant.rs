@@ -99,6 +99,7 @@ impl Plant {
             t: self.time(),
             agent: i as u32,
             _pad: 0,
+            sent_ns: 0,
             position: x.p.into(),
             velocity: x.v.into(),
             attitude: x.a.into(),

@@ -6,6 +6,7 @@
 
 mod neighbour_delay;
 mod ports;
+mod realtime;
 
 use formation_agent::Agent;
 use formation_config::runtime::boot::{boot, hello};
@@ -23,6 +24,9 @@ pub fn run() -> Result<(), String> {
     let neighbours: Vec<usize> = agent.neighbour_ids().collect();
     let ports = ports::Ports::open(&b.node, i, &neighbours)?;
     let _greeting = hello(&b.node, ROLE_AGENT, i as u32)?;
+    if b.args.realtime {
+        return realtime::run(&b, i, agent, &ports);
+    }
     let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);
     let mut refs: VecDeque<ReferenceFrame> = VecDeque::new();
     let mut pending_delays: Vec<DelayInjection> = Vec::new();

@@ -15,6 +15,10 @@ pub struct ChildArgs {
     pub variant: String,
     /// Agent index (0-based), for agents only.
     pub agent: Option<usize>,
+    /// Realtime mode (wall-clock plant, real delays) instead of lockstep.
+    pub realtime: bool,
+    /// Realtime mode: how long the plant busy-polls before it blocks on its event, µs (0: block).
+    pub spin_us: u32,
 }
 
 impl ChildArgs {
@@ -33,6 +37,12 @@ impl ChildArgs {
         v.push(self.variant.clone().into());
         v.push("--run-dir".into());
         v.push(self.run_dir.clone().into_os_string());
+        if self.realtime {
+            v.push("--mode".into());
+            v.push("realtime".into());
+            v.push("--spin-us".into());
+            v.push(self.spin_us.to_string().into());
+        }
         v
     }
 
@@ -44,6 +54,8 @@ impl ChildArgs {
             run_dir: PathBuf::new(),
             variant: "proposed".into(),
             agent: None,
+            realtime: false,
+            spin_us: 0,
         };
         let mut it = args.into_iter();
         while let Some(flag) = it.next() {
@@ -63,6 +75,18 @@ impl ChildArgs {
                 "--prefix" => out.prefix = text,
                 "--variant" => out.variant = text,
                 "--run-dir" => out.run_dir = PathBuf::from(value),
+                "--mode" => {
+                    out.realtime = match text.as_str() {
+                        "realtime" => true,
+                        "lockstep" => false,
+                        _ => return Err(format!("--mode: lockstep or realtime, not {text}")),
+                    }
+                }
+                "--spin-us" => {
+                    out.spin_us = text
+                        .parse()
+                        .map_err(|_| format!("--spin-us: not a number of µs: {text}"))?
+                }
                 _ => return Err(format!("unknown argument {flag}")),
             }
         }
@@ -85,8 +109,16 @@ mod tests {
             run_dir: PathBuf::from("/tmp/x y"),
             variant: "no-rbfnn".into(),
             agent: Some(3),
+            realtime: false,
+            spin_us: 0,
         };
         assert_eq!(ChildArgs::parse(a.to_args()).unwrap(), a);
+        let rt = ChildArgs {
+            realtime: true,
+            spin_us: 20,
+            ..a
+        };
+        assert_eq!(ChildArgs::parse(rt.to_args()).unwrap(), rt);
         assert!(ChildArgs::parse(vec!["--bogus".into(), "1".into()]).is_err());
     }
 }

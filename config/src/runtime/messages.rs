@@ -54,7 +54,7 @@ pub struct Hello {
 /// Plant -> orchestrator: what quadrotor i did at one step (an element of the per-step slice).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.StepEntry")]
+#[type_name("formation.v2.StepEntry")]
 pub struct StepEntry {
     /// The plant's truth after applying the command.
     pub truth: PlantTruth,

@@ -13,9 +13,11 @@
 
 pub mod args;
 pub mod boot;
+pub mod clock;
 pub mod messages;
 pub mod ports;
 pub mod process;
+pub mod timing;
 
 use std::time::Duration;
 
@@ -53,6 +55,9 @@ pub fn wake_agent(i: usize) -> String {
 pub const REFERENCE_BUFFER: usize = (LEADER_LEAD + 2 * ACK_EVERY) as usize;
 /// Subscriber buffer of the per-step records (plant -> orchestrator).
 pub const STEPS_BUFFER: usize = (PLANT_LEAD + 2 * ACK_EVERY) as usize;
+/// Subscriber buffer of the per-step records in realtime mode, where the plant does not wait for
+/// the recorder: one second of steps at 1 kHz.
+pub const REALTIME_STEPS_BUFFER: usize = 1024;
 /// Subscriber buffer of the per-agent state, share and command services.
 pub const LOCKSTEP_BUFFER: usize = 8;
 /// Subscriber buffer of the injection and control services.

@@ -124,6 +124,29 @@ impl Wake {
         }
     }
 
+    /// Busy-polls for a notification for up to `spin`, then sleeps as [`Wake::wait`] for the rest of
+    /// `timeout`. With `spin` zero this is [`Wake::wait`].
+    pub fn spin_then_wait(&self, spin: Duration, timeout: Duration) -> Result<(), String> {
+        if !spin.is_zero() {
+            let start = std::time::Instant::now();
+            loop {
+                let mut got = false;
+                if let Err(e) = self.listener.try_wait(|_| got = true) {
+                    return Err(format!("event poll failed: {e:?}"));
+                }
+                if got {
+                    return Ok(());
+                }
+                let spent = start.elapsed();
+                if spent >= spin || spent >= timeout {
+                    return self.wait(timeout.saturating_sub(spent));
+                }
+                std::hint::spin_loop();
+            }
+        }
+        self.wait(timeout)
+    }
+
     /// Consumes pending notifications without sleeping.
     pub fn clear(&self) {
         let _ = self.listener.try_wait(|_| {});

@@ -26,6 +26,7 @@ pub struct Recorder {
     variant: Variant,
     mode: &'static str,
     dt: f64,
+    timing: Option<serde_json::Value>,
 }
 
 impl Recorder {
@@ -46,6 +47,7 @@ impl Recorder {
             variant,
             mode,
             dt: s.simulation.dt_s,
+            timing: None,
         })
     }
 
@@ -65,6 +67,11 @@ impl Recorder {
         Ok(div)
     }
 
+    /// Sets the `timing` object of `summary.json` (realtime runs).
+    pub fn set_timing(&mut self, timing: serde_json::Value) {
+        self.timing = Some(timing);
+    }
+
     /// Flushes the CSV written so far (used when a run is interrupted).
     pub fn flush(&mut self) -> std::io::Result<()> {
         self.csv.flush()
@@ -73,7 +80,7 @@ impl Recorder {
     /// Flushes the CSV and writes `summary.json`; returns the summary.
     pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
         self.csv.flush()?;
-        let summary = summary::Summary::build(
+        let mut summary = summary::Summary::build(
             &self.metrics,
             &self.scenario,
             self.variant,
@@ -82,6 +89,7 @@ impl Recorder {
             steps,
             wall_time_s,
         );
+        summary.timing = self.timing.take();
         summary.write(&self.out_dir.join("summary.json"))?;
         Ok(summary)
     }

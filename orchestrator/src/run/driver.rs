@@ -38,11 +38,13 @@ pub struct Ports {
     progress: Pub<RunProgress>,
     wakes: Vec<Notifier<Svc>>,
     wake: Wake,
+    /// Lockstep: progress paces the plant, so it is woken; realtime: the plant keeps its own clock.
+    wake_plant_on_progress: bool,
 }
 
 impl Ports {
     /// Makes the orchestrator's ports on the created services.
-    pub fn open(node: &RunNode, n: usize) -> Result<Ports, String> {
+    pub fn open(node: &RunNode, n: usize, wake_plant_on_progress: bool) -> Result<Ports, String> {
         let mut wakes = vec![
             notifier(node, rt::WAKE_PLANT)?,
             notifier(node, rt::WAKE_LEADER)?,
@@ -58,6 +60,7 @@ impl Ports {
             progress: publisher(node, rt::PROGRESS)?,
             wakes,
             wake: Wake::open(node, rt::WAKE_ORCHESTRATOR)?,
+            wake_plant_on_progress,
         })
     }
 
@@ -76,7 +79,9 @@ impl Ports {
 
     fn announce(&self, recorded: u64) -> Result<(), String> {
         rt::ports::send(&self.progress, RunProgress { recorded })?;
-        poke(&self.wakes[0]);
+        if self.wake_plant_on_progress || recorded == 0 {
+            poke(&self.wakes[0]);
+        }
         poke(&self.wakes[1]);
         Ok(())
     }

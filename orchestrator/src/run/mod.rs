@@ -11,6 +11,7 @@ mod driver;
 mod progress;
 mod services;
 mod spawn;
+mod timing;
 
 use crate::cli;
 use crate::record::Recorder;
@@ -38,6 +39,34 @@ pub struct RunArgs {
     /// Override a scenario parameter, e.g. `--set simulation.duration_s=2` (repeatable).
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
+    /// Realtime mode: the plant integrates on the wall clock with a deadline per step and the
+    /// injected delays are real (see docs/realtime.md); timing goes into summary.json.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Realtime mode: how the plant waits for commands.
+    #[arg(long, value_enum, default_value_t = timing::WaitMode::Block)]
+    pub wait: timing::WaitMode,
+    /// Realtime mode with `--wait spin-block`: busy-poll time before blocking, µs.
+    #[arg(long, default_value_t = 20)]
+    pub spin_us: u32,
+}
+
+/// How a run is paced.
+#[derive(Debug, Clone, Copy)]
+struct Mode {
+    realtime: bool,
+    wait: timing::WaitMode,
+    spin_us: u32,
+}
+
+impl Mode {
+    fn name(self) -> &'static str {
+        if self.realtime {
+            "realtime"
+        } else {
+            "lockstep"
+        }
+    }
 }
 
 /// Exit code after Ctrl-C.
@@ -67,8 +96,18 @@ pub fn main(args: RunArgs) -> ExitCode {
         );
         return ExitCode::from(cli::EXIT_INVALID);
     }
+    let mode = Mode {
+        realtime: args.realtime,
+        wait: args.wait,
+        spin_us: args.spin_us,
+    };
     let out = args.out.unwrap_or_else(|| {
-        PathBuf::from(format!("out/{}-{}-lockstep", scenario.name, variant.name()))
+        PathBuf::from(format!(
+            "out/{}-{}-{}",
+            scenario.name,
+            variant.name(),
+            mode.name()
+        ))
     });
     let interrupted = Arc::new(AtomicBool::new(false));
     {
@@ -79,13 +118,24 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
     let run_id = new_run_id();
     let prefix = names::run_prefix(&run_id);
-    let result = run(&scenario, variant, &out, &run_id, &prefix, &interrupted);
+    let result = run(
+        &scenario,
+        variant,
+        mode,
+        &out,
+        &run_id,
+        &prefix,
+        &interrupted,
+    );
     if let Err(e) = cleanup::remove(&prefix) {
         eprintln!("warning: {e}");
     }
     match result {
         Ok((Outcome::Completed, summary)) => {
             summary.print_table();
+            if let Some(t) = &summary.timing {
+                timing::print(t);
+            }
             println!("wrote {}/trajectory.csv and summary.json", out.display());
             if let Some(d) = &summary.divergence {
                 eprintln!(
@@ -130,6 +180,7 @@ impl Drop for Children {
 fn run(
     scenario: &Scenario,
     variant: Variant,
+    mode: Mode,
     out: &Path,
     run_id: &str,
     prefix: &str,
@@ -138,7 +189,7 @@ fn run(
     let start = Instant::now();
     let n = scenario.n_agents();
     let dir = spawn::role_binary_dir()?;
-    let mut recorder = Recorder::create(scenario, variant, "lockstep", out)
+    let mut recorder = Recorder::create(scenario, variant, mode.name(), out)
         .map_err(|e| format!("cannot write outputs to {}: {e}", out.display()))?;
     let run_dir = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
     crate::sim::write_resolved_scenario(scenario, &run_dir)
@@ -147,14 +198,24 @@ fn run(
         eprintln!("warning: {e}");
     }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
-    let services = services::RunServices::create(&node, n)?;
-    let ports = driver::Ports::open(&node, n)?;
+    let services = services::RunServices::create(&node, n, mode.realtime)?;
+    let ports = driver::Ports::open(&node, n, !mode.realtime)?;
+    let timing_dir = formation_config::runtime::timing::dir(&run_dir);
+    if mode.realtime {
+        // Stale files of an earlier run in the same directory must not be merged.
+        let _ = std::fs::remove_dir_all(&timing_dir);
+    }
     let child_args = |agent: Option<usize>| ChildArgs {
         run_id: run_id.to_string(),
         prefix: prefix.to_string(),
         run_dir: run_dir.clone(),
         variant: variant.name().to_string(),
         agent,
+        realtime: mode.realtime,
+        spin_us: match mode.wait {
+            timing::WaitMode::Block => 0,
+            timing::WaitMode::SpinBlock => mode.spin_us,
+        },
     };
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(spawn::spawn(
@@ -201,6 +262,12 @@ fn run(
     drop(ports);
     drop(services);
     drop(node);
+    if mode.realtime && matches!(outcome, Outcome::Completed) {
+        match timing::collect(&run_dir, n, mode.wait, mode.spin_us) {
+            Ok(t) => recorder.set_timing(t),
+            Err(e) => eprintln!("warning: no timing statistics: {e}"),
+        }
+    }
     let summary = recorder
         .finish(recorded, start.elapsed().as_secs_f64())
         .map_err(|e| format!("cannot write {}/summary.json: {e}", out.display()))?;

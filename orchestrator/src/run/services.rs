@@ -61,8 +61,14 @@ fn event(node: &RunNode, name: &str, l: Limits) -> Result<Box<dyn Any>, String> 
 }
 
 impl RunServices {
-    /// Creates every service of a run with `n` agents.
-    pub fn create(node: &RunNode, n: usize) -> Result<RunServices, String> {
+    /// Creates every service of a run with `n` agents. In realtime mode the plant does not wait for
+    /// the recorder, so the step records get a deeper buffer.
+    pub fn create(node: &RunNode, n: usize, realtime: bool) -> Result<RunServices, String> {
+        let steps_buffer = if realtime {
+            rt::REALTIME_STEPS_BUFFER
+        } else {
+            rt::STEPS_BUFFER
+        };
         // Every process of the run may open any service: N agents, plant, leader, orchestrator.
         let nodes = n + 4;
         let lock = rt::LOCKSTEP_BUFFER;
@@ -78,7 +84,7 @@ impl RunServices {
             pubsub::<RunControl>(node, rt::CONTROL, limits(nodes, 1, n + 2, ctl))?,
             pubsub::<RunProgress>(node, rt::PROGRESS, limits(nodes, 1, 2, ctl))?,
             pubsub::<Hello>(node, rt::HELLO, limits(nodes, n + 2, 1, n + 2))?,
-            slices::<StepEntry>(node, rt::STEPS, limits(nodes, 1, 1, rt::STEPS_BUFFER))?,
+            slices::<StepEntry>(node, rt::STEPS, limits(nodes, 1, 1, steps_buffer))?,
             event(node, rt::WAKE_ORCHESTRATOR, limits(nodes, n + 3, 1, 0))?,
             event(node, rt::WAKE_PLANT, limits(nodes, n + 3, 1, 0))?,
             event(node, rt::WAKE_LEADER, limits(nodes, n + 3, 1, 0))?,

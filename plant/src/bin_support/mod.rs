@@ -2,6 +2,7 @@
 //! runner: apply the commands in agent order, take the truths, publish the step record, advance.
 
 mod ports;
+mod realtime;
 
 use formation_config::runtime::boot::{boot, hello};
 use formation_config::runtime::messages::{StepEntry, CONTROL_STOP, ROLE_PLANT};
@@ -18,6 +19,9 @@ pub fn run() -> Result<(), String> {
     let ports = ports::Ports::open(&b.node, n)?;
     let _greeting = hello(&b.node, ROLE_PLANT, 0)?;
     let mut plant = Plant::from_scenario(&b.scenario);
+    if b.args.realtime {
+        return realtime::run(&b, &ports, plant);
+    }
     let mut commands: Vec<Option<ControlCommand>> = vec![None; n];
     let mut entries = vec![StepEntry::default(); n];
     let mut faults: Vec<FaultInjection> = Vec::new();

@@ -1,0 +1,118 @@
+//! Agent i on the wall clock (`formation run --realtime`): it reacts to every fresh state at once
+//! and never waits for its delayed inputs. At step k it uses, through the step-keyed histories, the
+//! newest information stamped at or before t_k - tau_i(t_k) that has actually arrived
+//! ([`formation_agent::delay::StepHistory::at_or_before`]), so the injected delay adds to the real
+//! IPC latency. Step 0 is the warm-up: the agent waits for everything step 0 needs, as in lockstep.
+//!
+//! If several states are queued (the agent fell behind), all enter the history and only the newest
+//! is answered. Measures, per process: state hop (plant send stamp -> received), share hop
+//! (neighbour send stamp -> received) and the compute time of `Agent::step`; written at the stop
+//! to `<run dir>/timing/agent-<i>.json`.
+
+use super::ports::Ports;
+use formation_agent::Agent;
+use formation_config::runtime::boot::Boot;
+use formation_config::runtime::clock::now_ns;
+use formation_config::runtime::messages::CONTROL_STOP;
+use formation_config::runtime::ports::{poke, send};
+use formation_config::runtime::timing::{NsHistogram, TimingReport};
+use formation_config::runtime::CHILD_WAIT;
+use formation_config::wire::{DelayInjection, ReferenceFrame, VehicleState};
+use std::collections::VecDeque;
+
+/// What the agent measures.
+#[derive(Default)]
+struct Meters {
+    state_hop: NsHistogram,
+    share_hop: NsHistogram,
+    compute: NsHistogram,
+    skipped: u64,
+}
+
+/// Runs agent i in realtime mode until the orchestrator says stop (or goes away).
+pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), String> {
+    let mut m = Meters::default();
+    let mut refs: VecDeque<ReferenceFrame> = VecDeque::with_capacity(128);
+    let mut pending_delays: Vec<DelayInjection> = Vec::new();
+    let mut latest: Option<VehicleState> = None;
+    loop {
+        while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+            if c.kind == CONTROL_STOP {
+                return report(b, i, &m);
+            }
+        }
+        while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
+            pending_delays.push(*d);
+        }
+        while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
+            refs.push_back(*r);
+        }
+        for sub in &ports.shares_in {
+            while let Some(s) = sub.receive().map_err(|e| format!("{e:?}"))? {
+                if s.sent_ns != 0 {
+                    m.share_hop.record(now_ns().saturating_sub(s.sent_ns));
+                }
+                agent.observe_neighbor(&s);
+            }
+        }
+        while let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
+            if s.sent_ns != 0 {
+                m.state_hop.record(now_ns().saturating_sub(s.sent_ns));
+            }
+            if latest.replace(*s).is_some() {
+                // A newer state replaces one not answered yet: only the newest is answered.
+                m.skipped += 1;
+            }
+            if !agent.has_own(s.step) {
+                let mut share = agent.observe_own(&s);
+                share.sent_ns = now_ns();
+                send(&ports.share_out, share)?;
+                if s.step == 0 {
+                    // Warm-up: the neighbours wait for the shares of step 0.
+                    ports.neighbours_wake.iter().for_each(poke);
+                }
+            }
+        }
+        if let Some(s) = latest {
+            let k = s.step;
+            while refs.front().is_some_and(|r| r.step <= k) {
+                if let Some(r) = refs.pop_front() {
+                    agent.observe_reference(&r);
+                }
+            }
+            pending_delays.retain(|d| {
+                if d.step <= k {
+                    agent.set_delay(d);
+                    false
+                } else {
+                    true
+                }
+            });
+            if k > 0 || agent.ready(0) {
+                let t0 = now_ns();
+                let mut cmd = agent.step(&s);
+                let t1 = now_ns();
+                m.compute.record(t1 - t0);
+                cmd.sent_ns = t1;
+                send(&ports.command, cmd)?;
+                poke(&ports.plant_wake);
+                latest = None;
+            }
+        }
+        if let Some(why) = b.lifeline.must_stop() {
+            return Err(format!("agent {i} stopping: {why}"));
+        }
+        ports.wake.wait(CHILD_WAIT)?;
+    }
+}
+
+/// Writes `<run dir>/timing/agent-<i>.json`.
+fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), String> {
+    let mut r = TimingReport::default();
+    r.histograms.insert("state_hop".into(), m.state_hop.clone());
+    r.histograms.insert("share_hop".into(), m.share_hop.clone());
+    r.histograms
+        .insert("controller_step".into(), m.compute.clone());
+    r.counters.insert("skipped_states".into(), m.skipped);
+    r.write(&b.args.run_dir, &format!("agent-{i}"))
+}
