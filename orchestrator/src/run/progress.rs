@@ -29,7 +29,7 @@ impl Progress {
         let wall = self.start.elapsed().as_secs_f64().max(1e-9);
         let sim = done as f64 * self.dt;
         format!(
-            "lockstep: step {done}/{}  t = {sim:.2} s  {:.0} steps/s  {:.1}x real time",
+            "step {done}/{}  t = {sim:.2} s  {:.0} steps/s  {:.1}x real time",
             self.steps,
             done as f64 / wall,
             sim / wall
