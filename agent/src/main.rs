@@ -1,1 +1,15 @@
-fn main() {}
+//! `formation-agent`: the controller process of one quadrotor (`--agent i`) in `formation run`.
+//! Started by the orchestrator.
+use std::process::ExitCode;
+
+mod bin_support;
+
+fn main() -> ExitCode {
+    match bin_support::run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("formation-agent: {e}");
+            ExitCode::from(1)
+        }
+    }
+}

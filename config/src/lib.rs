@@ -6,11 +6,14 @@
 //! * [`wire`]: `#[repr(C)]` zero-copy messages exchanged over iceoryx2, stamped with step and time.
 //! * [`services`]: service names under a per-run prefix.
 //! * [`ipc`]: iceoryx2 plumbing: nodes under a run prefix, services sized for N, residue cleanup.
+//! * [`runtime`]: the lockstep protocol of `formation run` (pacing, control messages, role-process
+//!   plumbing).
 //! * [`graph`]: the communication graph (Laplacian `L`, leader weights `B`) built from a scenario.
 #![warn(missing_docs)]
 
 pub mod graph;
 pub mod ipc;
+pub mod runtime;
 pub mod scenario;
 pub mod services;
 pub mod validate;

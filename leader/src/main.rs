@@ -1,5 +1,15 @@
-//! `formation-leader`: the leader process (publishes the reference frame). Filled in by the runtime.
-fn main() {
-    eprintln!("formation-leader: run it through `formation run`");
-    std::process::exit(2);
+//! `formation-leader`: the leader process of `formation run`. It publishes the reference frame of
+//! every step, paced by the orchestrator's progress. Started by the orchestrator.
+use std::process::ExitCode;
+
+mod bin_support;
+
+fn main() -> ExitCode {
+    match bin_support::run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("formation-leader: {e}");
+            ExitCode::from(1)
+        }
+    }
 }

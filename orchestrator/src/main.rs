@@ -15,6 +15,8 @@ mod check;
 mod cli;
 mod plot;
 pub mod record;
+mod run;
+mod scenario_gen;
 mod sim;
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
@@ -29,6 +31,10 @@ struct Cli {
 enum Command {
     /// Run the closed loop in one process and write trajectory.csv and summary.json.
     Sim(sim::SimArgs),
+    /// Run one OS process per quadrotor (plus plant and leader) over iceoryx2, in lockstep.
+    Run(run::RunArgs),
+    /// Generate a scenario with N agents on a ring or path graph from the paper template.
+    Scenario(scenario_gen::ScenarioArgs),
     /// Render the paper's figures (PNG) from one run directory (or two, to compare variants).
     Plot(plot::PlotArgs),
     /// Print the graph spectrum, Theorem 1's matrix M and the loop bandwidths of a scenario.
@@ -50,10 +56,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Sim(a)) => sim::main(a),
+        Some(Command::Run(a)) => run::main(a),
+        Some(Command::Scenario(a)) => scenario_gen::main(a),
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
-        None => sim::main(sim::SimArgs::default()),
+        None => run::main(run::RunArgs::default()),
     }
 }

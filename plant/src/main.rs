@@ -1,5 +1,15 @@
-//! `formation-plant`: the plant process. Filled in by the runtime.
-fn main() {
-    eprintln!("formation-plant: run it through `formation run`");
-    std::process::exit(2);
+//! `formation-plant`: the plant process of `formation run`. It integrates every quadrotor in
+//! lockstep: step k+1 starts only when all N commands of step k are in. Started by the orchestrator.
+use std::process::ExitCode;
+
+mod bin_support;
+
+fn main() -> ExitCode {
+    match bin_support::run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("formation-plant: {e}");
+            ExitCode::from(1)
+        }
+    }
 }

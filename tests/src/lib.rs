@@ -31,3 +31,5 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     std::fs::create_dir_all(&dir).expect("can create a temporary directory");
     dir
 }
+
+pub mod run;

@@ -1,0 +1,97 @@
+//! Agent i's event loop around [`formation_agent::Agent`]. Per step k, as in the in-process
+//! runner: observe the reference of k, the own state of k (sharing it at once), the neighbours'
+//! shares, and compute the command of k once `ready(k)`. References arriving early are held here
+//! and handed to the agent only when their step comes, so its delay histories match the in-process
+//! run exactly.
+
+mod neighbour_delay;
+mod ports;
+
+use formation_agent::Agent;
+use formation_config::runtime::boot::{boot, hello};
+use formation_config::runtime::messages::{CONTROL_STOP, ROLE_AGENT};
+use formation_config::runtime::ports::{poke, send};
+use formation_config::runtime::CHILD_WAIT;
+use formation_config::wire::{DelayInjection, ReferenceFrame, VehicleState};
+use std::collections::VecDeque;
+
+/// Runs agent `--agent i` until the orchestrator says stop (or goes away).
+pub fn run() -> Result<(), String> {
+    let b = boot("agent")?;
+    let i = b.args.agent.ok_or("--agent is required")?;
+    let mut agent = Agent::new(&b.scenario, i, b.variant);
+    let neighbours: Vec<usize> = agent.neighbour_ids().collect();
+    let ports = ports::Ports::open(&b.node, i, &neighbours)?;
+    let _greeting = hello(&b.node, ROLE_AGENT, i as u32)?;
+    let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);
+    let mut refs: VecDeque<ReferenceFrame> = VecDeque::new();
+    let mut pending_delays: Vec<DelayInjection> = Vec::new();
+    let mut own: Option<VehicleState> = None;
+    let mut observed = false;
+    let mut k: u64 = 0;
+    loop {
+        while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+            if c.kind == CONTROL_STOP {
+                return Ok(());
+            }
+        }
+        while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
+            delays.observe(&d);
+            pending_delays.push(*d);
+        }
+        while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
+            refs.push_back(*r);
+        }
+        for sub in &ports.shares_in {
+            while let Some(s) = sub.receive().map_err(|e| format!("{e:?}"))? {
+                agent.observe_neighbor(&s);
+            }
+        }
+        while let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
+            if s.step != k || own.is_some() {
+                return Err(format!(
+                    "protocol error: state of step {} while at step {k}",
+                    s.step
+                ));
+            }
+            own = Some(*s);
+        }
+        while refs.front().is_some_and(|r| r.step <= k) {
+            if let Some(r) = refs.pop_front() {
+                agent.observe_reference(&r);
+            }
+        }
+        pending_delays.retain(|d| {
+            if d.step <= k {
+                agent.set_delay(d);
+                false
+            } else {
+                true
+            }
+        });
+        if let Some(s) = own {
+            if !observed {
+                let share = agent.observe_own(&s);
+                send(&ports.share_out, share)?;
+                for (idx, n) in ports.neighbours_wake.iter().enumerate() {
+                    if delays.needs_now(idx, k) {
+                        poke(n);
+                    }
+                }
+                observed = true;
+            }
+            if agent.ready(k) {
+                let cmd = agent.step(&s);
+                send(&ports.command, cmd)?;
+                poke(&ports.plant_wake);
+                k += 1;
+                own = None;
+                observed = false;
+            }
+        }
+        if let Some(why) = b.lifeline.must_stop() {
+            return Err(format!("agent {i} stopping at step {k}: {why}"));
+        }
+        ports.wake.wait(CHILD_WAIT)?;
+    }
+}

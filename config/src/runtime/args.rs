@@ -1,0 +1,92 @@
+//! Command line of the role processes, written by the orchestrator and parsed by the children.
+
+use std::path::PathBuf;
+
+/// What a role process is told on its command line.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChildArgs {
+    /// Run id (also part of the prefix); lets `ps` and tests find the processes of a run.
+    pub run_id: String,
+    /// iceoryx2 global prefix of the run.
+    pub prefix: String,
+    /// Run directory holding `scenario.toml`.
+    pub run_dir: PathBuf,
+    /// Controller variant name.
+    pub variant: String,
+    /// Agent index (0-based), for agents only.
+    pub agent: Option<usize>,
+}
+
+impl ChildArgs {
+    /// The arguments, in the order [`ChildArgs::parse`] reads them.
+    pub fn to_args(&self) -> Vec<std::ffi::OsString> {
+        let mut v: Vec<std::ffi::OsString> = Vec::new();
+        if let Some(i) = self.agent {
+            v.push("--agent".into());
+            v.push(i.to_string().into());
+        }
+        v.push("--run-id".into());
+        v.push(self.run_id.clone().into());
+        v.push("--prefix".into());
+        v.push(self.prefix.clone().into());
+        v.push("--variant".into());
+        v.push(self.variant.clone().into());
+        v.push("--run-dir".into());
+        v.push(self.run_dir.clone().into_os_string());
+        v
+    }
+
+    /// Parses `std::env::args_os()` minus the program name.
+    pub fn parse(args: impl IntoIterator<Item = std::ffi::OsString>) -> Result<ChildArgs, String> {
+        let mut out = ChildArgs {
+            run_id: String::new(),
+            prefix: String::new(),
+            run_dir: PathBuf::new(),
+            variant: "proposed".into(),
+            agent: None,
+        };
+        let mut it = args.into_iter();
+        while let Some(flag) = it.next() {
+            let flag = flag.to_string_lossy().into_owned();
+            let value = it
+                .next()
+                .ok_or_else(|| format!("missing value after {flag}"))?;
+            let text = value.to_string_lossy().into_owned();
+            match flag.as_str() {
+                "--agent" => {
+                    out.agent = Some(
+                        text.parse()
+                            .map_err(|_| format!("--agent: not an index: {text}"))?,
+                    )
+                }
+                "--run-id" => out.run_id = text,
+                "--prefix" => out.prefix = text,
+                "--variant" => out.variant = text,
+                "--run-dir" => out.run_dir = PathBuf::from(value),
+                _ => return Err(format!("unknown argument {flag}")),
+            }
+        }
+        if out.prefix.is_empty() || out.run_dir.as_os_str().is_empty() {
+            return Err("--prefix and --run-dir are required".into());
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn arguments_round_trip() {
+        let a = ChildArgs {
+            run_id: "abc".into(),
+            prefix: "fmabc_".into(),
+            run_dir: PathBuf::from("/tmp/x y"),
+            variant: "no-rbfnn".into(),
+            agent: Some(3),
+        };
+        assert_eq!(ChildArgs::parse(a.to_args()).unwrap(), a);
+        assert!(ChildArgs::parse(vec!["--bogus".into(), "1".into()]).is_err());
+    }
+}

@@ -1,0 +1,143 @@
+//! Opening the run's services (created beforehand by the orchestrator) and making ports on them,
+//! with errors that name the service.
+
+use crate::ipc::service_name;
+use core::fmt::Debug;
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+use std::time::Duration;
+
+/// The iceoryx2 service flavour of every run (inter-process).
+pub type Svc = ipc::Service;
+/// A node of a run.
+pub type RunNode = Node<Svc>;
+/// Publisher of `T`.
+pub type Pub<T> = Publisher<Svc, T, ()>;
+/// Subscriber of `T`.
+pub type Sub<T> = Subscriber<Svc, T, ()>;
+
+/// Publisher on the existing service `name`.
+pub fn publisher<T: Debug + ZeroCopySend + 'static>(
+    node: &RunNode,
+    name: &str,
+) -> Result<Pub<T>, String> {
+    let svc = node
+        .service_builder(&service_name(name).map_err(|e| e.to_string())?)
+        .publish_subscribe::<T>()
+        .open()
+        .map_err(|e| format!("cannot open service {name}: {e:?}"))?;
+    svc.publisher_builder()
+        .create()
+        .map_err(|e| format!("cannot publish on {name}: {e:?}"))
+}
+
+/// Subscriber on the existing service `name`.
+pub fn subscriber<T: Debug + ZeroCopySend + 'static>(
+    node: &RunNode,
+    name: &str,
+) -> Result<Sub<T>, String> {
+    let svc = node
+        .service_builder(&service_name(name).map_err(|e| e.to_string())?)
+        .publish_subscribe::<T>()
+        .open()
+        .map_err(|e| format!("cannot open service {name}: {e:?}"))?;
+    svc.subscriber_builder()
+        .create()
+        .map_err(|e| format!("cannot subscribe to {name}: {e:?}"))
+}
+
+/// Publisher of slices of `T` (up to `max_len` elements) on the existing service `name`.
+pub fn slice_publisher<T: Debug + ZeroCopySend + 'static>(
+    node: &RunNode,
+    name: &str,
+    max_len: usize,
+) -> Result<Pub<[T]>, String> {
+    let svc = node
+        .service_builder(&service_name(name).map_err(|e| e.to_string())?)
+        .publish_subscribe::<[T]>()
+        .open()
+        .map_err(|e| format!("cannot open service {name}: {e:?}"))?;
+    svc.publisher_builder()
+        .initial_max_slice_len(max_len.max(1))
+        .create()
+        .map_err(|e| format!("cannot publish on {name}: {e:?}"))
+}
+
+/// Subscriber of slices of `T` on the existing service `name`.
+pub fn slice_subscriber<T: Debug + ZeroCopySend + 'static>(
+    node: &RunNode,
+    name: &str,
+) -> Result<Sub<[T]>, String> {
+    let svc = node
+        .service_builder(&service_name(name).map_err(|e| e.to_string())?)
+        .publish_subscribe::<[T]>()
+        .open()
+        .map_err(|e| format!("cannot open service {name}: {e:?}"))?;
+    svc.subscriber_builder()
+        .create()
+        .map_err(|e| format!("cannot subscribe to {name}: {e:?}"))
+}
+
+/// Notifier on the existing event service `name`.
+pub fn notifier(node: &RunNode, name: &str) -> Result<Notifier<Svc>, String> {
+    let svc = node
+        .service_builder(&service_name(name).map_err(|e| e.to_string())?)
+        .event()
+        .open()
+        .map_err(|e| format!("cannot open event {name}: {e:?}"))?;
+    svc.notifier_builder()
+        .create()
+        .map_err(|e| format!("cannot notify {name}: {e:?}"))
+}
+
+/// The event a process sleeps on.
+#[derive(Debug)]
+pub struct Wake {
+    listener: Listener<Svc>,
+}
+
+impl Wake {
+    /// Listener on the existing event service `name`.
+    pub fn open(node: &RunNode, name: &str) -> Result<Wake, String> {
+        let svc = node
+            .service_builder(&service_name(name).map_err(|e| e.to_string())?)
+            .event()
+            .open()
+            .map_err(|e| format!("cannot open event {name}: {e:?}"))?;
+        let listener = svc
+            .listener_builder()
+            .create()
+            .map_err(|e| format!("cannot listen on {name}: {e:?}"))?;
+        Ok(Wake { listener })
+    }
+
+    /// Sleeps until notified or `timeout`, consuming every pending notification. The caller then
+    /// drains all its subscribers (notifications coalesce). A signal (e.g. Ctrl-C) ends the sleep
+    /// early without an error; the caller checks its flags.
+    pub fn wait(&self, timeout: Duration) -> Result<(), String> {
+        match self.listener.timed_wait(|_| {}, timeout) {
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => Ok(()),
+            Err(e) => Err(format!("event wait failed: {e:?}")),
+        }
+    }
+
+    /// Consumes pending notifications without sleeping.
+    pub fn clear(&self) {
+        let _ = self.listener.try_wait(|_| {});
+    }
+}
+
+/// Notifies, ignoring failures (a peer that has gone away is detected by the orchestrator).
+pub fn poke(n: &Notifier<Svc>) {
+    let _ = n.notify();
+}
+
+/// Publishes a copy of `value`.
+pub fn send<T: Debug + ZeroCopySend + Copy + 'static>(p: &Pub<T>, value: T) -> Result<(), String> {
+    p.send_copy(value)
+        .map(|_| ())
+        .map_err(|e| format!("send failed: {e:?}"))
+}

@@ -1,0 +1,58 @@
+//! Process plumbing of the role processes: names visible in `ps`, parent-death detection, and
+//! SIGTERM as a polite stop request.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static TERMINATED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_term(_sig: libc::c_int) {
+    TERMINATED.store(true, Ordering::SeqCst);
+}
+
+/// Watches the conditions under which a role process must stop on its own.
+#[derive(Debug)]
+pub struct Lifeline {
+    parent: libc::pid_t,
+}
+
+impl Lifeline {
+    /// Names the process (`prctl(PR_SET_NAME)`, at most 15 bytes, e.g. `fm-agent-3`), asks the kernel
+    /// for SIGTERM when the parent dies, turns SIGTERM/SIGHUP into a stop request and ignores SIGINT
+    /// (the orchestrator decides how a Ctrl-C ends the run).
+    pub fn install(name: &str) -> Lifeline {
+        let mut buf = [0u8; 16];
+        let bytes = name.as_bytes();
+        let len = bytes.len().min(15);
+        buf[..len].copy_from_slice(&bytes[..len]);
+        // SAFETY: plain syscalls with valid arguments; the handler only stores to an atomic.
+        unsafe {
+            libc::prctl(libc::PR_SET_NAME, buf.as_ptr() as libc::c_ulong, 0, 0, 0);
+            libc::prctl(
+                libc::PR_SET_PDEATHSIG,
+                libc::SIGTERM as libc::c_ulong,
+                0,
+                0,
+                0,
+            );
+            libc::signal(libc::SIGINT, libc::SIG_IGN);
+            libc::signal(libc::SIGTERM, on_term as *const () as libc::sighandler_t);
+            libc::signal(libc::SIGHUP, on_term as *const () as libc::sighandler_t);
+        }
+        Lifeline {
+            // SAFETY: getppid cannot fail.
+            parent: unsafe { libc::getppid() },
+        }
+    }
+
+    /// Why the process must stop now, if it must: its parent is gone or it was asked to terminate.
+    pub fn must_stop(&self) -> Option<&'static str> {
+        if TERMINATED.load(Ordering::SeqCst) {
+            return Some("terminated");
+        }
+        // SAFETY: getppid cannot fail.
+        if unsafe { libc::getppid() } != self.parent || self.parent == 1 {
+            return Some("the orchestrator is gone");
+        }
+        None
+    }
+}

@@ -1,0 +1,32 @@
+//! Removing what a run leaves under its iceoryx2 prefix (after every process of the run has exited).
+
+use formation_config::ipc;
+
+/// Deletes the run's files in /dev/shm and /tmp/iceoryx2; errors name what is left.
+pub fn remove(prefix: &str) -> Result<(), String> {
+    ipc::remove_residue(prefix).map_err(|e| format!("cannot remove the files of {prefix}: {e}"))?;
+    match ipc::residue(prefix) {
+        Ok(left) if left.is_empty() => Ok(()),
+        Ok(left) => Err(format!(
+            "files of run prefix {prefix} are left behind: {}",
+            left.iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+        Err(e) => Err(format!("cannot list the files of {prefix}: {e}")),
+    }
+}
+
+/// Writes `<run dir>/iox2/config/iceoryx2.toml`: the iceoryx2 config of the run (its prefix), so that
+/// `cd <run dir>/iox2 && iox2 service list` (iceoryx2 looks for `./config/iceoryx2.toml`) shows the
+/// run's nodes and services while it is running.
+pub fn write_iox2_config(run_dir: &std::path::Path, prefix: &str) -> Result<(), String> {
+    let cfg = ipc::config_for_prefix(prefix).map_err(|e| e.to_string())?;
+    let text =
+        toml::to_string(&cfg).map_err(|e| format!("cannot serialise the iceoryx2 config: {e}"))?;
+    let dir = run_dir.join("iox2").join("config");
+    std::fs::create_dir_all(&dir)
+        .and_then(|_| std::fs::write(dir.join("iceoryx2.toml"), text))
+        .map_err(|e| format!("cannot write {}: {e}", dir.display()))
+}

@@ -1,0 +1,213 @@
+//! The orchestrator's side of the lockstep: wait for every role process to say hello, start the run,
+//! feed every step's records to the [`Recorder`], pace plant and leader, and watch the children.
+
+use super::progress::Progress;
+use super::spawn::{self, RoleProcess};
+use crate::record::Recorder;
+use formation_config::runtime::messages::{
+    Hello, RunControl, RunProgress, StepEntry, CONTROL_STOP,
+};
+use formation_config::runtime::ports::{
+    notifier, poke, publisher, slice_subscriber, subscriber, Pub, RunNode, Sub, Svc, Wake,
+};
+use formation_config::runtime::{self as rt};
+use formation_config::services;
+use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use iceoryx2::port::notifier::Notifier;
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+/// How the run ended.
+#[derive(Debug)]
+pub enum Outcome {
+    /// Every step recorded, or the run diverged (recorded up to that step).
+    Completed,
+    /// Ctrl-C.
+    Interrupted,
+    /// A role process died or the protocol broke: the message.
+    Failed(String),
+}
+
+/// The orchestrator's ports.
+pub struct Ports {
+    hello: Sub<Hello>,
+    steps: Sub<[StepEntry]>,
+    reference: Sub<ReferenceFrame>,
+    control: Pub<RunControl>,
+    progress: Pub<RunProgress>,
+    wakes: Vec<Notifier<Svc>>,
+    wake: Wake,
+}
+
+impl Ports {
+    /// Makes the orchestrator's ports on the created services.
+    pub fn open(node: &RunNode, n: usize) -> Result<Ports, String> {
+        let mut wakes = vec![
+            notifier(node, rt::WAKE_PLANT)?,
+            notifier(node, rt::WAKE_LEADER)?,
+        ];
+        for i in 0..n {
+            wakes.push(notifier(node, &rt::wake_agent(i))?);
+        }
+        Ok(Ports {
+            hello: subscriber(node, rt::HELLO)?,
+            steps: slice_subscriber(node, rt::STEPS)?,
+            reference: subscriber(node, services::REFERENCE)?,
+            control: publisher(node, rt::CONTROL)?,
+            progress: publisher(node, rt::PROGRESS)?,
+            wakes,
+            wake: Wake::open(node, rt::WAKE_ORCHESTRATOR)?,
+        })
+    }
+
+    /// Tells every role process to stop.
+    pub fn stop(&self, recorded: u64) {
+        let _ = rt::ports::send(
+            &self.control,
+            RunControl {
+                kind: CONTROL_STOP,
+                _pad: 0,
+                step: recorded,
+            },
+        );
+        self.wakes.iter().for_each(poke);
+    }
+
+    fn announce(&self, recorded: u64) -> Result<(), String> {
+        rt::ports::send(&self.progress, RunProgress { recorded })?;
+        poke(&self.wakes[0]);
+        poke(&self.wakes[1]);
+        Ok(())
+    }
+}
+
+/// How often the children are checked for an unexpected exit.
+const SUPERVISE_EVERY: Duration = Duration::from_millis(50);
+/// Longest wait for every role process to be ready.
+const START_TIMEOUT: Duration = Duration::from_secs(30);
+
+/// Watches children and Ctrl-C; returns the reason to stop, if any.
+fn watch(children: &mut [RoleProcess], interrupted: &AtomicBool) -> Option<Outcome> {
+    if interrupted.load(Ordering::SeqCst) {
+        return Some(Outcome::Interrupted);
+    }
+    spawn::check(children).map(|d| Outcome::Failed(format!("{d}; stopping the run")))
+}
+
+/// Waits until plant, leader and the N agents have created their ports.
+pub fn wait_for_hellos(
+    ports: &Ports,
+    n: usize,
+    children: &mut [RoleProcess],
+    interrupted: &AtomicBool,
+) -> Result<(), Outcome> {
+    let start = Instant::now();
+    let mut seen = 0;
+    while seen < n + 2 {
+        if let Some(o) = watch(children, interrupted) {
+            return Err(o);
+        }
+        if start.elapsed() > START_TIMEOUT {
+            return Err(Outcome::Failed(format!(
+                "only {seen} of {} role processes were ready after {} s",
+                n + 2,
+                START_TIMEOUT.as_secs()
+            )));
+        }
+        ports.wake.wait(SUPERVISE_EVERY).map_err(Outcome::Failed)?;
+        while let Ok(Some(_)) = ports.hello.receive() {
+            seen += 1;
+        }
+    }
+    Ok(())
+}
+
+/// Drives the run to its end (or divergence, interruption, failure); returns the outcome and the
+/// number of steps recorded.
+pub fn drive(
+    ports: &Ports,
+    recorder: &mut Recorder,
+    n: usize,
+    steps: u64,
+    dt: f64,
+    children: &mut [RoleProcess],
+    interrupted: &AtomicBool,
+) -> (Outcome, u64) {
+    let mut recorded: u64 = 0;
+    let mut refs: VecDeque<ReferenceFrame> = VecDeque::new();
+    let mut records: VecDeque<(Vec<PlantTruth>, Vec<ControlCommand>)> = VecDeque::new();
+    let mut truths = vec![PlantTruth::default(); n];
+    let mut commands = vec![ControlCommand::default(); n];
+    let mut progress = Progress::new(steps, dt);
+    let mut last_check = Instant::now();
+    if let Err(e) = ports.announce(0) {
+        return (Outcome::Failed(e), 0);
+    }
+    loop {
+        if let Err(e) = ports.wake.wait(SUPERVISE_EVERY) {
+            return (Outcome::Failed(e), recorded);
+        }
+        // Records first, then references: every drained record's reference was published before it.
+        let mut got = 0;
+        while let Ok(Some(s)) = ports.steps.receive() {
+            if s.payload().len() != n {
+                let msg = format!("protocol error: step record with {} entries", s.len());
+                return (Outcome::Failed(msg), recorded);
+            }
+            records.push_back((
+                s.payload().iter().map(|e| e.truth).collect(),
+                s.payload().iter().map(|e| e.command).collect(),
+            ));
+            got += 1;
+        }
+        while let Ok(Some(r)) = ports.reference.receive() {
+            refs.push_back(*r);
+        }
+        while let Some((t, c)) = records.pop_front() {
+            let k = recorded;
+            if t.first().is_some_and(|x| x.state.step != k) {
+                let msg = format!(
+                    "protocol error: record of step {} while expecting {k}",
+                    t[0].state.step
+                );
+                return (Outcome::Failed(msg), recorded);
+            }
+            while refs.front().is_some_and(|r| r.step < k) {
+                refs.pop_front();
+            }
+            let Some(reference) = refs.front().copied().filter(|r| r.step == k) else {
+                let msg = format!("protocol error: no reference frame for step {k}");
+                return (Outcome::Failed(msg), recorded);
+            };
+            truths.copy_from_slice(&t);
+            commands.copy_from_slice(&c);
+            recorded = k + 1;
+            match recorder.record(k, &reference, &truths, &commands) {
+                Ok(Some(_divergence)) => return (Outcome::Completed, recorded),
+                Ok(None) => {}
+                Err(e) => {
+                    let msg = format!("cannot write trajectory.csv: {e}");
+                    return (Outcome::Failed(msg), recorded);
+                }
+            }
+        }
+        if recorded >= steps {
+            progress.finish(recorded);
+            return (Outcome::Completed, recorded);
+        }
+        if got > 0 {
+            if let Err(e) = ports.announce(recorded) {
+                return (Outcome::Failed(e), recorded);
+            }
+        }
+        if last_check.elapsed() >= SUPERVISE_EVERY {
+            last_check = Instant::now();
+            if let Some(o) = watch(children, interrupted) {
+                progress.finish(recorded);
+                return (o, recorded);
+            }
+            progress.show(recorded);
+        }
+    }
+}

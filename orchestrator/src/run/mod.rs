@@ -1,0 +1,208 @@
+//! `formation run`: one OS process per quadrotor, plus plant and leader, over iceoryx2 shared memory
+//! under a per-run prefix, in lockstep (bit-identical to `formation sim`).
+//!
+//! * [`services`]: every service, created here before any process starts, sized for N.
+//! * [`spawn`]: locating, starting, supervising and stopping the role processes.
+//! * [`driver`]: start barrier, pacing, and the per-step feed of the [`Recorder`].
+//! * [`cleanup`]: nothing of the run's prefix stays in /dev/shm or /tmp/iceoryx2.
+
+mod cleanup;
+mod driver;
+mod progress;
+mod services;
+mod spawn;
+
+use crate::cli;
+use crate::record::Recorder;
+use driver::Outcome;
+use formation_config::runtime::args::ChildArgs;
+use formation_config::{ipc, services as names, Scenario, Variant};
+use spawn::RoleProcess;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Arguments of `formation run`.
+#[derive(clap::Args, Debug, Default)]
+pub struct RunArgs {
+    /// Scenario: `paper` (default), `paper-exact`, or a TOML file.
+    pub scenario: Option<String>,
+    /// Controller variant: proposed, no-rbfnn, unconstrained.
+    #[arg(long, default_value = "proposed")]
+    pub variant: String,
+    /// Output directory (default: out/<scenario>-<variant>-lockstep).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Override a scenario parameter, e.g. `--set simulation.duration_s=2` (repeatable).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub sets: Vec<String>,
+}
+
+/// Exit code after Ctrl-C.
+const EXIT_INTERRUPTED: u8 = 130;
+/// How long the role processes get to exit by themselves before they are killed.
+const STOP_GRACE: Duration = Duration::from_millis(1000);
+
+/// Entry point of `formation run`.
+pub fn main(args: RunArgs) -> ExitCode {
+    let scenario = match cli::load_with_overrides(args.scenario.as_deref(), &args.sets) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
+    let variant = match cli::parse_variant(if args.variant.is_empty() {
+        "proposed"
+    } else {
+        &args.variant
+    }) {
+        Ok(v) => v,
+        Err(code) => return code,
+    };
+    if scenario.n_agents() > formation_config::MAX_AGENTS {
+        eprintln!(
+            "error: {} agents: at most {} are supported",
+            scenario.n_agents(),
+            formation_config::MAX_AGENTS
+        );
+        return ExitCode::from(cli::EXIT_INVALID);
+    }
+    let out = args.out.unwrap_or_else(|| {
+        PathBuf::from(format!("out/{}-{}-lockstep", scenario.name, variant.name()))
+    });
+    let interrupted = Arc::new(AtomicBool::new(false));
+    {
+        let flag = interrupted.clone();
+        if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)) {
+            eprintln!("warning: cannot install the Ctrl-C handler: {e}");
+        }
+    }
+    let run_id = new_run_id();
+    let prefix = names::run_prefix(&run_id);
+    let result = run(&scenario, variant, &out, &run_id, &prefix, &interrupted);
+    if let Err(e) = cleanup::remove(&prefix) {
+        eprintln!("warning: {e}");
+    }
+    match result {
+        Ok((Outcome::Completed, summary)) => {
+            summary.print_table();
+            println!("wrote {}/trajectory.csv and summary.json", out.display());
+            if let Some(d) = &summary.divergence {
+                eprintln!(
+                    "diverged: t = {:.3} s, agent {}: {} (outputs up to that step are written)",
+                    d.time_s, d.agent, d.cause
+                );
+            }
+            ExitCode::SUCCESS
+        }
+        Ok((Outcome::Interrupted, _)) => {
+            eprintln!(
+                "interrupted: outputs up to the last recorded step are in {}",
+                out.display()
+            );
+            ExitCode::from(EXIT_INTERRUPTED)
+        }
+        Ok((Outcome::Failed(e), _)) | Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// A short id, unique among concurrent runs on this machine (pid and clock).
+fn new_run_id() -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.subsec_nanos())
+        .unwrap_or(0);
+    format!("{:x}{:04x}", std::process::id(), nanos & 0xffff)
+}
+
+/// Kills and reaps the role processes if the run returns early.
+struct Children(Vec<RoleProcess>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        spawn::stop_all(&mut self.0, Duration::ZERO);
+    }
+}
+
+fn run(
+    scenario: &Scenario,
+    variant: Variant,
+    out: &Path,
+    run_id: &str,
+    prefix: &str,
+    interrupted: &AtomicBool,
+) -> Result<(Outcome, crate::record::Summary), String> {
+    let start = Instant::now();
+    let n = scenario.n_agents();
+    let dir = spawn::role_binary_dir()?;
+    let mut recorder = Recorder::create(scenario, variant, "lockstep", out)
+        .map_err(|e| format!("cannot write outputs to {}: {e}", out.display()))?;
+    let run_dir = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
+    crate::sim::write_resolved_scenario(scenario, &run_dir)
+        .map_err(|e| format!("cannot write {}/scenario.toml: {e}", run_dir.display()))?;
+    if let Err(e) = cleanup::write_iox2_config(&run_dir, prefix) {
+        eprintln!("warning: {e}");
+    }
+    let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
+    let services = services::RunServices::create(&node, n)?;
+    let ports = driver::Ports::open(&node, n)?;
+    let child_args = |agent: Option<usize>| ChildArgs {
+        run_id: run_id.to_string(),
+        prefix: prefix.to_string(),
+        run_dir: run_dir.clone(),
+        variant: variant.name().to_string(),
+        agent,
+    };
+    let mut children = Children(Vec::with_capacity(n + 2));
+    children.0.push(spawn::spawn(
+        &dir,
+        "formation-plant",
+        "plant".into(),
+        &child_args(None),
+    )?);
+    children.0.push(spawn::spawn(
+        &dir,
+        "formation-leader",
+        "leader".into(),
+        &child_args(None),
+    )?);
+    for i in 0..n {
+        children.0.push(spawn::spawn(
+            &dir,
+            "formation-agent",
+            format!("agent {} (--agent {i})", i + 1),
+            &child_args(Some(i)),
+        )?);
+    }
+    let pids: Vec<String> = children.0.iter().map(|c| c.pid().to_string()).collect();
+    eprintln!(
+        "formation run: id {run_id}, iceoryx2 prefix {prefix}, {n} agents, {} steps; pids {}",
+        scenario.n_steps(),
+        pids.join(" ")
+    );
+    let (outcome, recorded) = match driver::wait_for_hellos(&ports, n, &mut children.0, interrupted)
+    {
+        Ok(()) => driver::drive(
+            &ports,
+            &mut recorder,
+            n,
+            scenario.n_steps(),
+            scenario.simulation.dt_s,
+            &mut children.0,
+            interrupted,
+        ),
+        Err(o) => (o, 0),
+    };
+    ports.stop(recorded);
+    spawn::stop_all(&mut children.0, STOP_GRACE);
+    drop(ports);
+    drop(services);
+    drop(node);
+    let summary = recorder
+        .finish(recorded, start.elapsed().as_secs_f64())
+        .map_err(|e| format!("cannot write {}/summary.json: {e}", out.display()))?;
+    Ok((outcome, summary))
+}

@@ -1,0 +1,107 @@
+//! The plant's event loop around [`formation_plant::Plant`], in the call order of the in-process
+//! runner: apply the commands in agent order, take the truths, publish the step record, advance.
+
+mod ports;
+
+use formation_config::runtime::boot::{boot, hello};
+use formation_config::runtime::messages::{StepEntry, CONTROL_STOP, ROLE_PLANT};
+use formation_config::runtime::ports::{poke, send};
+use formation_config::runtime::{ACK_EVERY, CHILD_WAIT, PLANT_LEAD};
+use formation_config::wire::{ControlCommand, FaultInjection};
+use formation_plant::Plant;
+
+/// Runs the plant until the orchestrator says stop (or goes away).
+pub fn run() -> Result<(), String> {
+    let b = boot("plant")?;
+    let n = b.scenario.n_agents();
+    let steps = b.scenario.n_steps();
+    let ports = ports::Ports::open(&b.node, n)?;
+    let _greeting = hello(&b.node, ROLE_PLANT, 0)?;
+    let mut plant = Plant::from_scenario(&b.scenario);
+    let mut commands: Vec<Option<ControlCommand>> = vec![None; n];
+    let mut entries = vec![StepEntry::default(); n];
+    let mut faults: Vec<FaultInjection> = Vec::new();
+    let mut got = 0;
+    let mut k: u64 = 0;
+    let mut recorded: Option<u64> = None;
+    let mut states_out = false;
+    let mut told_blocked = false;
+    loop {
+        while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+            if c.kind == CONTROL_STOP {
+                return Ok(());
+            }
+        }
+        while let Some(p) = ports.progress.receive().map_err(|e| format!("{e:?}"))? {
+            recorded = Some(recorded.map_or(p.recorded, |r| r.max(p.recorded)));
+        }
+        while let Some(f) = ports.faults.receive().map_err(|e| format!("{e:?}"))? {
+            faults.push(*f);
+        }
+        for (i, sub) in ports.commands.iter().enumerate() {
+            while let Some(c) = sub.receive().map_err(|e| format!("{e:?}"))? {
+                if c.step != k || c.agent as usize != i || commands[i].is_some() {
+                    return Err(format!(
+                        "protocol error: command of agent {} for step {} while at step {k}",
+                        c.agent, c.step
+                    ));
+                }
+                commands[i] = Some(*c);
+                got += 1;
+            }
+        }
+        loop {
+            if k >= steps {
+                break;
+            }
+            if !states_out {
+                match recorded {
+                    Some(r) if k < r + PLANT_LEAD => {
+                        for i in 0..n {
+                            send(&ports.states[i], plant.vehicle_state(i))?;
+                        }
+                        ports.agents_wake.iter().for_each(poke);
+                        states_out = true;
+                        told_blocked = false;
+                    }
+                    Some(_) if !told_blocked => {
+                        poke(&ports.orchestrator_wake);
+                        told_blocked = true;
+                    }
+                    _ => {}
+                }
+            }
+            if !(states_out && got == n) {
+                break;
+            }
+            faults.retain(|f| {
+                if f.step <= k {
+                    plant.inject_fault(f);
+                    false
+                } else {
+                    true
+                }
+            });
+            for i in 0..n {
+                let cmd = commands[i].take().unwrap_or_default();
+                plant.apply(i, &cmd);
+                entries[i] = StepEntry {
+                    truth: plant.truth(i),
+                    command: cmd,
+                };
+            }
+            ports.publish_step(&entries)?;
+            plant.advance();
+            got = 0;
+            states_out = false;
+            k += 1;
+            if k.is_multiple_of(ACK_EVERY) || k == steps {
+                poke(&ports.orchestrator_wake);
+            }
+        }
+        if let Some(why) = b.lifeline.must_stop() {
+            return Err(format!("stopping at step {k}: {why}"));
+        }
+        ports.wake.wait(CHILD_WAIT)?;
+    }
+}

@@ -1,0 +1,180 @@
+//! End to end: `formation run` starts the real role binaries (one process per quadrotor, plant,
+//! leader) over iceoryx2 and must match `formation sim` byte for byte, stop cleanly on Ctrl-C and on
+//! a dead child, keep concurrent runs apart, and leave nothing in /dev/shm or /tmp/iceoryx2.
+
+use formation_tests::run::RunningRun;
+use formation_tests::{bin, temp_dir};
+use std::path::Path;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+/// Long enough for any test here; a run that takes longer is a hang.
+const RUN_TIMEOUT: Duration = Duration::from_secs(120);
+
+fn residue(prefix: &str) -> Vec<std::path::PathBuf> {
+    formation_config::ipc::residue(prefix).expect("can list /dev/shm and /tmp/iceoryx2")
+}
+
+fn sim(args: &[&str], out: &Path) {
+    let st = Command::new(bin("formation"))
+        .arg("sim")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .stdout(std::process::Stdio::null())
+        .status()
+        .expect("formation sim starts");
+    assert!(st.success(), "formation sim failed");
+}
+
+fn summary_without_timing(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json exists");
+    let mut v: serde_json::Value = serde_json::from_str(&text).expect("summary.json parses");
+    let obj = v.as_object_mut().expect("summary is an object");
+    for key in ["wall_time_s", "realtime_factor", "mode"] {
+        obj.remove(key);
+    }
+    v
+}
+
+/// Starts a run that lasts long enough to be interrupted, and waits until it is stepping.
+fn start_long_run(dir: &Path) -> RunningRun {
+    let run = RunningRun::start(&["--set", "simulation.duration_s=600"], &dir.join("run"));
+    assert!(
+        run.prefix().is_some(),
+        "the run did not start: {}",
+        run.stderr()
+    );
+    // Wait until steps are being recorded (the CSV grows past its header).
+    let csv = run.out.join("trajectory.csv");
+    let start = Instant::now();
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 4096 {
+        assert!(
+            start.elapsed() < RUN_TIMEOUT,
+            "no progress: {}",
+            run.stderr()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    run
+}
+
+#[test]
+fn lockstep_run_is_byte_identical_to_in_process_sim() {
+    let dir = temp_dir("identical");
+    let set = ["--set", "simulation.duration_s=2"];
+    let mut run = RunningRun::start(&set, &dir.join("lockstep"));
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    assert!(st.success(), "formation run failed: {}", run.stderr());
+    sim(&set, &dir.join("sim"));
+    let a = std::fs::read(dir.join("lockstep/trajectory.csv")).unwrap();
+    let b = std::fs::read(dir.join("sim/trajectory.csv")).unwrap();
+    assert!(a.len() > 1000, "trajectory.csv is too short");
+    assert!(a == b, "trajectory.csv differs between run and sim");
+    assert_eq!(
+        summary_without_timing(&dir.join("lockstep")),
+        summary_without_timing(&dir.join("sim"))
+    );
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_run_leaves_no_residue_in_dev_shm() {
+    let dir = temp_dir("residue");
+    let mut run = RunningRun::start(&["--set", "simulation.duration_s=0.3"], &dir.join("run"));
+    let prefix = run.prefix().expect("the run announces its prefix");
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    assert!(st.success(), "formation run failed: {}", run.stderr());
+    assert_eq!(residue(&prefix), Vec::<std::path::PathBuf>::new());
+    assert!(run.role_processes().is_empty(), "role processes survived");
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn ctrl_c_stops_every_process_within_two_seconds_with_exit_130() {
+    let dir = temp_dir("ctrl-c");
+    let mut run = start_long_run(&dir);
+    let prefix = run.prefix().unwrap();
+    assert_eq!(run.role_processes().len(), 7, "plant, leader and 5 agents");
+    run.signal(libc::SIGINT);
+    let (st, took) = run.wait(Duration::from_secs(10)).expect("the run stops");
+    assert!(took <= Duration::from_secs(2), "took {took:?}");
+    assert_eq!(st.code(), Some(130), "stderr: {}", run.stderr());
+    assert!(run.role_processes().is_empty(), "role processes survived");
+    assert_eq!(residue(&prefix), Vec::<std::path::PathBuf>::new());
+    let csv = std::fs::read_to_string(run.out.join("trajectory.csv")).unwrap();
+    assert!(
+        csv.lines().count() > 2 && csv.ends_with('\n'),
+        "CSV not flushed"
+    );
+    assert!(run.out.join("summary.json").is_file());
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sigkill_of_an_agent_is_reported_and_the_run_stops_cleanly() {
+    let dir = temp_dir("sigkill");
+    let mut run = start_long_run(&dir);
+    let prefix = run.prefix().unwrap();
+    let victim = run
+        .role_processes()
+        .into_iter()
+        .find(|pid| {
+            std::fs::read(format!("/proc/{pid}/cmdline"))
+                .map(|c| String::from_utf8_lossy(&c).contains("--agent\u{0}2\u{0}"))
+                .unwrap_or(false)
+        })
+        .expect("agent 3 (--agent 2) is running");
+    // SAFETY: kill with a pid of the run.
+    unsafe {
+        libc::kill(victim as i32, libc::SIGKILL);
+    }
+    let (st, took) = run.wait(Duration::from_secs(10)).expect("the run stops");
+    let stderr = run.stderr();
+    assert!(took <= Duration::from_secs(2), "took {took:?}");
+    assert_ne!(st.code(), Some(0));
+    assert!(
+        st.code().is_some(),
+        "the orchestrator must exit, not be killed"
+    );
+    let error = stderr
+        .lines()
+        .find(|l| l.starts_with("error:"))
+        .unwrap_or_else(|| panic!("no error line: {stderr}"));
+    assert!(
+        error.contains("agent 3"),
+        "error does not name agent 3: {error}"
+    );
+    assert!(error.contains(&victim.to_string()), "error: {error}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(run.role_processes().is_empty(), "role processes survived");
+    assert_eq!(residue(&prefix), Vec::<std::path::PathBuf>::new());
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn two_concurrent_runs_do_not_see_each_other() {
+    let dir = temp_dir("concurrent");
+    let set = ["--set", "simulation.duration_s=1"];
+    let mut a = RunningRun::start(&set, &dir.join("a"));
+    let mut b = RunningRun::start(&set, &dir.join("b"));
+    let (pa, pb) = (a.prefix().unwrap(), b.prefix().unwrap());
+    assert_ne!(pa, pb);
+    let (sa, _) = a.wait(RUN_TIMEOUT).expect("run a ends");
+    let (sb, _) = b.wait(RUN_TIMEOUT).expect("run b ends");
+    assert!(sa.success(), "run a: {}", a.stderr());
+    assert!(sb.success(), "run b: {}", b.stderr());
+    let ta = std::fs::read(dir.join("a/trajectory.csv")).unwrap();
+    let tb = std::fs::read(dir.join("b/trajectory.csv")).unwrap();
+    assert!(
+        ta == tb,
+        "the same scenario must give the same trajectory in both runs"
+    );
+    assert!(residue(&pa).is_empty() && residue(&pb).is_empty());
+    drop((a, b));
+    let _ = std::fs::remove_dir_all(&dir);
+}
