@@ -31,6 +31,9 @@ struct Meters {
 
 /// Runs agent i in realtime mode until the orchestrator says stop (or goes away).
 pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), String> {
+    if let Some(w) = formation_config::runtime::sched::realtime_setup(b.args.rt_priority) {
+        eprintln!("warning: {w}");
+    }
     let mut m = Meters::default();
     let mut refs: VecDeque<ReferenceFrame> = VecDeque::with_capacity(128);
     let mut pending_delays: Vec<DelayInjection> = Vec::new();

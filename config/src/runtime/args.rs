@@ -19,6 +19,8 @@ pub struct ChildArgs {
     pub realtime: bool,
     /// Realtime mode: how long the plant busy-polls before it blocks on its event, µs (0: block).
     pub spin_us: u32,
+    /// Realtime mode: `SCHED_FIFO` priority of plant and agents (0: normal policy).
+    pub rt_priority: u32,
 }
 
 impl ChildArgs {
@@ -42,6 +44,8 @@ impl ChildArgs {
             v.push("realtime".into());
             v.push("--spin-us".into());
             v.push(self.spin_us.to_string().into());
+            v.push("--rt-priority".into());
+            v.push(self.rt_priority.to_string().into());
         }
         v
     }
@@ -56,6 +60,7 @@ impl ChildArgs {
             agent: None,
             realtime: false,
             spin_us: 0,
+            rt_priority: 0,
         };
         let mut it = args.into_iter();
         while let Some(flag) = it.next() {
@@ -87,6 +92,11 @@ impl ChildArgs {
                         .parse()
                         .map_err(|_| format!("--spin-us: not a number of µs: {text}"))?
                 }
+                "--rt-priority" => {
+                    out.rt_priority = text
+                        .parse()
+                        .map_err(|_| format!("--rt-priority: not a priority: {text}"))?
+                }
                 _ => return Err(format!("unknown argument {flag}")),
             }
         }
@@ -111,11 +121,13 @@ mod tests {
             agent: Some(3),
             realtime: false,
             spin_us: 0,
+            rt_priority: 0,
         };
         assert_eq!(ChildArgs::parse(a.to_args()).unwrap(), a);
         let rt = ChildArgs {
             realtime: true,
             spin_us: 20,
+            rt_priority: 10,
             ..a
         };
         assert_eq!(ChildArgs::parse(rt.to_args()).unwrap(), rt);

@@ -17,6 +17,7 @@ pub mod clock;
 pub mod messages;
 pub mod ports;
 pub mod process;
+pub mod sched;
 pub mod timing;
 
 use std::time::Duration;

@@ -49,6 +49,10 @@ pub struct RunArgs {
     /// Realtime mode with `--wait spin-block`: busy-poll time before blocking, µs.
     #[arg(long, default_value_t = 20)]
     pub spin_us: u32,
+    /// Realtime mode: run plant and agents under SCHED_FIFO at this priority (1..=99; needs
+    /// CAP_SYS_NICE; 0, the default: normal policy).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=99))]
+    pub rt_priority: u32,
 }
 
 /// How a run is paced.
@@ -57,6 +61,7 @@ struct Mode {
     realtime: bool,
     wait: timing::WaitMode,
     spin_us: u32,
+    rt_priority: u32,
 }
 
 impl Mode {
@@ -100,6 +105,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         realtime: args.realtime,
         wait: args.wait,
         spin_us: args.spin_us,
+        rt_priority: args.rt_priority,
     };
     let out = args.out.unwrap_or_else(|| {
         PathBuf::from(format!(
@@ -216,6 +222,7 @@ fn run(
             timing::WaitMode::Block => 0,
             timing::WaitMode::SpinBlock => mode.spin_us,
         },
+        rt_priority: mode.rt_priority,
     };
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(spawn::spawn(
@@ -263,7 +270,7 @@ fn run(
     drop(services);
     drop(node);
     if mode.realtime && matches!(outcome, Outcome::Completed) {
-        match timing::collect(&run_dir, n, mode.wait, mode.spin_us) {
+        match timing::collect(&run_dir, n, mode.wait, mode.spin_us, mode.rt_priority) {
             Ok(t) => recorder.set_timing(t),
             Err(e) => eprintln!("warning: no timing statistics: {e}"),
         }

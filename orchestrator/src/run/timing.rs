@@ -41,7 +41,13 @@ fn quantiles(h: &NsHistogram) -> Value {
 }
 
 /// Reads `<run dir>/timing/{plant,agent-i}.json` and builds the `timing` object.
-pub fn collect(run_dir: &Path, n: usize, wait: WaitMode, spin_us: u32) -> Result<Value, String> {
+pub fn collect(
+    run_dir: &Path,
+    n: usize,
+    wait: WaitMode,
+    spin_us: u32,
+    rt_priority: u32,
+) -> Result<Value, String> {
     let dir = timing::dir(run_dir);
     let plant = TimingReport::read(&dir.join("plant.json"))?;
     let agents: Vec<TimingReport> = (0..n)
@@ -86,6 +92,7 @@ pub fn collect(run_dir: &Path, n: usize, wait: WaitMode, spin_us: u32) -> Result
     Ok(json!({
         "wait": wait.name(),
         "spin_us": if wait == WaitMode::SpinBlock { spin_us } else { 0 },
+        "rt_priority": rt_priority,
         "state_to_command_latency_us": latency,
         "ipc_hop_latency_us": ipc,
         "plant_period_jitter_us": quantiles(&hist(&plant, "jitter")),

@@ -66,6 +66,9 @@ impl From<String> for Stop {
 
 /// Runs the realtime plant until every step is done, then waits for the stop message.
 pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), String> {
+    if let Some(w) = formation_config::runtime::sched::realtime_setup(b.args.rt_priority) {
+        eprintln!("warning: {w}");
+    }
     let n = b.scenario.n_agents();
     let mut l = Loop {
         b,
