@@ -34,7 +34,11 @@ fn realtime_run_reports_timing_and_keeps_the_constraints() {
     );
     let prefix = run.prefix().expect("the run announces its prefix");
     let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
-    assert!(st.success(), "formation run --realtime failed: {}", run.stderr());
+    assert!(
+        st.success(),
+        "formation run --realtime failed: {}",
+        run.stderr()
+    );
     let text = std::fs::read_to_string(dir.join("rt/summary.json")).expect("summary.json exists");
     let s: Value = serde_json::from_str(&text).expect("summary.json parses");
     assert_eq!(s["mode"], "realtime");

@@ -181,6 +181,12 @@ pub fn drive(
             while refs.front().is_some_and(|r| r.step < k) {
                 refs.pop_front();
             }
+            if refs.is_empty() {
+                // Realtime: the plant ran ahead of the leader's lead (the leader is paced by what
+                // is recorded); keep the record until the reference comes.
+                records.push_front((t, c));
+                break;
+            }
             let Some(reference) = refs.front().copied().filter(|r| r.step == k) else {
                 let msg = format!("protocol error: no reference frame for step {k}");
                 return (Outcome::Failed(msg), recorded);
@@ -201,7 +207,7 @@ pub fn drive(
             progress.finish(recorded);
             return (Outcome::Completed, recorded);
         }
-        if got > 0 {
+        if got > 0 || !records.is_empty() {
             if let Err(e) = ports.announce(recorded) {
                 return (Outcome::Failed(e), recorded);
             }
