@@ -187,6 +187,7 @@ fn run(
     {
         Ok(()) => driver::drive(
             &ports,
+            &formation_leader::Mission::from_scenario(&scenario),
             &mut recorder,
             n,
             scenario.n_steps(),
