@@ -97,7 +97,7 @@ impl AttitudeLoop {
         let j = Vector3::from(p.inertia);
         let j_inv = j.map(|x| 1.0 / x);
         let r_r = euler_rate_matrix(a);
-        let r_r_inv = r_r.try_inverse().unwrap_or_else(Matrix3::identity);
+        let r_r_inv = euler_rate_matrix_inverse(a);
 
         // ---- Step 1: attitude error and virtual control alpha_iC (34).
         let z1 = a - a_c;
@@ -231,4 +231,11 @@ fn aux_step(
         0.0
     };
     e * (-(k_e + kappa) * dt).exp() + drive * (gamma_e * dt)
+}
+
+/// R_r^-1 in closed form: Omega = R_r^-1 A' (the body rates of given Euler-angle rates).
+pub fn euler_rate_matrix_inverse(a: &Vector3<f64>) -> Matrix3<f64> {
+    let (sf, cf) = a[0].sin_cos();
+    let (st, ct) = a[1].sin_cos();
+    Matrix3::new(1.0, 0.0, -st, 0.0, cf, sf * ct, 0.0, -sf, cf * ct)
 }

@@ -13,6 +13,7 @@ pub struct Rbfnn {
     l: usize,
     centres: [f64; MAX_NEURONS],
     vel_centres: [f64; MAX_NEURONS],
+    n_v: usize,
     inv_spread_sq: f64,
     inv_pos_span: f64,
     inv_vel_span: f64,
@@ -35,6 +36,7 @@ impl Rbfnn {
     ) -> Rbfnn {
         let l = l.clamp(1, MAX_NEURONS);
         let n_v = n_v.clamp(1, l);
+        let n_v = if l % n_v == 0 { n_v } else { 1 };
         let n_p = (l / n_v).max(1);
         let spaced = |j: usize, n: usize| {
             if n == 1 {
@@ -59,6 +61,7 @@ impl Rbfnn {
             l,
             centres,
             vel_centres,
+            n_v,
             inv_spread_sq: 1.0 / (spread * spread),
             inv_pos_span: 1.0 / pos_span,
             inv_vel_span: 1.0 / vel_span,
@@ -70,14 +73,24 @@ impl Rbfnn {
     /// Evaluates Psi_i at the delayed (P, V) and returns F-hat_iP = W-hat^T Psi (eq. (11)).
     pub fn evaluate(&mut self, p: [f64; 3], v: [f64; 3]) -> [f64; 3] {
         let mut out = [0.0; 3];
+        let (n_p, n_v) = (self.l / self.n_v, self.n_v);
         for k in 0..3 {
             let x = p[k] * self.inv_pos_span;
             let y = v[k] * self.inv_vel_span;
+            // The centres form a grid, so exp(-(dx² + dy²)/mu²) = exp(-dx²/mu²) exp(-dy²/mu²).
+            let mut gx = [0.0; MAX_NEURONS];
+            let mut gy = [0.0; MAX_NEURONS];
+            for (a, g) in gx.iter_mut().enumerate().take(n_p) {
+                let dx = x - self.centres[a * n_v];
+                *g = (-dx * dx * self.inv_spread_sq).exp();
+            }
+            for (b, g) in gy.iter_mut().enumerate().take(n_v) {
+                let dy = y - self.vel_centres[b];
+                *g = (-dy * dy * self.inv_spread_sq).exp();
+            }
             let mut acc = 0.0;
             for j in 0..self.l {
-                let dx = x - self.centres[j];
-                let dy = y - self.vel_centres[j];
-                let psi = (-(dx * dx + dy * dy) * self.inv_spread_sq).exp();
+                let psi = gx[j / n_v] * gy[j % n_v];
                 self.psi[k][j] = psi;
                 acc += self.weights[k][j] * psi;
             }

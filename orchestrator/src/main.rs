@@ -47,6 +47,12 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Behave like a Unix tool when the reader of stdout goes away (`formation sim | head`): exit quietly
+    // instead of panicking on a broken pipe.
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     match cli.command {
         Some(Command::Sim(a)) => sim::main(a),

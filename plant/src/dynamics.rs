@@ -1,6 +1,5 @@
 //! Eq. (1)-(2) of one quadrotor and a fixed-step RK4 with the inputs held over the step.
 
-use crate::kinematics::{euler_rate_matrix, thrust_axis};
 use crate::perturbations::{disturbance, model_perturbation, uncertainty};
 use formation_config::scenario::AgentSpec;
 use nalgebra::Vector3;
@@ -68,6 +67,25 @@ pub fn rotational_drift(j: &Vector3<f64>, drag: &Vector3<f64>, w: &Vector3<f64>)
     -(w.cross(&jw) + drag.component_mul(w)).component_div(j)
 }
 
+/// The terms of eq. (2) that depend on time only (evaluated once per distinct RK4 stage time).
+#[derive(Debug, Clone, Copy)]
+pub struct TimeTerms {
+    /// Delta F_i(t).
+    pub model: nalgebra::Matrix3<f64>,
+    /// D_iA(t), rad/s².
+    pub disturbance: Vector3<f64>,
+}
+
+impl TimeTerms {
+    /// The terms of agent `spec` at time `t`.
+    pub fn at(spec: &AgentSpec, t: f64) -> TimeTerms {
+        TimeTerms {
+            model: model_perturbation(&spec.model_perturbation, t),
+            disturbance: disturbance(&spec.disturbance, t),
+        }
+    }
+}
+
 /// Time derivative of the state under eq. (1)-(2).
 pub fn derivative(
     body: &Body,
@@ -76,14 +94,34 @@ pub fn derivative(
     u: &HeldInput,
     t: f64,
 ) -> RigidState {
+    derivative_with(body, spec, x, u, &TimeTerms::at(spec, t))
+}
+
+/// Time derivative with the time-only terms given.
+pub fn derivative_with(
+    body: &Body,
+    spec: &AgentSpec,
+    x: &RigidState,
+    u: &HeldInput,
+    tt: &TimeTerms,
+) -> RigidState {
     let f_p = uncertainty(&spec.uncertainty, &x.p, &x.v);
-    let acc =
-        thrust_axis(&x.a) * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
-    let a_dot = euler_rate_matrix(&x.a) * x.w;
-    let delta_f = model_perturbation(&spec.model_perturbation, t);
-    let w_dot = delta_f * rotational_drift(&body.inertia, &body.drag, &x.w)
+    let (sf, cf) = x.a[0].sin_cos();
+    let (st, ct) = x.a[1].sin_cos();
+    let (sp, cp) = x.a[2].sin_cos();
+    let thrust_axis = Vector3::new(st * cp * cf + sp * sf, st * sp * cf - cp * sf, ct * cf);
+    let acc = thrust_axis * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
+    // A' = R_r Omega, R_r of eq. (2).
+    let w = &x.w;
+    let tt_theta = st / ct;
+    let a_dot = Vector3::new(
+        w[0] + (sf * w[1] + cf * w[2]) * tt_theta,
+        cf * w[1] - sf * w[2],
+        (sf * w[1] + cf * w[2]) / ct,
+    );
+    let w_dot = tt.model * rotational_drift(&body.inertia, &body.drag, w)
         + u.torque.component_div(&body.inertia)
-        + disturbance(&spec.disturbance, t);
+        + tt.disturbance;
     RigidState {
         p: x.v,
         v: acc,
@@ -101,10 +139,29 @@ pub fn rk4(
     t: f64,
     h: f64,
 ) -> RigidState {
-    let k1 = derivative(body, spec, x, u, t);
-    let k2 = derivative(body, spec, &x.axpy(0.5 * h, &k1), u, t + 0.5 * h);
-    let k3 = derivative(body, spec, &x.axpy(0.5 * h, &k2), u, t + 0.5 * h);
-    let k4 = derivative(body, spec, &x.axpy(h, &k3), u, t + h);
+    let t0 = TimeTerms::at(spec, t);
+    let t1 = TimeTerms::at(spec, t + h);
+    rk4_with(body, spec, x, u, t, h, &t0, &t1)
+}
+
+/// RK4 with the time-only terms at the ends of the step given (the plant reuses the end of one step
+/// as the start of the next).
+#[allow(clippy::too_many_arguments)]
+pub fn rk4_with(
+    body: &Body,
+    spec: &AgentSpec,
+    x: &RigidState,
+    u: &HeldInput,
+    t: f64,
+    h: f64,
+    t0: &TimeTerms,
+    t1: &TimeTerms,
+) -> RigidState {
+    let tm = TimeTerms::at(spec, t + 0.5 * h);
+    let k1 = derivative_with(body, spec, x, u, t0);
+    let k2 = derivative_with(body, spec, &x.axpy(0.5 * h, &k1), u, &tm);
+    let k3 = derivative_with(body, spec, &x.axpy(0.5 * h, &k2), u, &tm);
+    let k4 = derivative_with(body, spec, &x.axpy(h, &k3), u, t1);
     RigidState {
         p: x.p + (k1.p + (k2.p + k3.p) * 2.0 + k4.p) * (h / 6.0),
         v: x.v + (k1.v + (k2.v + k3.v) * 2.0 + k4.v) * (h / 6.0),

@@ -1,6 +1,6 @@
 //! N quadrotors stepped together: the plant of a run.
 
-use crate::dynamics::{rk4, Body, HeldInput, RigidState};
+use crate::dynamics::{rk4_with, Body, HeldInput, RigidState, TimeTerms};
 use crate::faults::{actuate, FaultModel};
 use crate::perturbations::{disturbance, uncertainty};
 use formation_config::scenario::{AgentSpec, Scenario};
@@ -16,6 +16,8 @@ struct Vehicle {
     input: HeldInput,
     gamma: Vector3<f64>,
     delta: Vector3<f64>,
+    /// Time-only terms of eq. (2) at the start of the current step (the end of the previous one).
+    terms_now: TimeTerms,
 }
 
 /// The plant: N quadrotors, the step counter and the shared body parameters.
@@ -62,6 +64,7 @@ impl Plant {
                     },
                     gamma,
                     delta,
+                    terms_now: TimeTerms::at(a, 0.0),
                 }
             })
             .collect();
@@ -148,8 +151,20 @@ impl Plant {
     /// Integrates every quadrotor over [t_k, t_k+1] with its held inputs and advances k.
     pub fn advance(&mut self) {
         let t = self.time();
+        let t_next = (self.step + 1) as f64 * self.dt;
         for veh in &mut self.vehicles {
-            veh.state = rk4(&self.body, &veh.spec, &veh.state, &veh.input, t, self.dt);
+            let terms_next = TimeTerms::at(&veh.spec, t_next);
+            veh.state = rk4_with(
+                &self.body,
+                &veh.spec,
+                &veh.state,
+                &veh.input,
+                t,
+                t_next - t,
+                &veh.terms_now,
+                &terms_next,
+            );
+            veh.terms_now = terms_next;
         }
         self.step += 1;
     }

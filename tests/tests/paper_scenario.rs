@@ -1,0 +1,91 @@
+//! End-to-end: the real `formation sim` binary on the embedded scenarios meets the numbers the
+//! control-core issue promises (measured on every step, from summary.json).
+
+use formation_tests::{bin, temp_dir};
+use serde_json::Value;
+use std::process::Command;
+
+fn sim(args: &[&str], tag: &str) -> Value {
+    let out = temp_dir(tag);
+    let o = Command::new(bin("formation"))
+        .arg("sim")
+        .args(args)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("formation runs");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "formation sim {args:?} failed: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json written");
+    let v: Value = serde_json::from_str(&text).expect("summary.json is JSON");
+    let csv = std::fs::read_to_string(out.join("trajectory.csv")).expect("trajectory.csv written");
+    assert!(!csv.contains("NaN"), "NaN in trajectory.csv");
+    let _ = std::fs::remove_dir_all(&out);
+    v
+}
+
+fn worst(v: &Value, key: &str, window: &str) -> f64 {
+    v["agents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a[key][window].as_f64().expect("window has a value"))
+        .fold(0.0, f64::max)
+}
+
+fn violations(v: &Value) -> (u64, u64) {
+    v["agents"].as_array().unwrap().iter().fold((0, 0), |(a, r), x| {
+        (
+            a + x["attitude_constraint_violations"].as_u64().unwrap(),
+            r + x["rate_constraint_violations"].as_u64().unwrap(),
+        )
+    })
+}
+
+#[test]
+fn proposed_controller_flies_the_paper_mission_within_the_contract() {
+    let v = sim(&[], "proposed");
+    assert_eq!(v["scenario"], "paper");
+    assert_eq!(v["variant"], "proposed");
+    assert_eq!(v["mode"], "in-process");
+    assert_eq!(v["n_agents"], 5);
+    assert_eq!(v["diverged"], false);
+    assert!(v["divergence"].is_null());
+    assert_eq!(v["steps"], 60_000);
+    assert_eq!(violations(&v), (0, 0), "constraint violations");
+    for window in ["cover", "enclose"] {
+        let rms = worst(&v, "rms_formation_error_m", window);
+        assert!(rms <= 0.25, "worst RMS formation error in {window}: {rms} m");
+    }
+    let coverage = v["coverage_fraction"].as_f64().unwrap();
+    assert!(coverage >= 0.95, "coverage {coverage}");
+}
+
+#[test]
+fn removing_the_rbfnn_makes_the_worst_covering_error_at_least_one_and_a_half_times_larger() {
+    let with = worst(&sim(&[], "with-nn"), "rms_formation_error_m", "cover");
+    let without = worst(&sim(&["--variant", "no-rbfnn"], "no-nn"), "rms_formation_error_m", "cover");
+    assert!(without >= 1.5 * with, "no-rbfnn {without} vs proposed {with}");
+}
+
+#[test]
+fn paper_exact_gains_diverge_and_the_summary_names_time_agent_and_cause() {
+    let v = sim(&["paper-exact"], "exact");
+    assert_eq!(v["diverged"], true, "the printed gains are known not to close the loop");
+    let d = &v["divergence"];
+    assert!(d["time_s"].as_f64().unwrap() > 0.0);
+    let agent = d["agent"].as_u64().unwrap();
+    assert!((1..=5).contains(&agent));
+    assert!(!d["cause"].as_str().unwrap().is_empty());
+}
+
+#[test]
+fn under_abrupt_faults_only_the_unconstrained_controller_crosses_the_constraints() {
+    let scenario = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/scenarios/abrupt-faults.toml");
+    let proposed = sim(&[scenario], "abrupt-proposed");
+    let unconstrained = sim(&[scenario, "--variant", "unconstrained"], "abrupt-unconstrained");
+    assert_eq!(violations(&proposed), (0, 0));
+    let (a, r) = violations(&unconstrained);
+    assert!(a + r > 0, "the comparison controller was expected to cross a constraint");
+}
