@@ -127,6 +127,7 @@ pub fn wait_for_hellos(
 /// number of steps recorded.
 pub fn drive(
     ports: &Ports,
+    live: &mut super::Live,
     recorder: &mut Recorder,
     n: usize,
     steps: u64,
@@ -196,6 +197,11 @@ pub fn drive(
             progress.finish(recorded);
             return (Outcome::Completed, recorded);
         }
+        // Injections are forwarded before the progress that lets the plant move on.
+        if let Err(e) = live.injections.poll(recorded) {
+            return (Outcome::Failed(e), recorded);
+        }
+        live.registration.update(recorded);
         if got > 0 {
             if let Err(e) = ports.announce(recorded) {
                 return (Outcome::Failed(e), recorded);
