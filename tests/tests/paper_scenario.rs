@@ -15,7 +15,10 @@ fn sim(args: &[&str], tag: &str) -> Value {
         .output()
         .expect("formation runs");
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "formation sim {args:?} failed: {stderr}");
+    assert!(
+        o.status.success(),
+        "formation sim {args:?} failed: {stderr}"
+    );
     assert!(!stderr.contains("panicked"), "{stderr}");
     let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json written");
     let v: Value = serde_json::from_str(&text).expect("summary.json is JSON");
@@ -35,12 +38,16 @@ fn worst(v: &Value, key: &str, window: &str) -> f64 {
 }
 
 fn violations(v: &Value) -> (u64, u64) {
-    v["agents"].as_array().unwrap().iter().fold((0, 0), |(a, r), x| {
-        (
-            a + x["attitude_constraint_violations"].as_u64().unwrap(),
-            r + x["rate_constraint_violations"].as_u64().unwrap(),
-        )
-    })
+    v["agents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .fold((0, 0), |(a, r), x| {
+            (
+                a + x["attitude_constraint_violations"].as_u64().unwrap(),
+                r + x["rate_constraint_violations"].as_u64().unwrap(),
+            )
+        })
 }
 
 #[test]
@@ -56,7 +63,10 @@ fn proposed_controller_flies_the_paper_mission_within_the_contract() {
     assert_eq!(violations(&v), (0, 0), "constraint violations");
     for window in ["cover", "enclose"] {
         let rms = worst(&v, "rms_formation_error_m", window);
-        assert!(rms <= 0.25, "worst RMS formation error in {window}: {rms} m");
+        assert!(
+            rms <= 0.25,
+            "worst RMS formation error in {window}: {rms} m"
+        );
     }
     let coverage = v["coverage_fraction"].as_f64().unwrap();
     assert!(coverage >= 0.95, "coverage {coverage}");
@@ -65,14 +75,24 @@ fn proposed_controller_flies_the_paper_mission_within_the_contract() {
 #[test]
 fn removing_the_rbfnn_makes_the_worst_covering_error_at_least_one_and_a_half_times_larger() {
     let with = worst(&sim(&[], "with-nn"), "rms_formation_error_m", "cover");
-    let without = worst(&sim(&["--variant", "no-rbfnn"], "no-nn"), "rms_formation_error_m", "cover");
-    assert!(without >= 1.5 * with, "no-rbfnn {without} vs proposed {with}");
+    let without = worst(
+        &sim(&["--variant", "no-rbfnn"], "no-nn"),
+        "rms_formation_error_m",
+        "cover",
+    );
+    assert!(
+        without >= 1.5 * with,
+        "no-rbfnn {without} vs proposed {with}"
+    );
 }
 
 #[test]
 fn paper_exact_gains_diverge_and_the_summary_names_time_agent_and_cause() {
     let v = sim(&["paper-exact"], "exact");
-    assert_eq!(v["diverged"], true, "the printed gains are known not to close the loop");
+    assert_eq!(
+        v["diverged"], true,
+        "the printed gains are known not to close the loop"
+    );
     let d = &v["divergence"];
     assert!(d["time_s"].as_f64().unwrap() > 0.0);
     let agent = d["agent"].as_u64().unwrap();
@@ -82,10 +102,19 @@ fn paper_exact_gains_diverge_and_the_summary_names_time_agent_and_cause() {
 
 #[test]
 fn under_abrupt_faults_only_the_unconstrained_controller_crosses_the_constraints() {
-    let scenario = concat!(env!("CARGO_MANIFEST_DIR"), "/../config/scenarios/abrupt-faults.toml");
+    let scenario = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/scenarios/abrupt-faults.toml"
+    );
     let proposed = sim(&[scenario], "abrupt-proposed");
-    let unconstrained = sim(&[scenario, "--variant", "unconstrained"], "abrupt-unconstrained");
+    let unconstrained = sim(
+        &[scenario, "--variant", "unconstrained"],
+        "abrupt-unconstrained",
+    );
     assert_eq!(violations(&proposed), (0, 0));
     let (a, r) = violations(&unconstrained);
-    assert!(a + r > 0, "the comparison controller was expected to cross a constraint");
+    assert!(
+        a + r > 0,
+        "the comparison controller was expected to cross a constraint"
+    );
 }

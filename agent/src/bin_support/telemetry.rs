@@ -45,7 +45,12 @@ impl Sampler {
 
     /// The sample of the step whose state is `s` and command `cmd`; `latency` is the wall time of
     /// the controller step.
-    pub fn sample(&self, s: &VehicleState, cmd: &ControlCommand, latency: Duration) -> AgentTelemetry {
+    pub fn sample(
+        &self,
+        s: &VehicleState,
+        cmd: &ControlCommand,
+        latency: Duration,
+    ) -> AgentTelemetry {
         let e: f64 = (0..3)
             .map(|k| (s.position[k] - self.target[k]).powi(2))
             .sum::<f64>()

@@ -2,6 +2,7 @@
 //! process under `<run dir>/logs/<role>[-<agent>].log`, and optionally a console on stderr.
 
 use std::fs::File;
+use std::io::IsTerminal;
 use std::path::Path;
 use std::sync::Mutex;
 use tracing_subscriber::layer::SubscriberExt;
@@ -39,6 +40,7 @@ pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), String
             .compact()
             .without_time()
             .with_target(false)
+            .with_ansi(std::io::stderr().is_terminal())
             .with_writer(std::io::stderr)
             .with_filter(filter())
     });

@@ -36,10 +36,20 @@ pub struct FaultArgs {
     #[arg(long)]
     pub agent: usize,
     /// Gamma per axis, e.g. 0.5,0.5,0.5.
-    #[arg(long, value_delimiter = ',', required = true, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub gamma: Vec<f64>,
     /// delta per axis in N m, e.g. 0,0,0.
-    #[arg(long, value_delimiter = ',', required = true, allow_negative_numbers = true)]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
     pub delta: Vec<f64>,
     /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
     #[arg(long)]
@@ -176,7 +186,10 @@ fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, Stri
             }
         }
         if !run.is_live() {
-            return Err(format!("run {} ended before confirming the injection", run.id));
+            return Err(format!(
+                "run {} ended before confirming the injection",
+                run.id
+            ));
         }
         std::thread::sleep(Duration::from_millis(20));
     }

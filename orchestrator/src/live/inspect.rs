@@ -160,7 +160,11 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
                 } else {
                     to_text(&run.id, run.n_agents, &s)
                 };
-                if out.write_all(text.as_bytes()).and_then(|_| out.flush()).is_err() {
+                if out
+                    .write_all(text.as_bytes())
+                    .and_then(|_| out.flush())
+                    .is_err()
+                {
                     return Ok(()); // stdout closed (e.g. piped into head)
                 }
                 if !args.follow {
@@ -182,6 +186,10 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
             eprintln!("run {} has ended", run.id);
             return Ok(());
         }
-        std::thread::sleep(if last_step.is_some() { REFRESH } else { Duration::from_millis(20) });
+        std::thread::sleep(if last_step.is_some() {
+            REFRESH
+        } else {
+            Duration::from_millis(20)
+        });
     }
 }

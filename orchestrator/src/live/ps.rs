@@ -78,7 +78,10 @@ pub fn main(args: PsArgs) -> ExitCode {
         return ExitCode::SUCCESS;
     }
     if out.is_empty() {
-        println!("no runs (runs register in {})", registry::runs_dir().display());
+        println!(
+            "no runs (runs register in {})",
+            registry::runs_dir().display()
+        );
         return ExitCode::SUCCESS;
     }
     for r in &out {
@@ -102,16 +105,25 @@ fn print_run(r: &Value) {
         f("realtime_factor"),
         r["out_dir"].as_str().unwrap_or(""),
     );
-    println!("  {:<13} {:>5} {:>8} {:>6} {:>7} {:>10}", "ROLE", "AGENT", "PID", "STATE", "CPU%", "CPU%(avg)");
+    println!(
+        "  {:<13} {:>5} {:>8} {:>6} {:>7} {:>10}",
+        "ROLE", "AGENT", "PID", "STATE", "CPU%", "CPU%(avg)"
+    );
     let empty = Vec::new();
     for p in r["processes"].as_array().unwrap_or(&empty) {
         let pct = |v: &Value| v.as_f64().map_or("-".to_string(), |x| format!("{x:.1}"));
         println!(
             "  {:<13} {:>5} {:>8} {:>6} {:>7} {:>10}",
             p["role"].as_str().unwrap_or(""),
-            p["agent"].as_u64().map_or("-".to_string(), |a| a.to_string()),
+            p["agent"]
+                .as_u64()
+                .map_or("-".to_string(), |a| a.to_string()),
             p["pid"],
-            if p["alive"].as_bool() == Some(true) { "alive" } else { "dead" },
+            if p["alive"].as_bool() == Some(true) {
+                "alive"
+            } else {
+                "dead"
+            },
             pct(&p["cpu_percent"]),
             pct(&p["cpu_percent_since_start"]),
         );

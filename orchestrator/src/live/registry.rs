@@ -124,15 +124,19 @@ pub fn list() -> Vec<RunRecord> {
 pub fn find(id: Option<&str>) -> Result<RunRecord, String> {
     let runs = list();
     match id {
-        Some(id) => runs.into_iter().find(|r| r.id == id).ok_or_else(|| {
-            format!("no running run with id '{id}' (see `formation ps`)")
-        }),
+        Some(id) => runs
+            .into_iter()
+            .find(|r| r.id == id)
+            .ok_or_else(|| format!("no running run with id '{id}' (see `formation ps`)")),
         None => match runs.len() {
             0 => Err("no run is running (start one with `formation run`)".into()),
             1 => Ok(runs.into_iter().next().expect("one run")),
             k => Err(format!(
                 "{k} runs are running ({}): choose one with --run ID",
-                runs.iter().map(|r| r.id.as_str()).collect::<Vec<_>>().join(", ")
+                runs.iter()
+                    .map(|r| r.id.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )),
         },
     }
@@ -159,7 +163,8 @@ impl Registration {
             .map(|s| s.start_ticks)
             .unwrap_or(0);
         let path = dir.join(format!("{}.json", rec.id));
-        write_atomically(&path, &rec).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        write_atomically(&path, &rec)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         Ok(Registration {
             path,
             rec,

@@ -52,7 +52,9 @@ pub fn delay(s: &Scenario, d: &DelayProfile) -> Result<(), String> {
     let lo = d.base_s - d.amplitude_s.abs();
     let hi = d.base_s + d.amplitude_s.abs();
     if lo < 0.0 {
-        return Err(format!("--tau: tau(t) reaches {lo} s; it must never be negative"));
+        return Err(format!(
+            "--tau: tau(t) reaches {lo} s; it must never be negative"
+        ));
     }
     if hi > tau_m {
         return Err(format!(
@@ -139,15 +141,31 @@ mod tests {
     #[test]
     fn tau_expressions_parse() {
         assert_eq!(parse_tau("0.03").unwrap(), p(0.03, 0.0, 0.0));
-        assert_eq!(parse_tau("0.02+0.01*sin(0.5*t)").unwrap(), p(0.02, 0.01, 0.5));
-        assert_eq!(parse_tau(" 0.02 - 0.01 * sin( 2 * t ) ").unwrap(), p(0.02, -0.01, 2.0));
-        assert_eq!(parse_tau("1e-2+5e-3*sin(1*t)").unwrap(), p(0.01, 0.005, 1.0));
+        assert_eq!(
+            parse_tau("0.02+0.01*sin(0.5*t)").unwrap(),
+            p(0.02, 0.01, 0.5)
+        );
+        assert_eq!(
+            parse_tau(" 0.02 - 0.01 * sin( 2 * t ) ").unwrap(),
+            p(0.02, -0.01, 2.0)
+        );
+        assert_eq!(
+            parse_tau("1e-2+5e-3*sin(1*t)").unwrap(),
+            p(0.01, 0.005, 1.0)
+        );
         assert_eq!(parse_tau("0.01*sin(3*t)").unwrap(), p(0.0, 0.01, 3.0));
     }
 
     #[test]
     fn bad_tau_expressions_are_rejected_with_the_field() {
-        for bad in ["", "abc", "nan", "0.02+0.01*cos(0.5*t)", "0.02+0.01*sin(0.5)", "0.02+x*sin(t*2)"] {
+        for bad in [
+            "",
+            "abc",
+            "nan",
+            "0.02+0.01*cos(0.5*t)",
+            "0.02+0.01*sin(0.5)",
+            "0.02+x*sin(t*2)",
+        ] {
             let e = parse_tau(bad).unwrap_err();
             assert!(e.contains("--tau"), "{bad}: {e}");
         }
@@ -160,12 +178,22 @@ mod tests {
         assert!(agent(0, 5).unwrap_err().contains("--agent"));
         assert!(agent(6, 5).unwrap_err().contains("--agent"));
         assert!(fault(&s, [0.5; 3], [0.0; 3]).is_ok());
-        assert!(fault(&s, [1.5, 1.0, 1.0], [0.0; 3]).unwrap_err().contains("--gamma"));
-        assert!(fault(&s, [0.0, 1.0, 1.0], [0.0; 3]).unwrap_err().contains("--gamma"));
-        assert!(fault(&s, [1.0; 3], [1e6, 0.0, 0.0]).unwrap_err().contains("--delta"));
+        assert!(fault(&s, [1.5, 1.0, 1.0], [0.0; 3])
+            .unwrap_err()
+            .contains("--gamma"));
+        assert!(fault(&s, [0.0, 1.0, 1.0], [0.0; 3])
+            .unwrap_err()
+            .contains("--gamma"));
+        assert!(fault(&s, [1.0; 3], [1e6, 0.0, 0.0])
+            .unwrap_err()
+            .contains("--delta"));
         let tau_m = s.simulation.max_delay_s;
         assert!(delay(&s, &p(tau_m / 2.0, 0.0, 0.0)).is_ok());
-        assert!(delay(&s, &p(tau_m * 2.0, 0.0, 0.0)).unwrap_err().contains("tau_M"));
-        assert!(delay(&s, &p(0.001, 0.01, 1.0)).unwrap_err().contains("negative"));
+        assert!(delay(&s, &p(tau_m * 2.0, 0.0, 0.0))
+            .unwrap_err()
+            .contains("tau_M"));
+        assert!(delay(&s, &p(0.001, 0.01, 1.0))
+            .unwrap_err()
+            .contains("negative"));
     }
 }

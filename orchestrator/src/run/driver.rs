@@ -129,12 +129,13 @@ pub fn drive(
     ports: &Ports,
     live: &mut super::Live,
     recorder: &mut Recorder,
-    n: usize,
-    steps: u64,
-    dt: f64,
+    scenario: &formation_config::Scenario,
     children: &mut [RoleProcess],
     interrupted: &AtomicBool,
 ) -> (Outcome, u64) {
+    let n = scenario.n_agents();
+    let steps = scenario.n_steps();
+    let dt = scenario.simulation.dt_s;
     let mut recorded: u64 = 0;
     let mut refs: VecDeque<ReferenceFrame> = VecDeque::new();
     let mut records: VecDeque<(Vec<PlantTruth>, Vec<ControlCommand>)> = VecDeque::new();

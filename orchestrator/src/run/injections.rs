@@ -116,8 +116,15 @@ impl Injections {
                     angular_rate_rad_s: d.angular_rate_rad_s,
                 },
             )?;
-            tracing::info!(agent, step, t, base_s = d.base_s, amplitude_s = d.amplitude_s,
-                rate_rad_s = d.angular_rate_rad_s, "delay injection accepted");
+            tracing::info!(
+                agent,
+                step,
+                t,
+                base_s = d.base_s,
+                amplitude_s = d.amplitude_s,
+                rate_rad_s = d.angular_rate_rad_s,
+                "delay injection accepted"
+            );
             self.log(json!({
                 "wall_time_unix_s": wall, "event": "delay", "nonce": r.nonce, "agent": agent,
                 "step": step, "t": t, "requested_step": requested, "recorded_step": recorded,

@@ -14,11 +14,11 @@ mod services;
 mod spawn;
 
 use crate::cli;
+use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord};
 use crate::record::Recorder;
 use driver::Outcome;
 use formation_config::runtime::args::ChildArgs;
 use formation_config::{ipc, services as names, Scenario, Variant};
-use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord};
 use spawn::RoleProcess;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -203,7 +203,11 @@ fn run(
     }];
     for (k, c) in children.0.iter().enumerate() {
         processes.push(ProcessEntry {
-            role: ["plant", "leader"].get(k).copied().unwrap_or("agent").into(),
+            role: ["plant", "leader"]
+                .get(k)
+                .copied()
+                .unwrap_or("agent")
+                .into(),
             agent: k.checked_sub(1).filter(|&a| a >= 1),
             pid: c.pid(),
         });
@@ -238,9 +242,7 @@ fn run(
             &ports,
             &mut live,
             &mut recorder,
-            n,
-            scenario.n_steps(),
-            scenario.simulation.dt_s,
+            scenario,
             &mut children.0,
             interrupted,
         ),

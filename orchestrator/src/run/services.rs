@@ -2,7 +2,9 @@
 //! sized for N (limits are fixed by the creator; the role processes only open them).
 
 use formation_config::ipc::{event_with_limits, pubsub_with_limits, service_name, Limits};
-use formation_config::runtime::messages::{Hello, InjectRequest, RunControl, RunProgress, StepEntry};
+use formation_config::runtime::messages::{
+    Hello, InjectRequest, RunControl, RunProgress, StepEntry,
+};
 use formation_config::runtime::ports::{RunNode, Svc};
 use formation_config::runtime::{self as rt};
 use formation_config::services;
