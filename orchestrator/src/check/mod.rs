@@ -76,9 +76,9 @@ pub struct OuterReport {
     pub fastest_mode_rad_s: f64,
     /// Decay rate of the slowest root, 1/s.
     pub slowest_decay_rate: f64,
-    /// lambda_min k_V: the damping the slowest mode has against the uncertainty's negative damping, 1/s.
+    /// lambda_min k_V + k_L: the damping the slowest mode has against the uncertainty's negative damping, 1/s.
     pub slowest_damping_rate: f64,
-    /// lambda_min k_P: the stiffness of the slowest mode, 1/s².
+    /// lambda_min k_P + k_LP: the stiffness of the slowest mode, 1/s².
     pub slowest_stiffness: f64,
     /// Phase lost to tau_M at the fastest mode: tau_M * fastest_mode_rad_s, degrees.
     pub delay_phase_deg: f64,
@@ -145,18 +145,24 @@ pub fn report(s: &Scenario) -> Report {
         })),
         _ => None,
     };
-    let modes = outer::outer_modes(&graph.eigenvalues, pos.k_p, pos.k_v);
+    // The leader-relative terms (D11) add k_L to every mode's damping and k_LP to its stiffness:
+    // s² + (lambda k_V + k_L) s + (lambda k_P + k_LP). For one mode this equals the consensus law with
+    // the effective gains k_V + k_L / lambda and k_P + k_LP / lambda, which is how the loop models get them.
+    let (k_l, k_lp) = (pos.leader_velocity_damping, pos.leader_position_gain);
+    let modes = outer::outer_modes(&graph.eigenvalues, pos.k_p, pos.k_v, k_lp, k_l);
+    let lmax = graph.lambda_max.max(1e-12);
+    let (kp_fast, kv_fast) = (pos.k_p + k_lp / lmax, pos.k_v + k_l / lmax);
     let fastest = outer::fastest_root(&modes);
     let uncertainty = outer::uncertainty_slopes(&s.agents);
-    let slowest_damping = graph.lambda_min * pos.k_v;
+    let slowest_damping = graph.lambda_min * pos.k_v + k_l;
     let outer = OuterReport {
         fastest_mode_rad_s: fastest,
         slowest_decay_rate: outer::slowest_decay(&modes),
         slowest_damping_rate: slowest_damping,
-        slowest_stiffness: graph.lambda_min * pos.k_p,
+        slowest_stiffness: graph.lambda_min * pos.k_p + k_lp,
         delay_phase_deg: (tau * fastest).to_degrees(),
         delay_only: freq::phase_margin(|w| {
-            inner::outer_loop_delay_only(graph.lambda_max, pos.k_p, pos.k_v, tau, w)
+            inner::outer_loop_delay_only(graph.lambda_max, kp_fast, kv_fast, tau, w)
         }),
         quadratic_break_even_speed_m_s: (uncertainty.quadratic_slope_per_m_s > 0.0)
             .then(|| slowest_damping / uncertainty.quadratic_slope_per_m_s),
@@ -181,7 +187,7 @@ pub fn report(s: &Scenario) -> Report {
     let cascade = inner::CascadeInputs {
         lambda_max: graph.lambda_max,
         fastest_outer_rad_s: fastest,
-        outer: (pos.k_p, pos.k_v, tau),
+        outer: (kp_fast, kv_fast, tau),
         f1: inner::Filter {
             w: fa.natural_frequency_rad_s,
             xi: fa.damping,

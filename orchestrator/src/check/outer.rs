@@ -20,17 +20,17 @@ pub struct OuterMode {
 }
 
 /// The closed-loop modes of every eigenvalue.
-pub fn outer_modes(eigenvalues: &[f64], k_p: f64, k_v: f64) -> Vec<OuterMode> {
+pub fn outer_modes(eigenvalues: &[f64], k_p: f64, k_v: f64, k_lp: f64, k_l: f64) -> Vec<OuterMode> {
     eigenvalues
         .iter()
         .map(|&l| {
-            let r = quadratic_roots(l * k_v, l * k_p);
-            let wn = (l * k_p).max(0.0).sqrt();
+            let r = quadratic_roots(l * k_v + k_l, l * k_p + k_lp);
+            let wn = (l * k_p + k_lp).max(0.0).sqrt();
             OuterMode {
                 lambda: l,
                 roots: [pair(r[0]), pair(r[1])],
                 natural_frequency_rad_s: wn,
-                damping_ratio: l * k_v / (2.0 * wn),
+                damping_ratio: (l * k_v + k_l) / (2.0 * wn),
             }
         })
         .collect()
@@ -137,7 +137,7 @@ mod tests {
     #[test]
     fn printed_gains_on_the_path_graph_have_a_fastest_mode_near_25_rad_s() {
         let lmax = 2.0 + 3f64.sqrt();
-        let modes = outer_modes(&[2.0 - 3f64.sqrt(), lmax], 4.9, 6.85);
+        let modes = outer_modes(&[2.0 - 3f64.sqrt(), lmax], 4.9, 6.85, 0.0, 0.0);
         let b = lmax * 6.85;
         let c = lmax * 4.9;
         let fast = (b + (b * b - 4.0 * c).sqrt()) / 2.0;

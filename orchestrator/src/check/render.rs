@@ -125,19 +125,19 @@ fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
     let u = &ou.uncertainty;
     writeln!(
         o,
-        "slowest mode: lambda_min k_V = {:.3}/s vs uncertainty (61) |df/dV| up to {:.3}/s (agent {}, axis {}; velocity power 1)",
+        "slowest mode: lambda_min k_V + k_L = {:.3}/s vs uncertainty (61) |df/dV| up to {:.3}/s (agent {}, axis {}; velocity power 1)",
         ou.slowest_damping_rate, u.worst_velocity_gain, u.worst_velocity_at[0], u.worst_velocity_at[1]
     )?;
     if let Some(vs) = ou.quadratic_break_even_speed_m_s {
         writeln!(
             o,
-            "  velocity power 2 axes: |df/dV| = 2|gain||V| depends on V (slope up to {:.3} per m/s, agent {}, axis {}); exceeds lambda_min k_V above |V| = {:.3} m/s",
+            "  velocity power 2 axes: |df/dV| = 2|gain||V| depends on V (slope up to {:.3} per m/s, agent {}, axis {}); exceeds lambda_min k_V + k_L above |V| = {:.3} m/s",
             u.quadratic_slope_per_m_s, u.quadratic_at[0], u.quadratic_at[1], vs
         )?;
     }
     writeln!(
         o,
-        "  lambda_min k_P = {:.3}/s^2 vs |df/dP| up to {:.3}/s^2 (agent {}, axis {})",
+        "  lambda_min k_P + k_LP = {:.3}/s^2 vs |df/dP| up to {:.3}/s^2 (agent {}, axis {})",
         ou.slowest_stiffness, u.worst_position_gain, u.worst_position_at[0], u.worst_position_at[1]
     )?;
     writeln!(

@@ -100,7 +100,7 @@ pub fn all(r: &Report) -> Vec<Verdict> {
         "outer.slowest_mode_damping",
         if o.slowest_damping_rate > u.worst_velocity_gain { Level::Ok } else { Level::Warn },
         format!(
-            "lambda_min k_V = {:.3}/s vs uncertainty negative damping up to {:.3}/s (agent {} axis {}){}",
+            "lambda_min k_V + k_L = {:.3}/s vs uncertainty negative damping up to {:.3}/s (agent {} axis {}){}",
             o.slowest_damping_rate,
             u.worst_velocity_gain,
             u.worst_velocity_at[0],
@@ -115,7 +115,7 @@ pub fn all(r: &Report) -> Vec<Verdict> {
         "outer.slowest_mode_stiffness",
         if o.slowest_stiffness > u.worst_position_gain { Level::Ok } else { Level::Warn },
         format!(
-            "lambda_min k_P = {:.3}/s^2 vs uncertainty negative stiffness up to {:.3}/s^2 (agent {} axis {})",
+            "lambda_min k_P + k_LP = {:.3}/s^2 vs uncertainty negative stiffness up to {:.3}/s^2 (agent {} axis {})",
             o.slowest_stiffness, u.worst_position_gain, u.worst_position_at[0], u.worst_position_at[1]
         ),
     ));
