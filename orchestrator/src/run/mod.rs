@@ -241,7 +241,7 @@ fn run(
         Ok(()) => driver::drive(
             &ports,
             &mut live,
-            &formation_leader::Mission::from_scenario(&scenario),
+            &formation_leader::Mission::from_scenario(scenario),
             &mut recorder,
             scenario,
             &mut children.0,
