@@ -71,8 +71,8 @@ impl Recorder {
     }
 
     /// Flushes the CSV and writes `summary.json`; returns the summary.
-    pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
-        self.csv.flush()?;
+    pub fn finish(self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
+        self.csv.close()?;
         let summary = summary::Summary::build(
             &self.metrics,
             &self.scenario,
