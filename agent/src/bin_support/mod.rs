@@ -39,7 +39,12 @@ pub fn run() -> Result<(), String> {
     loop {
         while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
             if c.kind == CONTROL_STOP {
-                tracing::info!(step = k, "stop received");
+                tracing::info!(
+                    step = k,
+                    telemetry_samples = sampler.sent(),
+                    telemetry_mean_send_us = sampler.mean_send_us(),
+                    "stop received"
+                );
                 return Ok(());
             }
         }
@@ -105,8 +110,11 @@ pub fn run() -> Result<(), String> {
                 send(&ports.command, cmd)?;
                 poke(&ports.plant_wake);
                 if let Some(t0) = started {
+                    let latency = t0.elapsed();
+                    let t1 = std::time::Instant::now();
                     // Best effort: a failed telemetry send never disturbs control.
-                    let _ = send(&ports.telemetry, sampler.sample(&s, &cmd, t0.elapsed()));
+                    let _ = send(&ports.telemetry, sampler.sample(&s, &cmd, latency));
+                    sampler.count_send(t1.elapsed());
                 }
                 k += 1;
                 own = None;

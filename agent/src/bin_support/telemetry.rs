@@ -17,6 +17,9 @@ pub struct Sampler {
     rate_limit: f64,
     /// P_d + Delta_i0 of the latest reference handed to the controller.
     target: [f64; 3],
+    /// Samples sent and the wall time spent building and sending them (the overhead).
+    sent: u64,
+    send_time: Duration,
 }
 
 impl Sampler {
@@ -29,6 +32,8 @@ impl Sampler {
             margin: s.controller.attitude.attitude_margin_rad,
             rate_limit: s.controller.attitude.rate_limit_rad_s,
             target: [0.0; 3],
+            sent: 0,
+            send_time: Duration::ZERO,
         }
     }
 
@@ -67,6 +72,28 @@ impl Sampler {
             rate_limit_rad_s: self.rate_limit,
             loop_latency_us: latency.as_secs_f64() * 1e6,
             controller: cmd.telemetry,
+        }
+    }
+}
+
+impl Sampler {
+    /// Accounts one sample that took `d` to build and send.
+    pub fn count_send(&mut self, d: Duration) {
+        self.sent += 1;
+        self.send_time += d;
+    }
+
+    /// Samples sent so far.
+    pub fn sent(&self) -> u64 {
+        self.sent
+    }
+
+    /// Mean wall time to build and send one sample, µs (0 before the first).
+    pub fn mean_send_us(&self) -> f64 {
+        if self.sent == 0 {
+            0.0
+        } else {
+            self.send_time.as_secs_f64() * 1e6 / self.sent as f64
         }
     }
 }
