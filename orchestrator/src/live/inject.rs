@@ -140,7 +140,9 @@ pub fn main(args: InjectArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    match send_and_confirm(&run, &req) {
+    let result = send_and_confirm(&run, &req);
+    super::tidy_after(&run);
+    match result {
         Ok(line) => {
             let v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
             println!(

@@ -129,7 +129,9 @@ pub fn main(args: InspectArgs) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(EXIT_INVALID);
     }
-    match follow(&run, &args) {
+    let result = follow(&run, &args);
+    super::tidy_after(&run);
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");

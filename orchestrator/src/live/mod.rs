@@ -28,3 +28,11 @@ pub fn run_scenario(run: &registry::RunRecord) -> Result<Scenario, String> {
 pub fn client_node(run: &registry::RunRecord, role: &str) -> Result<RunNode, String> {
     ipc::node(&run.prefix, &format!("fm-{role}-{}", std::process::id())).map_err(|e| e.to_string())
 }
+
+/// Call after a client's node is dropped: if the run has ended meanwhile, its orchestrator may have
+/// cleaned up before this client left, so remove what is left of the run's prefix.
+pub fn tidy_after(run: &registry::RunRecord) {
+    if !run.is_live() {
+        let _ = ipc::remove_residue(&run.prefix);
+    }
+}
