@@ -13,6 +13,7 @@
 
 pub mod args;
 pub mod boot;
+pub mod logging;
 pub mod messages;
 pub mod ports;
 pub mod process;

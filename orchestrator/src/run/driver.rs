@@ -124,14 +124,16 @@ pub fn wait_for_hellos(
 /// number of steps recorded.
 pub fn drive(
     ports: &Ports,
+    live: &mut super::Live,
     mission: &formation_leader::Mission,
     recorder: &mut Recorder,
-    n: usize,
-    steps: u64,
-    dt: f64,
+    scenario: &formation_config::Scenario,
     children: &mut [RoleProcess],
     interrupted: &AtomicBool,
 ) -> (Outcome, u64) {
+    let n = scenario.n_agents();
+    let steps = scenario.n_steps();
+    let dt = scenario.simulation.dt_s;
     let mut recorded: u64 = 0;
     // The reference of step k is a pure function of (k, t_k): the recorder computes it with the same
     // code as the leader process (bit-identical), instead of depending on the leader's stream.
@@ -186,6 +188,11 @@ pub fn drive(
             progress.finish(recorded);
             return (Outcome::Completed, recorded);
         }
+        // Injections are forwarded before the progress that lets the plant move on.
+        if let Err(e) = live.injections.poll(recorded) {
+            return (Outcome::Failed(e), recorded);
+        }
+        live.registration.update(recorded);
         if got > 0 {
             if let Err(e) = ports.announce(recorded) {
                 return (Outcome::Failed(e), recorded);
