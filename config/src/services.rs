@@ -34,3 +34,9 @@ pub fn control_command(i: usize) -> String {
 pub fn telemetry(i: usize) -> String {
     format!("formation/agent/{i}/telemetry")
 }
+
+/// `formation inject` -> orchestrator: [`crate::runtime::messages::InjectRequest`].
+pub const INJECT_REQUEST: &str = "formation/inject/request";
+
+/// Most concurrent client processes (`formation inspect`, `ps`, `inject`) a run admits.
+pub const MAX_CLIENTS: usize = 8;

@@ -245,3 +245,36 @@ pub struct DelayInjection {
     /// Angular rate, rad/s.
     pub angular_rate_rad_s: f64,
 }
+
+/// Agent i -> `formation inspect` (service [`crate::services::telemetry`]): a live sample of the
+/// controller, published every [`TELEMETRY_EVERY_S`] of simulation time without waiting for anyone.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.AgentTelemetry")]
+pub struct AgentTelemetry {
+    /// Simulation step k of the sample.
+    pub step: u64,
+    /// Simulation time t_k, s.
+    pub t: f64,
+    /// Agent index i (0-based).
+    pub agent: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Formation error |P_i - P_d - Delta_i0| at t_k, m.
+    pub formation_error_m: f64,
+    /// Attitude A_i = [phi, theta, psi] at t_k, rad.
+    pub attitude: [f64; 3],
+    /// Body rate Omega_i at t_k, rad/s.
+    pub rate: [f64; 3],
+    /// Attitude constraint |A_iC| + margin that |A_i| must stay below, rad.
+    pub attitude_limit_rad: f64,
+    /// Body rate constraint that |Omega_i| must stay below, rad/s.
+    pub rate_limit_rad_s: f64,
+    /// Wall time of the controller step of this sample (`Agent::step`), µs.
+    pub loop_latency_us: f64,
+    /// The controller's internals at step k.
+    pub controller: ControllerTelemetry,
+}
+
+/// Simulation time between two [`AgentTelemetry`] samples of one agent, s.
+pub const TELEMETRY_EVERY_S: f64 = 0.02;

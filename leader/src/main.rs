@@ -8,6 +8,7 @@ fn main() -> ExitCode {
     match bin_support::run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            tracing::error!("{e}");
             eprintln!("formation-leader: {e}");
             ExitCode::from(1)
         }

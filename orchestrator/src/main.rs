@@ -4,6 +4,7 @@
 //! * `run`     — one OS process per quadrotor, plant and leader over iceoryx2 (the product).
 //! * `plot`    — the paper's figures from a run directory.
 //! * `check`   — what decides whether a gain set can work (graph spectrum, Theorem 1, bandwidths).
+//! * `ps`, `inspect`, `inject` — look at and act on a running `run` from another terminal.
 //! * `bench`   — IPC latency and jitter: iceoryx2 vs Unix sockets vs UDP.
 #![warn(missing_docs)]
 
@@ -13,6 +14,7 @@ use std::process::ExitCode;
 mod bench;
 mod check;
 mod cli;
+mod live;
 mod plot;
 pub mod record;
 mod run;
@@ -41,6 +43,12 @@ enum Command {
     Check(check::CheckArgs),
     /// Measure IPC latency and jitter (iceoryx2, Unix domain sockets, UDP loopback).
     Bench(bench::BenchArgs),
+    /// List the running runs and their processes (role, agent, pid, alive, CPU share, progress).
+    Ps(live::ps::PsArgs),
+    /// Show one agent's live telemetry (agent ids are 1-based).
+    Inspect(live::inspect::InspectArgs),
+    /// Inject an actuator fault or a delay profile into a running run (agent ids are 1-based).
+    Inject(live::inject::InjectArgs),
     /// Internal: one agent process of `formation bench`.
     #[command(hide = true)]
     BenchPeer(bench::PeerArgs),
@@ -61,6 +69,9 @@ fn main() -> ExitCode {
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
+        Some(Command::Ps(a)) => live::ps::main(a),
+        Some(Command::Inspect(a)) => live::inspect::main(a),
+        Some(Command::Inject(a)) => live::inject::main(a),
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
         None => run::main(run::RunArgs::default()),
     }

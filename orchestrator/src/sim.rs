@@ -31,6 +31,10 @@ pub struct SimArgs {
     /// Print only the summary JSON path (for scripts).
     #[arg(long)]
     pub quiet: bool,
+    /// Speed report: run K times and print the median, fastest and slowest real-time factor
+    /// (sim_time / wall_time of the whole run, outputs included). The outputs of the last run are kept.
+    #[arg(long, value_name = "K", default_value_t = 1)]
+    pub repeat: u32,
 }
 
 /// Entry point of `formation sim`.
@@ -54,8 +58,30 @@ pub fn main(args: SimArgs) -> ExitCode {
         eprintln!("error: cannot write {}/scenario.toml: {e}", out.display());
         return ExitCode::from(1);
     }
+    let mut factors = Vec::new();
+    for _ in 1..args.repeat.max(1) {
+        match run_in_process(&scenario, variant, &out) {
+            Ok(s) => factors.push(s.realtime_factor),
+            Err(e) => {
+                eprintln!("error: cannot write outputs to {}: {e}", out.display());
+                return ExitCode::from(1);
+            }
+        }
+    }
     match run_in_process(&scenario, variant, &out) {
         Ok(summary) => {
+            if args.repeat > 1 {
+                factors.push(summary.realtime_factor);
+                factors.sort_by(|a, b| a.total_cmp(b));
+                println!(
+                    "speed over {} runs: median {:.0}x real time (slowest {:.0}x, fastest {:.0}x), {:.2} µs per simulated step",
+                    factors.len(),
+                    factors[factors.len() / 2],
+                    factors[0],
+                    factors[factors.len() - 1],
+                    1e6 * scenario.simulation.dt_s / factors[factors.len() / 2]
+                );
+            }
             if args.quiet {
                 println!("{}", out.join("summary.json").display());
             } else {

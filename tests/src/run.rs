@@ -20,8 +20,14 @@ impl RunningRun {
     /// Starts `formation run <args...> --out <out>` (no `CARGO` in its environment, so it never
     /// builds anything).
     pub fn start(args: &[&str], out: &Path) -> RunningRun {
+        RunningRun::start_with_env(args, out, &[])
+    }
+
+    /// Like [`RunningRun::start`], with extra environment variables (e.g. `FORMATION_RUNS_DIR`).
+    pub fn start_with_env(args: &[&str], out: &Path, env: &[(&str, &Path)]) -> RunningRun {
         let _ = std::fs::remove_dir_all(out);
         let mut child = Command::new(crate::bin("formation"))
+            .envs(env.iter().map(|(k, v)| (*k, v.as_os_str())))
             .arg("run")
             .args(args)
             .arg("--out")

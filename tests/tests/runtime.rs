@@ -97,7 +97,12 @@ fn ctrl_c_stops_every_process_within_two_seconds_with_exit_130() {
     let dir = temp_dir("ctrl-c");
     let mut run = start_long_run(&dir);
     let prefix = run.prefix().unwrap();
-    assert_eq!(run.role_processes().len(), 7, "plant, leader and 5 agents");
+    assert_eq!(
+        run.role_processes().len(),
+        7,
+        "plant, leader and 5 agents; stderr: {}",
+        run.stderr()
+    );
     run.signal(libc::SIGINT);
     let (st, took) = run.wait(Duration::from_secs(10)).expect("the run stops");
     assert!(took <= Duration::from_secs(2), "took {took:?}");

@@ -7,6 +7,7 @@
 mod neighbour_delay;
 mod ports;
 mod realtime;
+mod telemetry;
 
 use formation_agent::Agent;
 use formation_config::runtime::boot::{boot, hello};
@@ -33,9 +34,21 @@ pub fn run() -> Result<(), String> {
     let mut own: Option<VehicleState> = None;
     let mut observed = false;
     let mut k: u64 = 0;
+    let mut sampler = telemetry::Sampler::new(&b.scenario, i);
+    tracing::info!(
+        agent = i + 1,
+        neighbours = ?neighbours.iter().map(|j| j + 1).collect::<Vec<_>>(),
+        "agent ready"
+    );
     loop {
         while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
             if c.kind == CONTROL_STOP {
+                tracing::info!(
+                    step = k,
+                    telemetry_samples = sampler.sent(),
+                    telemetry_mean_send_us = sampler.mean_send_us(),
+                    "stop received"
+                );
                 return Ok(());
             }
         }
@@ -63,11 +76,21 @@ pub fn run() -> Result<(), String> {
         while refs.front().is_some_and(|r| r.step <= k) {
             if let Some(r) = refs.pop_front() {
                 agent.observe_reference(&r);
+                sampler.observe_reference(&r);
             }
         }
         pending_delays.retain(|d| {
             if d.step <= k {
                 agent.set_delay(d);
+                if d.agent as usize == i {
+                    tracing::info!(
+                        step = k,
+                        base_s = d.base_s,
+                        amplitude_s = d.amplitude_s,
+                        rate_rad_s = d.angular_rate_rad_s,
+                        "delay injection applied"
+                    );
+                }
                 false
             } else {
                 true
@@ -85,9 +108,18 @@ pub fn run() -> Result<(), String> {
                 observed = true;
             }
             if agent.ready(k) {
+                let sample = sampler.due(k);
+                let started = sample.then(std::time::Instant::now);
                 let cmd = agent.step(&s);
                 send(&ports.command, cmd)?;
                 poke(&ports.plant_wake);
+                if let Some(t0) = started {
+                    let latency = t0.elapsed();
+                    let t1 = std::time::Instant::now();
+                    // Best effort: a failed telemetry send never disturbs control.
+                    let _ = send(&ports.telemetry, sampler.sample(&s, &cmd, latency));
+                    sampler.count_send(t1.elapsed());
+                }
                 k += 1;
                 own = None;
                 observed = false;

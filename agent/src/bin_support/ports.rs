@@ -7,7 +7,7 @@ use formation_config::runtime::ports::{
 use formation_config::runtime::{self as rt};
 use formation_config::services;
 use formation_config::wire::{
-    ControlCommand, DelayInjection, NeighborState, ReferenceFrame, VehicleState,
+    AgentTelemetry, ControlCommand, DelayInjection, NeighborState, ReferenceFrame, VehicleState,
 };
 use iceoryx2::port::notifier::Notifier;
 
@@ -21,6 +21,8 @@ pub struct Ports {
     pub shares_in: Vec<Sub<NeighborState>>,
     pub share_out: Pub<NeighborState>,
     pub command: Pub<ControlCommand>,
+    /// Live samples for `formation inspect` (never waited on).
+    pub telemetry: Pub<AgentTelemetry>,
     pub plant_wake: Notifier<Svc>,
     /// One per neighbour, in `neighbours` order.
     pub neighbours_wake: Vec<Notifier<Svc>>,
@@ -41,6 +43,7 @@ impl Ports {
                 .collect::<Result<_, _>>()?,
             share_out: publisher(node, &services::neighbor_state(i))?,
             command: publisher(node, &services::control_command(i))?,
+            telemetry: publisher(node, &services::telemetry(i))?,
             plant_wake: notifier(node, rt::WAKE_PLANT)?,
             neighbours_wake: neighbours
                 .iter()

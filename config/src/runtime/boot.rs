@@ -21,8 +21,8 @@ pub struct Boot {
     pub node: RunNode,
 }
 
-/// Parses the command line, names the process `fm-<role>[-<agent>]`, loads the scenario and creates
-/// the node.
+/// Parses the command line, names the process `fm-<role>[-<agent>]`, starts its log
+/// (`<run dir>/logs/<role>[-<agent>].log`), loads the scenario and creates the node.
 pub fn boot(role: &str) -> Result<Boot, String> {
     let args = ChildArgs::parse(std::env::args_os().skip(1))?;
     let name = match args.agent {
@@ -30,6 +30,16 @@ pub fn boot(role: &str) -> Result<Boot, String> {
         None => format!("fm-{role}"),
     };
     let lifeline = Lifeline::install(&name);
+    let log_name = super::logging::log_file_name(role, args.agent);
+    if let Err(e) = super::logging::init(&args.run_dir, &log_name, false) {
+        eprintln!("{name}: {e}");
+    }
+    tracing::info!(
+        pid = std::process::id(),
+        run = %args.run_id,
+        agent = args.agent.map(|i| i + 1),
+        "{name} starting"
+    );
     let path = args.run_dir.join("scenario.toml");
     let text = std::fs::read_to_string(&path)
         .map_err(|e| format!("cannot read {}: {e}", path.display()))?;

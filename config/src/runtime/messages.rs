@@ -61,3 +61,36 @@ pub struct StepEntry {
     /// The command the agent sent for this step.
     pub command: ControlCommand,
 }
+
+/// [`InjectRequest::kind`]: an actuator fault (to the plant).
+pub const INJECT_FAULT: u32 = 1;
+/// [`InjectRequest::kind`]: a delay profile (to the agents).
+pub const INJECT_DELAY: u32 = 2;
+/// [`InjectRequest::at_step`] when no step was asked for: "as soon as deterministically possible".
+pub const INJECT_ASAP: u64 = u64::MAX;
+
+/// `formation inject` -> orchestrator: a validated injection request; the orchestrator picks the
+/// step it applies at, records it in `events.jsonl` (with `nonce`) and forwards it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[type_name("formation.v1.InjectRequest")]
+pub struct InjectRequest {
+    /// Random id chosen by the client; echoed in `events.jsonl`.
+    pub nonce: u64,
+    /// Requested first step, or [`INJECT_ASAP`].
+    pub at_step: u64,
+    /// [`INJECT_FAULT`] or [`INJECT_DELAY`].
+    pub kind: u32,
+    /// Agent index i (0-based).
+    pub agent: u32,
+    /// Fault: Gamma_i (diagonal).
+    pub gamma: [f64; 3],
+    /// Fault: delta_i, N m.
+    pub delta: [f64; 3],
+    /// Delay: tau_i(t) = base + amplitude sin(rate t), base in s.
+    pub base_s: f64,
+    /// Delay amplitude, s.
+    pub amplitude_s: f64,
+    /// Delay angular rate, rad/s.
+    pub angular_rate_rad_s: f64,
+}

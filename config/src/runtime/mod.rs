@@ -14,6 +14,7 @@
 pub mod args;
 pub mod boot;
 pub mod clock;
+pub mod logging;
 pub mod messages;
 pub mod ports;
 pub mod process;
@@ -51,11 +52,15 @@ pub fn wake_agent(i: usize) -> String {
     format!("formation/wake/agent/{i}")
 }
 
-/// Subscriber buffer of the reference service: everything the leader may publish between two
-/// drains of the slowest subscriber (the orchestrator), plus slack.
-pub const REFERENCE_BUFFER: usize = (LEADER_LEAD + 2 * ACK_EVERY) as usize;
-/// Subscriber buffer of the per-step records (plant -> orchestrator).
-pub const STEPS_BUFFER: usize = (PLANT_LEAD + 2 * ACK_EVERY) as usize;
+/// Subscriber buffer of the reference service: everything the leader may publish between two drains of
+/// the slowest subscriber (the orchestrator). At one drain the leader may have published only up to the
+/// step being recorded (it was descheduled); the orchestrator then records up to PLANT_LEAD + ACK_EVERY
+/// more steps and announces them, and the leader may publish up to LEADER_LEAD past that before the next
+/// drain: LEADER_LEAD + PLANT_LEAD + 2 ACK_EVERY, plus slack. (Sized from LEADER_LEAD alone it
+/// overflowed under load: "no reference frame for step 128".)
+pub const REFERENCE_BUFFER: usize = (LEADER_LEAD + PLANT_LEAD + 4 * ACK_EVERY) as usize;
+/// Subscriber buffer of the per-step records (plant -> orchestrator), by the same argument for the plant.
+pub const STEPS_BUFFER: usize = (2 * PLANT_LEAD + 4 * ACK_EVERY) as usize;
 /// Subscriber buffer of the per-step records in realtime mode, where the plant does not wait for
 /// the recorder: one second of steps at 1 kHz.
 pub const REALTIME_STEPS_BUFFER: usize = 1024;

@@ -31,6 +31,7 @@ pub fn run() -> Result<(), String> {
     loop {
         while let Some(c) = control.receive().map_err(|e| format!("{e:?}"))? {
             if c.kind == CONTROL_STOP {
+                tracing::info!(published = head, "stop received");
                 return Ok(());
             }
         }

@@ -84,20 +84,137 @@ pub const COLUMNS: &[&str] = &[
     "tau",
 ];
 
-/// Buffered writer of `trajectory.csv`.
+/// The rows of one output step, handed to the writer thread.
+struct StepRows {
+    p_d: [f64; 3],
+    target: [f64; 3],
+    offsets: Vec<[f64; 3]>,
+    truths: Vec<PlantTruth>,
+    commands: Vec<ControlCommand>,
+    errors: Vec<f64>,
+}
+
+enum Msg {
+    Step(Box<StepRows>),
+    Flush(std::sync::mpsc::SyncSender<std::io::Result<()>>),
+}
+
+/// Writer of `trajectory.csv`: formatting and writing run on a thread of their own, off the
+/// simulation loop (the formatting code is the same, so the bytes are too).
 pub struct TrajectoryWriter {
+    tx: Option<std::sync::mpsc::SyncSender<Msg>>,
+    handle: Option<std::thread::JoinHandle<std::io::Result<()>>>,
+}
+
+impl TrajectoryWriter {
+    /// Creates the file, writes the header and starts the writer thread.
+    pub fn create(path: &Path, s: &Scenario) -> std::io::Result<TrajectoryWriter> {
+        let mut rows = RowWriter::create(path, s)?;
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Msg>(1024);
+        let handle = std::thread::Builder::new()
+            .name("csv-writer".into())
+            .spawn(move || -> std::io::Result<()> {
+                for msg in rx {
+                    match msg {
+                        Msg::Step(r) => rows.write_rows(&r)?,
+                        Msg::Flush(reply) => {
+                            let _ = reply.send(rows.flush());
+                        }
+                    }
+                }
+                rows.flush()
+            })?;
+        Ok(TrajectoryWriter {
+            tx: Some(tx),
+            handle: Some(handle),
+        })
+    }
+
+    /// Queues one row per agent for this step.
+    pub fn write_step(
+        &mut self,
+        r: &ReferenceFrame,
+        truths: &[PlantTruth],
+        commands: &[ControlCommand],
+        metrics: &Metrics,
+    ) -> std::io::Result<()> {
+        let n = truths.len();
+        let rows = StepRows {
+            p_d: r.p_d,
+            target: r.target,
+            offsets: r.offset[..n].to_vec(),
+            truths: truths.to_vec(),
+            commands: commands.to_vec(),
+            errors: metrics.agents.iter().map(|a| a.last_error).collect(),
+        };
+        self.send(Msg::Step(Box::new(rows)))
+    }
+
+    /// Waits until everything queued so far is written and flushed to the file.
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        let (reply_tx, reply_rx) = std::sync::mpsc::sync_channel(1);
+        self.send(Msg::Flush(reply_tx))?;
+        reply_rx.recv().map_err(|_| self.stopped())?
+    }
+
+    /// Writes everything queued and stops the thread.
+    pub fn close(mut self) -> std::io::Result<()> {
+        self.tx.take();
+        match self.handle.take().map(|h| h.join()) {
+            Some(Ok(result)) => result,
+            Some(Err(_)) => Err(std::io::Error::other(
+                "the trajectory writer thread panicked",
+            )),
+            None => Ok(()),
+        }
+    }
+
+    fn send(&mut self, msg: Msg) -> std::io::Result<()> {
+        let sent = self
+            .tx
+            .as_ref()
+            .map(|tx| tx.send(msg).is_ok())
+            .unwrap_or(false);
+        if sent {
+            Ok(())
+        } else {
+            Err(self.stopped())
+        }
+    }
+
+    /// The error of a writer thread that stopped (it failed to write).
+    fn stopped(&mut self) -> std::io::Error {
+        self.tx.take();
+        match self.handle.take().map(|h| h.join()) {
+            Some(Ok(Err(e))) => e,
+            _ => std::io::Error::other("the trajectory writer stopped"),
+        }
+    }
+}
+
+impl Drop for TrajectoryWriter {
+    fn drop(&mut self) {
+        self.tx.take();
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+/// Buffered, synchronous writer of `trajectory.csv` rows (runs on the writer thread).
+struct RowWriter {
     out: BufWriter<File>,
     margin: f64,
     rate_limit: f64,
     line: String,
 }
 
-impl TrajectoryWriter {
+impl RowWriter {
     /// Creates the file and writes the header.
-    pub fn create(path: &Path, s: &Scenario) -> std::io::Result<TrajectoryWriter> {
+    fn create(path: &Path, s: &Scenario) -> std::io::Result<RowWriter> {
         let mut out = BufWriter::with_capacity(1 << 20, File::create(path)?);
         writeln!(out, "{}", COLUMNS.join(","))?;
-        Ok(TrajectoryWriter {
+        Ok(RowWriter {
             out,
             margin: s.controller.attitude.attitude_margin_rad,
             rate_limit: s.controller.attitude.rate_limit_rad_s,
@@ -106,15 +223,10 @@ impl TrajectoryWriter {
     }
 
     /// Writes one row per agent for this step.
-    pub fn write_step(
-        &mut self,
-        r: &ReferenceFrame,
-        truths: &[PlantTruth],
-        commands: &[ControlCommand],
-        metrics: &Metrics,
-    ) -> std::io::Result<()> {
+    fn write_rows(&mut self, rows: &StepRows) -> std::io::Result<()> {
         let mut fmt = ryu::Buffer::new();
-        for (i, (tr, cmd)) in truths.iter().zip(commands).enumerate() {
+        let r = rows;
+        for (i, (tr, cmd)) in rows.truths.iter().zip(&rows.commands).enumerate() {
             let st = &tr.state;
             let tm = &cmd.telemetry;
             let line = &mut self.line;
@@ -125,9 +237,9 @@ impl TrajectoryWriter {
             line.push(',');
             line.push_str(itoa::Buffer::new().format(i + 1));
             let pd = [
-                r.p_d[0] + r.offset[i][0],
-                r.p_d[1] + r.offset[i][1],
-                r.p_d[2] + r.offset[i][2],
+                r.p_d[0] + r.offsets[i][0],
+                r.p_d[1] + r.offsets[i][1],
+                r.p_d[2] + r.offsets[i][2],
             ];
             let e = [
                 st.position[0] - pd[0],
@@ -143,7 +255,7 @@ impl TrajectoryWriter {
                 &st.rate,
                 &pd,
                 &e,
-                &[metrics.agents[i].last_error],
+                &[rows.errors[i]],
                 &r.target[..2],
                 &tm.u_p,
                 &[tr.thrust_n],
@@ -177,7 +289,7 @@ impl TrajectoryWriter {
     }
 
     /// Flushes the buffer to the file.
-    pub fn flush(&mut self) -> std::io::Result<()> {
+    fn flush(&mut self) -> std::io::Result<()> {
         self.out.flush()
     }
 }

@@ -79,7 +79,7 @@ impl Recorder {
 
     /// Flushes the CSV and writes `summary.json`; returns the summary.
     pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
-        self.csv.flush()?;
+        self.csv.close()?;
         let mut summary = summary::Summary::build(
             &self.metrics,
             &self.scenario,

@@ -11,7 +11,6 @@ use formation_config::runtime::ports::{
     notifier, poke, publisher, slice_subscriber, subscriber, Pub, RunNode, Sub, Svc, Wake,
 };
 use formation_config::runtime::{self as rt};
-use formation_config::services;
 use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use iceoryx2::port::notifier::Notifier;
 use std::collections::VecDeque;
@@ -33,7 +32,6 @@ pub enum Outcome {
 pub struct Ports {
     hello: Sub<Hello>,
     steps: Sub<[StepEntry]>,
-    reference: Sub<ReferenceFrame>,
     control: Pub<RunControl>,
     progress: Pub<RunProgress>,
     wakes: Vec<Notifier<Svc>>,
@@ -55,7 +53,6 @@ impl Ports {
         Ok(Ports {
             hello: subscriber(node, rt::HELLO)?,
             steps: slice_subscriber(node, rt::STEPS)?,
-            reference: subscriber(node, services::REFERENCE)?,
             control: publisher(node, rt::CONTROL)?,
             progress: publisher(node, rt::PROGRESS)?,
             wakes,
@@ -132,15 +129,20 @@ pub fn wait_for_hellos(
 /// number of steps recorded.
 pub fn drive(
     ports: &Ports,
+    live: &mut super::Live,
+    mission: &formation_leader::Mission,
     recorder: &mut Recorder,
-    n: usize,
-    steps: u64,
-    dt: f64,
+    scenario: &formation_config::Scenario,
     children: &mut [RoleProcess],
     interrupted: &AtomicBool,
 ) -> (Outcome, u64) {
+    let n = scenario.n_agents();
+    let steps = scenario.n_steps();
+    let dt = scenario.simulation.dt_s;
     let mut recorded: u64 = 0;
-    let mut refs: VecDeque<ReferenceFrame> = VecDeque::new();
+    // The reference of step k is a pure function of (k, t_k): the recorder computes it with the same
+    // code as the leader process (bit-identical), instead of depending on the leader's stream.
+    let mut reference = ReferenceFrame::default();
     let mut records: VecDeque<(Vec<PlantTruth>, Vec<ControlCommand>)> = VecDeque::new();
     let mut truths = vec![PlantTruth::default(); n];
     let mut commands = vec![ControlCommand::default(); n];
@@ -153,7 +155,6 @@ pub fn drive(
         if let Err(e) = ports.wake.wait(SUPERVISE_EVERY) {
             return (Outcome::Failed(e), recorded);
         }
-        // Records first, then references: every drained record's reference was published before it.
         let mut got = 0;
         while let Ok(Some(s)) = ports.steps.receive() {
             if s.payload().len() != n {
@@ -166,9 +167,6 @@ pub fn drive(
             ));
             got += 1;
         }
-        while let Ok(Some(r)) = ports.reference.receive() {
-            refs.push_back(*r);
-        }
         while let Some((t, c)) = records.pop_front() {
             let k = recorded;
             if t.first().is_some_and(|x| x.state.step != k) {
@@ -178,19 +176,7 @@ pub fn drive(
                 );
                 return (Outcome::Failed(msg), recorded);
             }
-            while refs.front().is_some_and(|r| r.step < k) {
-                refs.pop_front();
-            }
-            if refs.is_empty() {
-                // Realtime: the plant ran ahead of the leader's lead (the leader is paced by what
-                // is recorded); keep the record until the reference comes.
-                records.push_front((t, c));
-                break;
-            }
-            let Some(reference) = refs.front().copied().filter(|r| r.step == k) else {
-                let msg = format!("protocol error: no reference frame for step {k}");
-                return (Outcome::Failed(msg), recorded);
-            };
+            mission.reference(k, k as f64 * dt, &mut reference);
             truths.copy_from_slice(&t);
             commands.copy_from_slice(&c);
             recorded = k + 1;
@@ -207,7 +193,12 @@ pub fn drive(
             progress.finish(recorded);
             return (Outcome::Completed, recorded);
         }
-        if got > 0 || !records.is_empty() {
+        // Injections are forwarded before the progress that lets the plant move on.
+        if let Err(e) = live.injections.poll(recorded) {
+            return (Outcome::Failed(e), recorded);
+        }
+        live.registration.update(recorded);
+        if got > 0 {
             if let Err(e) = ports.announce(recorded) {
                 return (Outcome::Failed(e), recorded);
             }

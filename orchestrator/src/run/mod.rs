@@ -8,12 +8,14 @@
 
 mod cleanup;
 mod driver;
+mod injections;
 mod progress;
 mod services;
 mod spawn;
 mod timing;
 
 use crate::cli;
+use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord};
 use crate::record::Recorder;
 use driver::Outcome;
 use formation_config::runtime::args::ChildArgs;
@@ -174,6 +176,14 @@ fn new_run_id() -> String {
     format!("{:x}{:04x}", std::process::id(), nanos & 0xffff)
 }
 
+/// What the driver keeps up to date for the client commands (`ps`, `inspect`, `inject`).
+pub struct Live {
+    /// Incoming injection requests, forwarded and logged.
+    pub injections: injections::Injections,
+    /// The run's registry record.
+    pub registration: Registration,
+}
+
 /// Kills and reaps the role processes if the run returns early.
 struct Children(Vec<RoleProcess>);
 
@@ -201,6 +211,9 @@ fn run(
     crate::sim::write_resolved_scenario(scenario, &run_dir)
         .map_err(|e| format!("cannot write {}/scenario.toml: {e}", run_dir.display()))?;
     if let Err(e) = cleanup::write_iox2_config(&run_dir, prefix) {
+        eprintln!("warning: {e}");
+    }
+    if let Err(e) = formation_config::runtime::logging::init(&run_dir, "orchestrator.log", true) {
         eprintln!("warning: {e}");
     }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
@@ -251,20 +264,62 @@ fn run(
         scenario.n_steps(),
         pids.join(" ")
     );
+    let mut processes = vec![ProcessEntry {
+        role: "orchestrator".into(),
+        agent: None,
+        pid: std::process::id(),
+    }];
+    for (k, c) in children.0.iter().enumerate() {
+        processes.push(ProcessEntry {
+            role: ["plant", "leader"]
+                .get(k)
+                .copied()
+                .unwrap_or("agent")
+                .into(),
+            agent: k.checked_sub(1).filter(|&a| a >= 1),
+            pid: c.pid(),
+        });
+    }
+    let registration = Registration::create(RunRecord {
+        id: run_id.to_string(),
+        prefix: prefix.to_string(),
+        out_dir: run_dir.clone(),
+        scenario: scenario.name.clone(),
+        variant: variant.name().to_string(),
+        n_agents: n,
+        steps: scenario.n_steps(),
+        dt_s: scenario.simulation.dt_s,
+        orchestrator_start_ticks: 0,
+        started_unix_s: unix_now(),
+        processes,
+        last_step: 0,
+        steps_per_s: 0.0,
+    })?;
+    tracing::info!(
+        run = run_id,
+        record = %registration.path().display(),
+        "run registered (see `formation ps`)"
+    );
+    let mut live = Live {
+        injections: injections::Injections::open(&node, scenario, &run_dir)?,
+        registration,
+    };
     let (outcome, recorded) = match driver::wait_for_hellos(&ports, n, &mut children.0, interrupted)
     {
         Ok(()) => driver::drive(
             &ports,
+            &mut live,
+            &formation_leader::Mission::from_scenario(scenario),
             &mut recorder,
-            n,
-            scenario.n_steps(),
-            scenario.simulation.dt_s,
+            scenario,
             &mut children.0,
             interrupted,
         ),
         Err(o) => (o, 0),
     };
+    tracing::info!(recorded, outcome = ?outcome, "run ending");
     ports.stop(recorded);
+    drop(live);
     spawn::stop_all(&mut children.0, STOP_GRACE);
     drop(ports);
     drop(services);

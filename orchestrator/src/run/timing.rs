@@ -79,9 +79,11 @@ pub fn collect(
         skipped += count(a, "skipped_states");
     }
     let command_hop = hist(&plant, "command_hop");
+    // Pooled: the two hops a wake-up follows at once (plant -> agent, agent -> plant). Shares are
+    // not followed by a wake-up after step 0 (the neighbour reads them at its next state), so their
+    // "hop" includes up to a period of waiting and is reported apart.
     let mut hop = state_hop.clone();
     hop.merge(&command_hop);
-    hop.merge(&share_hop);
     let mut ipc = quantiles(&hop);
     ipc["plant_to_agent"] = quantiles(&state_hop);
     ipc["agent_to_plant"] = quantiles(&command_hop);

@@ -33,6 +33,7 @@ pub fn run() -> Result<(), String> {
     loop {
         while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
             if c.kind == CONTROL_STOP {
+                tracing::info!(step = k, "stop received");
                 return Ok(());
             }
         }
@@ -81,6 +82,14 @@ pub fn run() -> Result<(), String> {
             faults.retain(|f| {
                 if f.step <= k {
                     plant.inject_fault(f);
+                    tracing::info!(
+                        step = k,
+                        agent = f.agent + 1,
+                        gamma = ?f.gamma,
+                        delta = ?f.delta,
+                        mode = f.mode,
+                        "fault injection applied"
+                    );
                     false
                 } else {
                     true

@@ -1,0 +1,52 @@
+//! `tracing` set-up of every formation process: `RUST_LOG` (default `info`), one log file per
+//! process under `<run dir>/logs/<role>[-<agent>].log`, and optionally a console on stderr.
+
+use std::fs::File;
+use std::io::IsTerminal;
+use std::path::Path;
+use std::sync::Mutex;
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+use tracing_subscriber::{fmt, EnvFilter, Layer};
+
+/// Log file name of a process: `plant`, `leader`, `orchestrator`, or `agent-<i>` with i 1-based.
+pub fn log_file_name(role: &str, agent: Option<usize>) -> String {
+    match agent {
+        Some(i) => format!("{role}-{}.log", i + 1),
+        None => format!("{role}.log"),
+    }
+}
+
+/// Installs the global subscriber: a file layer writing to `<run_dir>/logs/<name>` (created if
+/// needed) and, if `console`, a compact layer on stderr. Returns an error text (logging then stays
+/// off or console-only) when the file cannot be created; never panics.
+pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), String> {
+    let filter = || EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let dir = run_dir.join("logs");
+    let file = std::fs::create_dir_all(&dir)
+        .and_then(|_| File::create(dir.join(file_name)))
+        .map_err(|e| format!("cannot create {}: {e}", dir.join(file_name).display()));
+    let file_layer = file.as_ref().ok().map(|f| {
+        let f = f.try_clone().ok().map(Mutex::new);
+        f.map(|w| {
+            fmt::layer()
+                .with_ansi(false)
+                .with_writer(w)
+                .with_filter(filter())
+        })
+    });
+    let console_layer = console.then(|| {
+        fmt::layer()
+            .compact()
+            .without_time()
+            .with_target(false)
+            .with_ansi(std::io::stderr().is_terminal())
+            .with_writer(std::io::stderr)
+            .with_filter(filter())
+    });
+    let _ = tracing_subscriber::registry()
+        .with(file_layer.flatten())
+        .with(console_layer)
+        .try_init();
+    file.map(|_| ())
+}

@@ -1,0 +1,203 @@
+//! `formation inject fault|delay`: validated against the run's scenario here (exit code 2 and
+//! nothing sent on a bad value), then sent to the run's orchestrator, which picks the apply step,
+//! forwards it and confirms by writing it to `DIR/events.jsonl`.
+
+use super::registry::{self, RunRecord};
+use super::validate;
+use crate::cli::EXIT_INVALID;
+use formation_config::runtime::messages::{InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT};
+use formation_config::runtime::ports::{notifier, poke, publisher, send};
+use formation_config::runtime::WAKE_ORCHESTRATOR;
+use formation_config::services;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+/// Arguments of `formation inject`.
+#[derive(clap::Args, Debug)]
+pub struct InjectArgs {
+    /// What to inject.
+    #[command(subcommand)]
+    pub what: InjectWhat,
+}
+
+/// The injection kinds.
+#[derive(clap::Subcommand, Debug)]
+pub enum InjectWhat {
+    /// Actuator fault of one agent: Gamma (multiplicative, each in (0, 1]) and delta (additive, N m).
+    Fault(FaultArgs),
+    /// Communication delay profile of one agent: tau(t), within [0, tau_M] of the run.
+    Delay(DelayArgs),
+}
+
+/// Arguments of `formation inject fault`.
+#[derive(clap::Args, Debug)]
+pub struct FaultArgs {
+    /// Agent id, 1-based (1..=N).
+    #[arg(long)]
+    pub agent: usize,
+    /// Gamma per axis, e.g. 0.5,0.5,0.5.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
+    pub gamma: Vec<f64>,
+    /// delta per axis in N m, e.g. 0,0,0.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required = true,
+        allow_negative_numbers = true
+    )]
+    pub delta: Vec<f64>,
+    /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
+    #[arg(long)]
+    pub at: Option<f64>,
+    /// Run id (see `formation ps`); may be omitted when exactly one run is running.
+    #[arg(long)]
+    pub run: Option<String>,
+}
+
+/// Arguments of `formation inject delay`.
+#[derive(clap::Args, Debug)]
+pub struct DelayArgs {
+    /// Agent id, 1-based (1..=N).
+    #[arg(long)]
+    pub agent: usize,
+    /// tau(t) in s: a constant (0.03) or base+amp*sin(w*t) (0.02+0.01*sin(0.5*t)).
+    #[arg(long, allow_hyphen_values = true)]
+    pub tau: String,
+    /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
+    #[arg(long)]
+    pub at: Option<f64>,
+    /// Run id (see `formation ps`); may be omitted when exactly one run is running.
+    #[arg(long)]
+    pub run: Option<String>,
+}
+
+/// How long to wait for the orchestrator's confirmation.
+const CONFIRM: Duration = Duration::from_secs(10);
+
+fn three(v: &[f64], name: &str) -> Result<[f64; 3], String> {
+    <[f64; 3]>::try_from(v).map_err(|_| format!("--{name}: expected three comma-separated values"))
+}
+
+/// Validates and builds the request (agent id 1-based on the command line, 0-based on the wire).
+fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
+    let (run_id, agent, at) = match what {
+        InjectWhat::Fault(a) => (a.run.as_deref(), a.agent, a.at),
+        InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
+    };
+    let run = registry::find(run_id)?;
+    let s = super::run_scenario(&run)?;
+    validate::agent(agent, run.n_agents)?;
+    let at_step = match at {
+        Some(t) => {
+            validate::at(&s, t)?;
+            (t / s.simulation.dt_s).round() as u64
+        }
+        None => INJECT_ASAP,
+    };
+    let mut r = InjectRequest {
+        nonce: nonce(),
+        at_step,
+        agent: (agent - 1) as u32,
+        ..InjectRequest::default()
+    };
+    match what {
+        InjectWhat::Fault(a) => {
+            r.kind = INJECT_FAULT;
+            r.gamma = three(&a.gamma, "gamma")?;
+            r.delta = three(&a.delta, "delta")?;
+            validate::fault(&s, r.gamma, r.delta)?;
+        }
+        InjectWhat::Delay(a) => {
+            let d = validate::parse_tau(&a.tau)?;
+            validate::delay(&s, &d)?;
+            r.kind = INJECT_DELAY;
+            r.base_s = d.base_s;
+            r.amplitude_s = d.amplitude_s;
+            r.angular_rate_rad_s = d.angular_rate_rad_s;
+        }
+    }
+    Ok((run, r))
+}
+
+fn nonce() -> u64 {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64);
+    nanos ^ ((std::process::id() as u64) << 40)
+}
+
+/// Entry point of `formation inject`.
+pub fn main(args: InjectArgs) -> ExitCode {
+    let (run, req) = match request(&args.what) {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let result = send_and_confirm(&run, &req);
+    super::tidy_after(&run);
+    match result {
+        Ok(line) => {
+            let v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
+            println!(
+                "{} injection for agent {} of run {} applies at step {} (t = {:.3} s){}",
+                v["event"].as_str().unwrap_or("?"),
+                req.agent + 1,
+                run.id,
+                v["step"],
+                v["t"].as_f64().unwrap_or(f64::NAN),
+                if v["after_end"].as_bool() == Some(true) {
+                    ", after the end of the run"
+                } else {
+                    ""
+                }
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Sends the request and waits for its line in `events.jsonl` (the publisher stays alive until
+/// then, so the sample cannot be lost).
+fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, String> {
+    let node = super::client_node(run, "inject")?;
+    let p = publisher::<InjectRequest>(&node, services::INJECT_REQUEST)?;
+    let wake = notifier(&node, WAKE_ORCHESTRATOR)?;
+    send(&p, *req)?;
+    poke(&wake);
+    let events = run.out_dir.join("events.jsonl");
+    let needle = format!("\"nonce\":{}", req.nonce);
+    let start = Instant::now();
+    while start.elapsed() < CONFIRM {
+        if let Ok(text) = std::fs::read_to_string(&events) {
+            if let Some(line) = text.lines().find(|l| l.contains(&needle)) {
+                if line.contains("\"event\":\"rejected\"") {
+                    return Err(format!("the run rejected the injection: {line}"));
+                }
+                return Ok(line.to_string());
+            }
+        }
+        if !run.is_live() {
+            return Err(format!(
+                "run {} ended before confirming the injection",
+                run.id
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Err(format!(
+        "run {} did not confirm the injection within {} s",
+        run.id,
+        CONFIRM.as_secs()
+    ))
+}

@@ -1,0 +1,197 @@
+//! `formation inspect --agent I [--run ID] [--follow] [--json]`: one agent's live telemetry.
+
+use super::registry;
+use crate::cli::EXIT_INVALID;
+use formation_config::runtime::ports::{subscriber, Sub};
+use formation_config::services;
+use formation_config::wire::AgentTelemetry;
+use serde_json::{json, Value};
+use std::io::Write;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Arguments of `formation inspect`.
+#[derive(clap::Args, Debug)]
+pub struct InspectArgs {
+    /// Agent id, 1-based (1..=N) as in the CSV, the figures and the paper.
+    #[arg(long)]
+    pub agent: usize,
+    /// Run id (see `formation ps`); may be omitted when exactly one run is running.
+    #[arg(long)]
+    pub run: Option<String>,
+    /// Keep refreshing until Ctrl-C (or the end of the run).
+    #[arg(long)]
+    pub follow: bool,
+    /// One JSON object per sample.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// How long to wait for the first sample.
+const FIRST_SAMPLE: Duration = Duration::from_secs(10);
+/// Refresh interval of `--follow`.
+const REFRESH: Duration = Duration::from_millis(250);
+
+/// The newest sample in the subscriber's queue, if any.
+fn newest(sub: &Sub<AgentTelemetry>) -> Result<Option<AgentTelemetry>, String> {
+    let mut last = None;
+    while let Some(s) = sub.receive().map_err(|e| format!("telemetry: {e:?}"))? {
+        last = Some(*s);
+    }
+    Ok(last)
+}
+
+/// The sample as JSON (agent 1-based).
+pub fn to_json(run: &str, s: &AgentTelemetry) -> Value {
+    let c = &s.controller;
+    json!({
+        "run": run, "agent": s.agent + 1, "step": s.step, "t": s.t,
+        "formation_error_m": s.formation_error_m,
+        "e_p": c.e_p, "e_v": c.e_v, "tau_s": c.tau_s,
+        "attitude": s.attitude, "attitude_norm": norm(s.attitude),
+        "attitude_limit_rad": s.attitude_limit_rad,
+        "rate": s.rate, "rate_norm": norm(s.rate), "rate_limit_rad_s": s.rate_limit_rad_s,
+        "attitude_cmd": c.attitude_cmd, "z1": c.z1, "z2": c.z2, "c1": c.c1, "c2": c.c2,
+        "blf1": c.blf1, "blf2": c.blf2,
+        "u_p": c.u_p, "f_hat": c.f_hat, "nn_weight_norm": c.nn_weight_norm,
+        "gamma_hat": c.gamma_hat, "delta_hat": c.delta_hat, "d_hat": c.d_hat,
+        "model_hat_dev": c.model_hat_dev, "e1": c.e1, "e2": c.e2,
+        "loop_latency_us": s.loop_latency_us,
+    })
+}
+
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+fn v3(v: [f64; 3]) -> String {
+    format!("[{:+.4}, {:+.4}, {:+.4}]", v[0], v[1], v[2])
+}
+
+/// The sample as a readable block.
+pub fn to_text(run: &str, n: usize, s: &AgentTelemetry) -> String {
+    let c = &s.controller;
+    let mut o = String::new();
+    o += &format!(
+        "run {run}  agent {}/{n}  step {}  t = {:.3} s  controller step {:.1} us\n",
+        s.agent + 1,
+        s.step,
+        s.t,
+        s.loop_latency_us
+    );
+    o += &format!("formation error   {:.4} m\n", s.formation_error_m);
+    o += &format!("e_P (delayed)     {} m\n", v3(c.e_p));
+    o += &format!("e_V (delayed)     {} m/s\n", v3(c.e_v));
+    o += &format!("tau               {:.4} s\n", c.tau_s);
+    o += &format!(
+        "attitude |A|      {:.4} rad  limit {:.4}  A = {}  V1B = {:.3e} (C1 = {:.4})\n",
+        norm(s.attitude),
+        s.attitude_limit_rad,
+        v3(s.attitude),
+        c.blf1,
+        c.c1
+    );
+    o += &format!(
+        "rate |Omega|      {:.4} rad/s  limit {:.4}  Omega = {}  V2B = {:.3e} (C2 = {:.4})\n",
+        norm(s.rate),
+        s.rate_limit_rad_s,
+        v3(s.rate),
+        c.blf2,
+        c.c2
+    );
+    o += &format!(
+        "RBFNN |W|         {:.4}  F-hat = {} m/s^2\n",
+        c.nn_weight_norm,
+        v3(c.f_hat)
+    );
+    o += &format!("Gamma-hat         {}\n", v3(c.gamma_hat));
+    o += &format!("delta-hat         {} N m\n", v3(c.delta_hat));
+    o += &format!(
+        "D-hat             {:.4} rad/s^2   |Delta F-hat - I| = {:.4}\n",
+        c.d_hat, c.model_hat_dev
+    );
+    o += &format!("E1 {}  E2 {}\n", v3(c.e1), v3(c.e2));
+    o
+}
+
+/// Entry point of `formation inspect`.
+pub fn main(args: InspectArgs) -> ExitCode {
+    let run = match registry::find(args.run.as_deref()) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    if let Err(e) = super::validate::agent(args.agent, run.n_agents) {
+        eprintln!("error: {e}");
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let result = follow(&run, &args);
+    super::tidy_after(&run);
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
+    let stop = Arc::new(AtomicBool::new(false));
+    if args.follow {
+        let flag = stop.clone();
+        let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
+    }
+    let node = super::client_node(run, "inspect")?;
+    let sub: Sub<AgentTelemetry> = subscriber(&node, &services::telemetry(args.agent - 1))?;
+    let start = Instant::now();
+    let mut last_step = None;
+    let mut out = std::io::stdout();
+    loop {
+        if let Some(s) = newest(&sub)? {
+            if last_step != Some(s.step) {
+                last_step = Some(s.step);
+                let text = if args.json {
+                    format!("{}\n", to_json(&run.id, &s))
+                } else if args.follow {
+                    format!("\x1b[H\x1b[2J{}", to_text(&run.id, run.n_agents, &s))
+                } else {
+                    to_text(&run.id, run.n_agents, &s)
+                };
+                if out
+                    .write_all(text.as_bytes())
+                    .and_then(|_| out.flush())
+                    .is_err()
+                {
+                    return Ok(()); // stdout closed (e.g. piped into head)
+                }
+                if !args.follow {
+                    return Ok(());
+                }
+            }
+        } else if last_step.is_none() && start.elapsed() > FIRST_SAMPLE {
+            return Err(format!(
+                "no telemetry from agent {} of run {} within {} s",
+                args.agent,
+                run.id,
+                FIRST_SAMPLE.as_secs()
+            ));
+        }
+        if stop.load(Ordering::SeqCst) {
+            return Ok(());
+        }
+        if last_step.is_some() && !run.is_live() {
+            eprintln!("run {} has ended", run.id);
+            return Ok(());
+        }
+        std::thread::sleep(if last_step.is_some() {
+            REFRESH
+        } else {
+            Duration::from_millis(20)
+        });
+    }
+}

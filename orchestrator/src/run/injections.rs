@@ -1,0 +1,150 @@
+//! The orchestrator's side of `formation inject`: it drains the requests, validates them again
+//! against the run's scenario, picks the step they apply at, forwards them to the plant (faults) or
+//! the agents (delays), and appends one line per request to `DIR/events.jsonl`.
+//!
+//! The apply step is the requested one if it is far enough ahead, else the first step the plant
+//! cannot have reached yet (`recorded + PLANT_LEAD + SLACK`). Requests are forwarded before the
+//! orchestrator announces new progress, so the plant and the agents hold them before they can reach
+//! that step: results of a lockstep run stay deterministic for a given apply step.
+
+use crate::live::registry::unix_now;
+use crate::live::validate::{self, DelayProfile};
+use formation_config::runtime::messages::{InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT};
+use formation_config::runtime::ports::{publisher, send, subscriber, Pub, RunNode, Sub};
+use formation_config::runtime::PLANT_LEAD;
+use formation_config::services;
+use formation_config::wire::{DelayInjection, FaultInjection};
+use formation_config::Scenario;
+use serde_json::json;
+use std::fs::File;
+use std::io::Write;
+use std::path::Path;
+
+/// Steps beyond the plant's lead before an injection may apply.
+pub const SLACK: u64 = 4;
+
+/// Ports and log of the injections of one run.
+pub struct Injections {
+    requests: Sub<InjectRequest>,
+    faults: Pub<FaultInjection>,
+    delays: Pub<DelayInjection>,
+    events: File,
+    scenario: Scenario,
+}
+
+impl Injections {
+    /// Opens the ports and creates `out/events.jsonl`.
+    pub fn open(node: &RunNode, scenario: &Scenario, out: &Path) -> Result<Injections, String> {
+        let path = out.join("events.jsonl");
+        Ok(Injections {
+            requests: subscriber(node, services::INJECT_REQUEST)?,
+            faults: publisher(node, services::FAULT_INJECTION)?,
+            delays: publisher(node, services::DELAY_INJECTION)?,
+            events: File::create(&path)
+                .map_err(|e| format!("cannot create {}: {e}", path.display()))?,
+            scenario: scenario.clone(),
+        })
+    }
+
+    /// Handles every pending request; call it before announcing `recorded` as progress.
+    pub fn poll(&mut self, recorded: u64) -> Result<(), String> {
+        while let Ok(Some(r)) = self.requests.receive() {
+            let r = *r;
+            self.handle(&r, recorded)?;
+        }
+        Ok(())
+    }
+
+    fn check(&self, r: &InjectRequest) -> Result<(), String> {
+        validate::agent(r.agent as usize + 1, self.scenario.n_agents())?;
+        match r.kind {
+            INJECT_FAULT => validate::fault(&self.scenario, r.gamma, r.delta),
+            INJECT_DELAY => validate::delay(&self.scenario, &profile(r)),
+            k => Err(format!("unknown injection kind {k}")),
+        }
+    }
+
+    fn handle(&mut self, r: &InjectRequest, recorded: u64) -> Result<(), String> {
+        let wall = unix_now();
+        if let Err(e) = self.check(r) {
+            tracing::warn!(nonce = r.nonce, "injection rejected: {e}");
+            return self.log(json!({
+                "wall_time_unix_s": wall, "event": "rejected", "nonce": r.nonce,
+                "recorded_step": recorded, "error": e,
+            }));
+        }
+        let earliest = recorded + PLANT_LEAD + SLACK;
+        let step = if r.at_step != INJECT_ASAP && r.at_step >= earliest {
+            r.at_step
+        } else {
+            earliest
+        };
+        let dt = self.scenario.simulation.dt_s;
+        let t = step as f64 * dt;
+        let requested = (r.at_step != INJECT_ASAP).then_some(r.at_step);
+        let after_end = step >= self.scenario.n_steps();
+        let agent = r.agent as usize + 1;
+        if r.kind == INJECT_FAULT {
+            send(
+                &self.faults,
+                FaultInjection {
+                    step,
+                    t,
+                    agent: r.agent,
+                    mode: 1,
+                    gamma: r.gamma,
+                    delta: r.delta,
+                },
+            )?;
+            tracing::info!(agent, step, t, gamma = ?r.gamma, delta = ?r.delta, "fault injection accepted");
+            self.log(json!({
+                "wall_time_unix_s": wall, "event": "fault", "nonce": r.nonce, "agent": agent,
+                "step": step, "t": t, "requested_step": requested, "recorded_step": recorded,
+                "after_end": after_end, "gamma": r.gamma, "delta": r.delta,
+            }))
+        } else {
+            let d = profile(r);
+            send(
+                &self.delays,
+                DelayInjection {
+                    step,
+                    t,
+                    agent: r.agent,
+                    _pad: 0,
+                    base_s: d.base_s,
+                    amplitude_s: d.amplitude_s,
+                    angular_rate_rad_s: d.angular_rate_rad_s,
+                },
+            )?;
+            tracing::info!(
+                agent,
+                step,
+                t,
+                base_s = d.base_s,
+                amplitude_s = d.amplitude_s,
+                rate_rad_s = d.angular_rate_rad_s,
+                "delay injection accepted"
+            );
+            self.log(json!({
+                "wall_time_unix_s": wall, "event": "delay", "nonce": r.nonce, "agent": agent,
+                "step": step, "t": t, "requested_step": requested, "recorded_step": recorded,
+                "after_end": after_end, "base_s": d.base_s, "amplitude_s": d.amplitude_s,
+                "angular_rate_rad_s": d.angular_rate_rad_s,
+            }))
+        }
+    }
+
+    fn log(&mut self, v: serde_json::Value) -> Result<(), String> {
+        writeln!(self.events, "{v}")
+            .and_then(|_| self.events.flush())
+            .map_err(|e| format!("cannot write events.jsonl: {e}"))
+    }
+}
+
+fn profile(r: &InjectRequest) -> DelayProfile {
+    DelayProfile {
+        base_s: r.base_s,
+        amplitude_s: r.amplitude_s,
+        angular_rate_rad_s: r.angular_rate_rad_s,
+    }
+}
