@@ -100,7 +100,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     let dir = temp_dir("inspect-live");
     let runs = dir.join("runs");
     let run = RunningRun::start_with_env(
-        &["--set", "simulation.duration_s=20"],
+        &["--set", "simulation.duration_s=40"],
         &dir.join("out"),
         &[("FORMATION_RUNS_DIR", &runs)],
     );
@@ -152,7 +152,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
             "--gamma",
             "0.5,0.5,0.5",
             "--delta",
-            "0,0,0",
+            "0.15,0.1,0.5",
         ],
     ));
     let delay_step = applies_at(&formation(
@@ -161,32 +161,23 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     ));
     assert!(fault_step > before["step"].as_u64().unwrap());
 
-    // What the estimator really does (measured, see the report of this branch): with Gamma = 0.5 and
-    // delta = 0 the roll/pitch torques of a cruising quadrotor are too small to excite the Gamma-hat
-    // law (48), whose leakage pulls it towards 1, so Gamma-hat does not move measurably towards
-    // 0.5. The injection removes the scenario's additive fault, though (a yaw bias and a roll/pitch
-    // ramp of 0.1 N m), and delta-hat (47) follows it: its roll and pitch components fall to well
-    // below half their pre-injection values within a few seconds. That is the assertion.
+    // While the run flies on, inspect keeps answering and Gamma-hat stays inside its projection bounds
+    // (Assumption 5); the effect of the injection on Gamma-hat is checked at the end against a baseline.
     let start = Instant::now();
-    let mut seen = false;
-    while !seen && run.role_processes().len() == 7 && start.elapsed() < TIMEOUT {
+    let mut samples = 0;
+    while run.role_processes().len() == 7 && start.elapsed() < TIMEOUT {
         if let Some(s) = inspect(&runs, 2) {
-            let d = vec3(&s, "delta_hat");
             let g = vec3(&s, "gamma_hat");
             assert!(
                 g.iter().all(|x| (0.3..=1.05).contains(x)),
                 "Gamma-hat within its projection bounds: {s}"
             );
-            seen = s["step"].as_u64().unwrap() > fault_step
-                && d[0] < 0.5 * delta_before[0]
-                && d[1] < 0.5 * delta_before[1];
+            samples += 1;
         }
         std::thread::sleep(Duration::from_millis(100));
     }
-    assert!(
-        seen,
-        "delta-hat of agent 2 never fell below half of {delta_before:?} (Gamma-hat before: {gamma_before:?})"
-    );
+    assert!(samples > 0, "inspect answered during the run");
+    let _ = (gamma_before, delta_before);
 
     let mut run = run;
     let (status, _) = run.wait(TIMEOUT).expect("the run finishes");
@@ -200,6 +191,41 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
         assert_eq!(a["rate_constraint_violations"], 0, "{a}");
     }
     assert_eq!(summary["diverged"], false);
+
+    // Gamma-hat moves towards the injected 0.5: compared with the same scenario flown without the
+    // injection (in-process, deterministic), agent 2's pitch Gamma-hat over the last 10 s is lower.
+    let baseline_dir = dir.join("baseline");
+    let status = std::process::Command::new(formation_tests::bin("formation"))
+        .args([
+            "sim",
+            "--set",
+            "simulation.duration_s=40",
+            "--quiet",
+            "--out",
+        ])
+        .arg(&baseline_dir)
+        .output()
+        .expect("formation sim runs");
+    assert!(status.status.success());
+    let late_mean = |csv: &std::path::Path| -> f64 {
+        let text = std::fs::read_to_string(csv).unwrap();
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+        let (t, agent, g) = (col("t"), col("agent"), col("gamma_hat_y"));
+        let vals: Vec<f64> = lines
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .filter(|f| f[agent] == "2" && f[t].parse::<f64>().unwrap() >= 30.0)
+            .map(|f| f[g].parse().unwrap())
+            .collect();
+        vals.iter().sum::<f64>() / vals.len() as f64
+    };
+    let injected = late_mean(&out.join("trajectory.csv"));
+    let baseline = late_mean(&baseline_dir.join("trajectory.csv"));
+    assert!(
+        injected < baseline - 0.02,
+        "pitch Gamma-hat of agent 2 over 30-40 s: {injected} with Gamma = 0.5 injected vs {baseline} without"
+    );
 
     let events = std::fs::read_to_string(out.join("events.jsonl")).expect("events.jsonl");
     let events: Vec<Value> = events
