@@ -33,7 +33,8 @@ struct Cli {
 enum Command {
     /// Run the closed loop in one process and write trajectory.csv and summary.json.
     Sim(sim::SimArgs),
-    /// Run one OS process per quadrotor (plus plant and leader) over iceoryx2, in lockstep.
+    /// Run one OS process per quadrotor (plus plant and leader) over iceoryx2, in lockstep (or on
+    /// the wall clock with `--realtime`).
     Run(run::RunArgs),
     /// Generate a scenario with N agents on a ring or path graph from the paper template.
     Scenario(scenario_gen::ScenarioArgs),
