@@ -82,3 +82,32 @@ pub fn parse_variant(name: &str) -> Result<formation_config::Variant, ExitCode> 
         ExitCode::from(EXIT_INVALID)
     })
 }
+
+/// What every runner (`sim`, `run`) takes: scenario, variant, output directory and overrides.
+#[derive(clap::Args, Debug, Default, Clone)]
+pub struct RunnerArgs {
+    /// Scenario: `paper` (default), `paper-exact`, or a TOML file.
+    pub scenario: Option<String>,
+    /// Controller variant: proposed, no-rbfnn, unconstrained.
+    #[arg(long, default_value = "proposed")]
+    pub variant: String,
+    /// Output directory (default: out/<scenario>-<variant>[-<mode>]).
+    #[arg(long)]
+    pub out: Option<std::path::PathBuf>,
+    /// Override a scenario parameter, e.g. `--set controller.position.k_p=1.5` (repeatable).
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    pub sets: Vec<String>,
+}
+
+impl RunnerArgs {
+    /// The validated scenario (after the overrides) and the variant; exit code 2 with clear errors.
+    pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {
+        let scenario = load_with_overrides(self.scenario.as_deref(), &self.sets)?;
+        let name = if self.variant.is_empty() {
+            "proposed"
+        } else {
+            &self.variant
+        };
+        Ok((scenario, parse_variant(name)?))
+    }
+}

@@ -17,17 +17,9 @@ use std::time::Instant;
 /// Arguments of `formation sim`.
 #[derive(clap::Args, Debug, Default)]
 pub struct SimArgs {
-    /// Scenario: `paper` (default), `paper-exact`, or a TOML file.
-    pub scenario: Option<String>,
-    /// Controller variant: proposed, no-rbfnn, unconstrained.
-    #[arg(long, default_value = "proposed")]
-    pub variant: String,
-    /// Output directory (default: out/<scenario>-<variant>).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Override a scenario parameter, e.g. `--set controller.position.k_p=1.5` (repeatable).
-    #[arg(long = "set", value_name = "PATH=VALUE")]
-    pub sets: Vec<String>,
+    /// Scenario, variant, output directory, overrides.
+    #[command(flatten)]
+    pub common: cli::RunnerArgs,
     /// Print only the summary JSON path (for scripts).
     #[arg(long)]
     pub quiet: bool,
@@ -39,19 +31,12 @@ pub struct SimArgs {
 
 /// Entry point of `formation sim`.
 pub fn main(args: SimArgs) -> ExitCode {
-    let scenario = match cli::load_with_overrides(args.scenario.as_deref(), &args.sets) {
-        Ok(s) => s,
-        Err(code) => return code,
-    };
-    let variant = match cli::parse_variant(if args.variant.is_empty() {
-        "proposed"
-    } else {
-        &args.variant
-    }) {
+    let (scenario, variant) = match args.common.load() {
         Ok(v) => v,
         Err(code) => return code,
     };
     let out = args
+        .common
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}", scenario.name, variant.name())));
     if let Err(e) = write_resolved_scenario(&scenario, &out) {

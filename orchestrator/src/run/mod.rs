@@ -30,17 +30,9 @@ use std::time::{Duration, Instant};
 /// Arguments of `formation run`.
 #[derive(clap::Args, Debug, Default)]
 pub struct RunArgs {
-    /// Scenario: `paper` (default), `paper-exact`, or a TOML file.
-    pub scenario: Option<String>,
-    /// Controller variant: proposed, no-rbfnn, unconstrained.
-    #[arg(long, default_value = "proposed")]
-    pub variant: String,
-    /// Output directory (default: out/<scenario>-<variant>-lockstep).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Override a scenario parameter, e.g. `--set simulation.duration_s=2` (repeatable).
-    #[arg(long = "set", value_name = "PATH=VALUE")]
-    pub sets: Vec<String>,
+    /// Scenario, variant, output directory, overrides.
+    #[command(flatten)]
+    pub common: cli::RunnerArgs,
     /// Realtime mode: the plant integrates on the wall clock with a deadline per step and the
     /// injected delays are real (see docs/realtime.md); timing goes into summary.json.
     #[arg(long)]
@@ -83,15 +75,7 @@ const STOP_GRACE: Duration = Duration::from_millis(1000);
 
 /// Entry point of `formation run`.
 pub fn main(args: RunArgs) -> ExitCode {
-    let scenario = match cli::load_with_overrides(args.scenario.as_deref(), &args.sets) {
-        Ok(s) => s,
-        Err(code) => return code,
-    };
-    let variant = match cli::parse_variant(if args.variant.is_empty() {
-        "proposed"
-    } else {
-        &args.variant
-    }) {
+    let (scenario, variant) = match args.common.load() {
         Ok(v) => v,
         Err(code) => return code,
     };
@@ -109,7 +93,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         spin_us: args.spin_us,
         rt_priority: args.rt_priority,
     };
-    let out = args.out.unwrap_or_else(|| {
+    let out = args.common.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
             "out/{}-{}-{}",
             scenario.name,
