@@ -159,9 +159,7 @@ impl Agent {
     pub fn delay_at(&self, step: u64) -> f64 {
         let t = step as f64 * self.p.dt;
         match &self.delay_override {
-            Some((from, d)) if step >= *from => (d.base_s
-                + d.amplitude_s * (d.angular_rate_rad_s * t).sin())
-            .clamp(0.0, self.p.max_delay),
+            Some((from, d)) if step >= *from => d.tau(t, self.p.max_delay),
             _ => self.p.delay_at(t),
         }
     }

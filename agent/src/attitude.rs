@@ -19,7 +19,7 @@ use crate::command_filter::CommandFilter;
 use crate::params::AgentParams;
 use formation_config::Variant;
 use formation_plant::dynamics::rotational_drift;
-use formation_plant::kinematics::euler_rate_matrix;
+use formation_plant::kinematics::AttitudeTrig;
 use nalgebra::{Matrix3, Vector3};
 
 /// Internal states of the attitude loop.
@@ -96,8 +96,9 @@ impl AttitudeLoop {
         let unconstrained = p.variant == Variant::Unconstrained;
         let j = Vector3::from(p.inertia);
         let j_inv = j.map(|x| 1.0 / x);
-        let r_r = euler_rate_matrix(a);
-        let r_r_inv = euler_rate_matrix_inverse(a);
+        let trig = AttitudeTrig::of(a);
+        let r_r = trig.euler_rate_matrix();
+        let r_r_inv = trig.euler_rate_matrix_inverse();
 
         // ---- Step 1: attitude error and virtual control alpha_iC (34).
         let z1 = a - a_c;
@@ -231,11 +232,4 @@ fn aux_step(
         0.0
     };
     e * (-(k_e + kappa) * dt).exp() + drive * (gamma_e * dt)
-}
-
-/// R_r^-1 in closed form: Omega = R_r^-1 A' (the body rates of given Euler-angle rates).
-pub fn euler_rate_matrix_inverse(a: &Vector3<f64>) -> Matrix3<f64> {
-    let (sf, cf) = a[0].sin_cos();
-    let (st, ct) = a[1].sin_cos();
-    Matrix3::new(1.0, 0.0, -st, 0.0, cf, sf * ct, 0.0, -sf, cf * ct)
 }

@@ -65,7 +65,6 @@ impl AgentParams {
 
     /// tau_i(t), s, clamped to [0, tau_M] (Assumption 2).
     pub fn delay_at(&self, t: f64) -> f64 {
-        let d = &self.delay;
-        (d.base_s + d.amplitude_s * (d.angular_rate_rad_s * t).sin()).clamp(0.0, self.max_delay)
+        self.delay.tau(t, self.max_delay)
     }
 }

@@ -54,23 +54,10 @@ pub fn consensus_errors(
     (ep, ev)
 }
 
-/// Eq. (14): U_iP = -k_P e_iP - k_V e_iV - F-hat_iP + Delta_i0'' (+ P_d'' with our feedforward,
-/// - k_L (V_i - P_d' - Delta_i0') with our leader-relative damping, D11), then
-/// the limits: horizontal norm, vertical range (keeps U_i3P + g > 0, Remark 3) and the tilt the
-/// horizontal part implies.
-pub fn control_law(
-    g: &PositionGains,
-    gravity: f64,
-    ep: [f64; 3],
-    ev: [f64; 3],
-    f_hat: [f64; 3],
-    me: &Member,
-    leader: &LeaderInfo,
-) -> [f64; 3] {
-    limit(g, gravity, raw_law(g, ep, ev, f_hat, me, leader))
-}
-
-/// U_iP of eq. (14) before the limits of D5.
+/// Eq. (14) before the limits of D5: U_iP = -k_P e_iP - k_V e_iV - F-hat_iP + Delta_i0'' (+ P_d'' with
+/// our feedforward, D4; - k_L (V_i - P_d' - Delta_i0') - k_LP (P_i - P_d - Delta_i0) with our
+/// leader-relative terms, D11). The caller applies [`limit`] (and knows from the difference whether the
+/// limit is active).
 pub fn raw_law(
     g: &PositionGains,
     ep: [f64; 3],

@@ -36,7 +36,7 @@ impl Rbfnn {
     ) -> Rbfnn {
         let l = l.clamp(1, MAX_NEURONS);
         let n_v = n_v.clamp(1, l);
-        let n_v = if l % n_v == 0 { n_v } else { 1 };
+        let n_v = if l.is_multiple_of(n_v) { n_v } else { 1 };
         let n_p = (l / n_v).max(1);
         let spaced = |j: usize, n: usize| {
             if n == 1 {

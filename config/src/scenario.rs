@@ -580,10 +580,11 @@ impl Scenario {
             .round()
             .max(1.0) as u64
     }
+}
 
-    /// Delay tau_i(t) of agent `i` (0-based) at time `t`, s.
-    pub fn delay_at(&self, i: usize, t: f64) -> f64 {
-        let d = &self.agents[i].delay;
-        d.base_s + d.amplitude_s * (d.angular_rate_rad_s * t).sin()
+impl DelaySpec {
+    /// tau(t) = base + amplitude sin(angular_rate t), clamped to [0, tau_max] (Assumption 2), s.
+    pub fn tau(&self, t: f64, tau_max: f64) -> f64 {
+        (self.base_s + self.amplitude_s * (self.angular_rate_rad_s * t).sin()).clamp(0.0, tau_max)
     }
 }

@@ -12,8 +12,6 @@ pub const REFERENCE: &str = "formation/reference";
 pub const FAULT_INJECTION: &str = "formation/inject/fault";
 /// Orchestrator -> agents: [`crate::wire::DelayInjection`].
 pub const DELAY_INJECTION: &str = "formation/inject/delay";
-/// Plant -> recorder: [`crate::wire::PlantTruth`].
-pub const PLANT_TRUTH: &str = "formation/plant/truth";
 
 /// Plant -> agent i: [`crate::wire::VehicleState`].
 pub fn vehicle_state(i: usize) -> String {

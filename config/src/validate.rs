@@ -3,6 +3,9 @@
 //! Every error names the offending field (as a TOML path) and the assumption it breaks, so that a
 //! user sees at once what to fix. Commands exit with code 2 on a validation error.
 
+// `!(x > 0.0)` rather than `x <= 0.0` throughout: the negated form also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::graph::Topology;
 use crate::scenario::{AgentSpec, Scenario};
 use crate::MAX_AGENTS;
@@ -338,7 +341,7 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         CTRL,
     );
     let nv = ctl.rbfnn.velocity_centres;
-    if nv == 0 || ctl.rbfnn.neurons_per_axis % nv.max(1) != 0 {
+    if nv == 0 || !ctl.rbfnn.neurons_per_axis.is_multiple_of(nv.max(1)) {
         c.push(
             "controller.rbfnn.velocity_centres",
             CTRL,

@@ -11,8 +11,8 @@
 //! 3. agent i -> its neighbours: [`NeighborState`] (P_i, V_i at t_k), published as soon as step 2 arrives.
 //! 4. agent i -> plant  : [`ControlCommand`] for step k, computed from information stamped
 //!    t_k - tau_i(t_k) (its own, its neighbours', the leader's) and its current attitude and rate.
-//! 5. plant integrates [t_k, t_{k+1}] once all N commands of step k are in, and publishes
-//!    [`PlantTruth`] (at the output rate) for the recorder.
+//! 5. plant integrates [t_k, t_{k+1}] once all N commands of step k are in, and sends the step's
+//!    N [`PlantTruth`]s with the N commands to the recorder (see `runtime::messages::StepEntry`).
 //!
 //! Injections from the orchestrator: [`FaultInjection`] (-> plant), [`DelayInjection`] (-> agents).
 

@@ -1,5 +1,6 @@
 //! Eq. (1)-(2) of one quadrotor and a fixed-step RK4 with the inputs held over the step.
 
+use crate::kinematics::AttitudeTrig;
 use crate::perturbations::{disturbance, model_perturbation, uncertainty};
 use formation_config::scenario::AgentSpec;
 use nalgebra::Vector3;
@@ -106,19 +107,11 @@ pub fn derivative_with(
     tt: &TimeTerms,
 ) -> RigidState {
     let f_p = uncertainty(&spec.uncertainty, &x.p, &x.v);
-    let (sf, cf) = x.a[0].sin_cos();
-    let (st, ct) = x.a[1].sin_cos();
-    let (sp, cp) = x.a[2].sin_cos();
-    let thrust_axis = Vector3::new(st * cp * cf + sp * sf, st * sp * cf - cp * sf, ct * cf);
-    let acc = thrust_axis * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
-    // A' = R_r Omega, R_r of eq. (2).
+    let trig = AttitudeTrig::of(&x.a);
+    let acc =
+        trig.thrust_axis() * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
     let w = &x.w;
-    let tt_theta = st / ct;
-    let a_dot = Vector3::new(
-        w[0] + (sf * w[1] + cf * w[2]) * tt_theta,
-        cf * w[1] - sf * w[2],
-        (sf * w[1] + cf * w[2]) / ct,
-    );
+    let a_dot = trig.euler_rates(w);
     let w_dot = tt.model * rotational_drift(&body.inertia, &body.drag, w)
         + u.torque.component_div(&body.inertia)
         + tt.disturbance;

@@ -21,20 +21,78 @@ pub fn rotation(a: &Vector3<f64>) -> Matrix3<f64> {
     )
 }
 
+/// Sines and cosines of an attitude, computed once for the several matrices that need them.
+#[derive(Debug, Clone, Copy)]
+pub struct AttitudeTrig {
+    sf: f64,
+    cf: f64,
+    st: f64,
+    ct: f64,
+    sp: f64,
+    cp: f64,
+}
+
+impl AttitudeTrig {
+    /// The trigonometric values of A = [phi, theta, psi].
+    pub fn of(a: &Vector3<f64>) -> AttitudeTrig {
+        let (sf, cf) = a[0].sin_cos();
+        let (st, ct) = a[1].sin_cos();
+        let (sp, cp) = a[2].sin_cos();
+        AttitudeTrig {
+            sf,
+            cf,
+            st,
+            ct,
+            sp,
+            cp,
+        }
+    }
+
+    /// Third column of R_t (the thrust direction R_t e_3).
+    pub fn thrust_axis(&self) -> Vector3<f64> {
+        let AttitudeTrig {
+            sf,
+            cf,
+            st,
+            ct,
+            sp,
+            cp,
+        } = *self;
+        Vector3::new(st * cp * cf + sp * sf, st * sp * cf - cp * sf, ct * cf)
+    }
+
+    /// R_r Omega of eq. (2) (Euler-angle rates), without building R_r.
+    pub fn euler_rates(&self, w: &Vector3<f64>) -> Vector3<f64> {
+        let AttitudeTrig { sf, cf, st, ct, .. } = *self;
+        let tt = st / ct;
+        let (qs, rc) = (sf * w[1], cf * w[2]);
+        Vector3::new(w[0] + (qs + rc) * tt, cf * w[1] - sf * w[2], (qs + rc) / ct)
+    }
+
+    /// R_r of eq. (2). Singular at theta = +-pi/2.
+    pub fn euler_rate_matrix(&self) -> Matrix3<f64> {
+        let AttitudeTrig { sf, cf, st, ct, .. } = *self;
+        let tt = st / ct;
+        Matrix3::new(1.0, sf * tt, cf * tt, 0.0, cf, -sf, 0.0, sf / ct, cf / ct)
+    }
+}
+
+impl AttitudeTrig {
+    /// R_r^-1 in closed form: Omega = R_r^-1 A' (the body rates of given Euler-angle rates).
+    pub fn euler_rate_matrix_inverse(&self) -> Matrix3<f64> {
+        let AttitudeTrig { sf, cf, st, ct, .. } = *self;
+        Matrix3::new(1.0, 0.0, -st, 0.0, cf, sf * ct, 0.0, -sf, cf * ct)
+    }
+}
+
 /// Third column of R_t (the thrust direction R_t e_3), without building the whole matrix.
 pub fn thrust_axis(a: &Vector3<f64>) -> Vector3<f64> {
-    let (sf, cf) = a[0].sin_cos();
-    let (st, ct) = a[1].sin_cos();
-    let (sp, cp) = a[2].sin_cos();
-    Vector3::new(st * cp * cf + sp * sf, st * sp * cf - cp * sf, ct * cf)
+    AttitudeTrig::of(a).thrust_axis()
 }
 
 /// R_r of eq. (2): body rates to Euler-angle rates, A' = R_r Omega. Singular at theta = +-pi/2.
 pub fn euler_rate_matrix(a: &Vector3<f64>) -> Matrix3<f64> {
-    let (sf, cf) = a[0].sin_cos();
-    let (st, ct) = a[1].sin_cos();
-    let tt = st / ct;
-    Matrix3::new(1.0, sf * tt, cf * tt, 0.0, cf, -sf, 0.0, sf / ct, cf / ct)
+    AttitudeTrig::of(a).euler_rate_matrix()
 }
 
 /// S(Omega): the skew matrix with S(a) b = a x b.

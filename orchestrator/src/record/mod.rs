@@ -60,7 +60,7 @@ impl Recorder {
         commands: &[ControlCommand],
     ) -> std::io::Result<Option<Divergence>> {
         let div = self.metrics.record(step, reference, truths, commands);
-        if step % self.decimation == 0 || div.is_some() {
+        if step.is_multiple_of(self.decimation) || div.is_some() {
             self.csv
                 .write_step(reference, truths, commands, &self.metrics)?;
         }
