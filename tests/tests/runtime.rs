@@ -31,7 +31,7 @@ fn summary_without_timing(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json exists");
     let mut v: serde_json::Value = serde_json::from_str(&text).expect("summary.json parses");
     let obj = v.as_object_mut().expect("summary is an object");
-    for key in ["wall_time_s", "realtime_factor", "mode"] {
+    for key in ["wall_time_s", "realtime_factor", "mode", "timing"] {
         obj.remove(key);
     }
     v
@@ -71,6 +71,19 @@ fn lockstep_run_is_byte_identical_to_in_process_sim() {
     let b = std::fs::read(dir.join("sim/trajectory.csv")).unwrap();
     assert!(a.len() > 1000, "trajectory.csv is too short");
     assert!(a == b, "trajectory.csv differs between run and sim");
+    // The lockstep run times its steady state (every step after the warm-up); sim does not.
+    let text = std::fs::read_to_string(dir.join("lockstep/summary.json")).unwrap();
+    let summary: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let timing = &summary["timing"];
+    assert_eq!(
+        timing["timed_steps"],
+        2000 - timing["warmup_steps"].as_u64().unwrap()
+    );
+    let mean = timing["step_us"]["mean"].as_f64().expect("mean step time");
+    assert!(mean > 0.0 && mean < 1e6, "step time {mean} µs");
+    let sim_text = std::fs::read_to_string(dir.join("sim/summary.json")).unwrap();
+    let sim_summary: serde_json::Value = serde_json::from_str(&sim_text).unwrap();
+    assert_eq!(sim_summary.get("timing"), None, "sim has no timing");
     assert_eq!(
         summary_without_timing(&dir.join("lockstep")),
         summary_without_timing(&dir.join("sim"))

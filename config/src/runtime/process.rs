@@ -1,7 +1,14 @@
 //! Process plumbing of the role processes: names visible in `ps`, parent-death detection, and
 //! SIGTERM as a polite stop request.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// [`Lifeline::must_stop`] asks the kernel for the parent pid at most this often: the parent's
+/// death also arrives as SIGTERM (`PR_SET_PDEATHSIG`), which interrupts any wait, so the `getppid`
+/// check is a backstop and need not cost a system call per loop iteration (reading the monotonic
+/// clock does not enter the kernel).
+const PARENT_CHECK_EVERY: Duration = Duration::from_millis(20);
 
 static TERMINATED: AtomicBool = AtomicBool::new(false);
 
@@ -13,6 +20,10 @@ extern "C" fn on_term(_sig: libc::c_int) {
 #[derive(Debug)]
 pub struct Lifeline {
     parent: libc::pid_t,
+    /// Time base of `next_check_ns`.
+    born: Instant,
+    /// When the parent pid is checked next, ns after `born`.
+    next_check_ns: AtomicU64,
 }
 
 impl Lifeline {
@@ -41,6 +52,8 @@ impl Lifeline {
         Lifeline {
             // SAFETY: getppid cannot fail.
             parent: unsafe { libc::getppid() },
+            born: Instant::now(),
+            next_check_ns: AtomicU64::new(0),
         }
     }
 
@@ -49,6 +62,14 @@ impl Lifeline {
         if TERMINATED.load(Ordering::SeqCst) {
             return Some("terminated");
         }
+        let now = self.born.elapsed().as_nanos() as u64;
+        if now < self.next_check_ns.load(Ordering::Relaxed) {
+            return None;
+        }
+        self.next_check_ns.store(
+            now + PARENT_CHECK_EVERY.as_nanos() as u64,
+            Ordering::Relaxed,
+        );
         // SAFETY: getppid cannot fail.
         if unsafe { libc::getppid() } != self.parent || self.parent == 1 {
             return Some("the orchestrator is gone");

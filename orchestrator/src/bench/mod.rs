@@ -16,6 +16,7 @@
 mod case;
 mod iox;
 mod link;
+mod lockstep;
 mod peer;
 mod plan;
 mod procs;
@@ -57,6 +58,10 @@ pub struct BenchArgs {
     /// Only these transports (comma-separated: iox2-event, iox2-waitset, iox2-poll, uds-dgram, udp).
     #[arg(long)]
     pub transports: Option<String>,
+    /// Skip the lockstep case (a real `formation run` in lockstep, timed per step and set against
+    /// the iceoryx2 event fan-out; it runs whenever iox2-event is measured and `--n` <= 64).
+    #[arg(long)]
+    pub no_lockstep: bool,
     /// Print `{"results": [...]}` on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -131,6 +136,10 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
         spin: Duration::from_micros(a.spin_us),
         cpus,
         allowed: allowed.to_vec(),
+        lockstep: !a.no_lockstep
+            && a.n >= 2
+            && a.n <= formation_config::MAX_AGENTS
+            && (only.is_empty() || only.contains(&Transport::IoxEvent)),
         only,
     })
 }
@@ -217,6 +226,25 @@ pub fn main(args: BenchArgs) -> ExitCode {
                 failures += 1;
             }
         }
+    }
+    if input.lockstep && !procs::aborted() {
+        let what = format!("lockstep (formation run) n={}", args.n);
+        let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
+        match lockstep::run(args.n, args.seconds, &scratch) {
+            Ok(row) => {
+                eprintln!(
+                    "  {what}: mean {:.1} µs per step ({} steps)",
+                    row.mean_us, row.samples
+                );
+                rows.push(row);
+            }
+            Err(e) if procs::aborted() => eprintln!("  {what}: interrupted ({e})"),
+            Err(e) => {
+                eprintln!("  {what}: FAILED: {e}");
+                failures += 1;
+            }
+        }
+        let _ = std::fs::remove_dir_all(&scratch);
     }
     drop(node);
     match fipc::remove_residue(&prefix) {

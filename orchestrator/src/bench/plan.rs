@@ -135,6 +135,8 @@ pub struct PlanInput {
     pub allowed: Vec<usize>,
     /// Transports to include (all if empty).
     pub only: Vec<Transport>,
+    /// Also time a real lockstep `formation run` with `n` agents.
+    pub lockstep: bool,
 }
 
 /// The cases to run, and the skipped ones as (description, reason).
@@ -215,6 +217,7 @@ mod tests {
             cpus,
             allowed: vec![0, 1],
             only: vec![],
+            lockstep: false,
         }
     }
 

@@ -19,6 +19,8 @@ pub struct Row {
     pub payload_bytes: usize,
     /// Median, µs.
     pub p50_us: f64,
+    /// Mean, µs (for lockstep: steady-state wall time per step).
+    pub mean_us: f64,
     /// 99th percentile, µs.
     pub p99_us: f64,
     /// 99.9th percentile, µs.
@@ -43,6 +45,7 @@ impl Row {
             n: case.n,
             payload_bytes: payload,
             p50_us: us(h.value_at_quantile(0.5)),
+            mean_us: (h.mean() / 100.0).round() / 10.0,
             p99_us: us(h.value_at_quantile(0.99)),
             p999_us: us(h.value_at_quantile(0.999)),
             max_us: us(h.max()),
@@ -51,21 +54,30 @@ impl Row {
     }
 }
 
-/// `{"results": [...]}`.
+/// `{"results": [...]}`, plus `lockstep_vs_fan_out` when both were measured.
 pub fn json(rows: &[Row]) -> String {
-    serde_json::json!({ "results": rows }).to_string()
+    let mut v = serde_json::json!({ "results": rows });
+    if let Some((l, f, r)) = super::lockstep::ratio(rows) {
+        v["lockstep_vs_fan_out"] = serde_json::json!({
+            "lockstep_mean_us": l,
+            "fan_out_mean_us": f,
+            "ratio": (r * 1000.0).round() / 1000.0,
+        });
+    }
+    v.to_string()
 }
 
 /// A fixed-width table, with a note on what a sample is.
 pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
     let mut s = format!(
-        "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
+        "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
         "transport",
         "pattern",
         "wait",
         "n",
         "payload",
         "p50 µs",
+        "mean µs",
         "p99 µs",
         "p99.9 µs",
         "max µs",
@@ -79,13 +91,14 @@ pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
             "-".to_string()
         };
         s.push_str(&format!(
-            "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9} {:>8}\n",
+            "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9} {:>8}\n",
             r.transport,
             r.pattern,
             r.wait,
             r.n,
             r.payload_bytes,
             r.p50_us,
+            r.mean_us,
             r.p99_us,
             r.p999_us,
             r.max_us,
@@ -95,8 +108,15 @@ pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
     }
     s.push_str(
         "ping-pong: full round trip per sample (one-way = RTT/2); fan-out: time per step \
-         (publish to n agents, wait for all n replies).\n",
+         (publish to n agents, wait for all n replies); lockstep: wall time per step of `formation \
+         run` in steady state (plant + leader + n agents with the control laws).\n",
     );
+    if let Some((l, f, r)) = super::lockstep::ratio(rows) {
+        s.push_str(&format!(
+            "lockstep step / bare iox2-event fan-out (block, same n), means: {l:.1} / {f:.1} µs = \
+             {r:.2}x\n"
+        ));
+    }
     for (what, why) in skipped {
         s.push_str(&format!("skipped {what}: {why}\n"));
     }

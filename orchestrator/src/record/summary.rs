@@ -66,7 +66,8 @@ pub struct Summary {
     pub coverage_fraction: Option<f64>,
     /// Per-agent metrics.
     pub agents: Vec<AgentSummary>,
-    /// Realtime timing statistics (realtime runs only).
+    /// Timing statistics: realtime runs (latencies, jitter, deadline misses) and lockstep runs
+    /// (steady-state wall time per step); absent for `formation sim`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub timing: Option<serde_json::Value>,
 }

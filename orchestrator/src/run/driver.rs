@@ -135,6 +135,7 @@ pub fn drive(
     scenario: &formation_config::Scenario,
     children: &mut [RoleProcess],
     interrupted: &AtomicBool,
+    step_timing: &mut super::step_timing::StepTiming,
 ) -> (Outcome, u64) {
     let n = scenario.n_agents();
     let steps = scenario.n_steps();
@@ -188,6 +189,9 @@ pub fn drive(
                     return (Outcome::Failed(msg), recorded);
                 }
             }
+        }
+        if got > 0 {
+            step_timing.on_recorded(Instant::now(), recorded);
         }
         if recorded >= steps {
             progress.finish(recorded);

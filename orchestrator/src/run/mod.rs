@@ -12,6 +12,7 @@ mod injections;
 mod progress;
 mod services;
 mod spawn;
+pub(crate) mod step_timing;
 mod timing;
 
 use crate::cli;
@@ -125,8 +126,10 @@ pub fn main(args: RunArgs) -> ExitCode {
     match result {
         Ok((Outcome::Completed, summary)) => {
             summary.print_table();
-            if let Some(t) = &summary.timing {
-                timing::print(t);
+            match &summary.timing {
+                Some(t) if mode.realtime => timing::print(t),
+                Some(t) => step_timing::print(t),
+                None => {}
             }
             println!("wrote {}/trajectory.csv and summary.json", out.display());
             if let Some(d) = &summary.divergence {
@@ -288,6 +291,7 @@ fn run(
         injections: injections::Injections::open(&node, scenario, &run_dir)?,
         registration,
     };
+    let mut step_timing = step_timing::StepTiming::default();
     let (outcome, recorded) = match driver::wait_for_hellos(&ports, n, &mut children.0, interrupted)
     {
         Ok(()) => driver::drive(
@@ -298,6 +302,7 @@ fn run(
             scenario,
             &mut children.0,
             interrupted,
+            &mut step_timing,
         ),
         Err(o) => (o, 0),
     };
@@ -313,6 +318,8 @@ fn run(
             Ok(t) => recorder.set_timing(t),
             Err(e) => eprintln!("warning: no timing statistics: {e}"),
         }
+    } else if let Some(t) = step_timing.summary() {
+        recorder.set_timing(t);
     }
     let summary = recorder
         .finish(recorded, start.elapsed().as_secs_f64())
