@@ -13,7 +13,7 @@ use formation_agent::Agent;
 use formation_config::runtime::boot::{boot, hello};
 use formation_config::runtime::messages::{CONTROL_STOP, ROLE_AGENT};
 use formation_config::runtime::ports::{poke, send};
-use formation_config::runtime::CHILD_WAIT;
+use formation_config::runtime::{CHILD_WAIT, HOUSEKEEPING_EVERY};
 use formation_config::wire::{DelayInjection, ReferenceFrame, VehicleState};
 use std::collections::VecDeque;
 
@@ -40,30 +40,17 @@ pub fn run() -> Result<(), String> {
         neighbours = ?neighbours.iter().map(|j| j + 1).collect::<Vec<_>>(),
         "agent ready"
     );
+    // The per-step inputs (own state, neighbour shares) are read on every wake-up; the slow ones
+    // (stop, delay injections, references) every HOUSEKEEPING_EVERY steps, when a reference is
+    // missing, and on any wake-up that brought no state (docs/runtime.md, "Cost of a step").
+    let mut housekeeping = true;
     loop {
-        while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
-            if c.kind == CONTROL_STOP {
-                tracing::info!(
-                    step = k,
-                    telemetry_samples = sampler.sent(),
-                    telemetry_mean_send_us = sampler.mean_send_us(),
-                    "stop received"
-                );
-                return Ok(());
-            }
-        }
-        while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
-            delays.observe(&d);
-            pending_delays.push(*d);
-        }
-        while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
-            refs.push_back(*r);
-        }
         for sub in &ports.shares_in {
             while let Some(s) = sub.receive().map_err(|e| format!("{e:?}"))? {
                 agent.observe_neighbor(&s);
             }
         }
+        let mut fresh = false;
         while let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
             if s.step != k || own.is_some() {
                 return Err(format!(
@@ -72,6 +59,32 @@ pub fn run() -> Result<(), String> {
                 ));
             }
             own = Some(*s);
+            fresh = true;
+        }
+        let reference_missing = !refs.back().is_some_and(|r| r.step >= k);
+        if housekeeping || !fresh || reference_missing {
+            while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+                if c.kind == CONTROL_STOP {
+                    tracing::info!(
+                        step = k,
+                        telemetry_samples = sampler.sent(),
+                        telemetry_mean_send_us = sampler.mean_send_us(),
+                        "stop received"
+                    );
+                    return Ok(());
+                }
+            }
+            if let Some(why) = b.lifeline.must_stop() {
+                return Err(format!("agent {i} stopping at step {k}: {why}"));
+            }
+            while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
+                delays.observe(&d);
+                pending_delays.push(*d);
+            }
+            while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
+                refs.push_back(*r);
+            }
+            housekeeping = false;
         }
         while refs.front().is_some_and(|r| r.step <= k) {
             if let Some(r) = refs.pop_front() {
@@ -123,10 +136,8 @@ pub fn run() -> Result<(), String> {
                 k += 1;
                 own = None;
                 observed = false;
+                housekeeping = k.is_multiple_of(HOUSEKEEPING_EVERY);
             }
-        }
-        if let Some(why) = b.lifeline.must_stop() {
-            return Err(format!("agent {i} stopping at step {k}: {why}"));
         }
         ports.wake.wait(CHILD_WAIT)?;
     }

@@ -57,9 +57,7 @@ impl NeighbourDelays {
             Some((from, o)) if step >= *from => o,
             _ => base,
         };
-        let t = step as f64 * self.dt;
-        let tau = (d.base_s + d.amplitude_s * (d.angular_rate_rad_s * t).sin())
-            .clamp(0.0, self.max_delay);
+        let tau = d.tau(step as f64 * self.dt, self.max_delay);
         delay_steps(tau, self.dt) <= 1
     }
 }

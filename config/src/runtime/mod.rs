@@ -29,6 +29,10 @@ pub const PLANT_LEAD: u64 = 32;
 pub const LEADER_LEAD: u64 = 64;
 /// The plant wakes the orchestrator every this many steps.
 pub const ACK_EVERY: u64 = 8;
+/// Plant and agents read their slow inputs (stop, progress, injections, references) every this many
+/// steps, and on any wake-up that brought none of their per-step inputs; the per-step inputs
+/// (commands, own state, neighbour shares) are read on every wake-up.
+pub const HOUSEKEEPING_EVERY: u64 = ACK_EVERY;
 /// Longest a role process sleeps before it rechecks its parent and its stop flags.
 pub const CHILD_WAIT: Duration = Duration::from_millis(100);
 

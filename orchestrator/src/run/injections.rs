@@ -20,8 +20,10 @@ use std::fs::File;
 use std::io::Write;
 use std::path::Path;
 
-/// Steps beyond the plant's lead before an injection may apply.
-pub const SLACK: u64 = 4;
+/// Steps beyond the plant's lead before an injection may apply: the role processes read the
+/// injection services every `HOUSEKEEPING_EVERY` steps, so one such read always falls between the
+/// forwarding and the step the injection applies at (plus margin).
+pub const SLACK: u64 = formation_config::runtime::HOUSEKEEPING_EVERY + 4;
 
 /// Ports and log of the injections of one run.
 pub struct Injections {

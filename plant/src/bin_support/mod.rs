@@ -7,7 +7,7 @@ mod realtime;
 use formation_config::runtime::boot::{boot, hello};
 use formation_config::runtime::messages::{StepEntry, CONTROL_STOP, ROLE_PLANT};
 use formation_config::runtime::ports::{poke, send};
-use formation_config::runtime::{ACK_EVERY, CHILD_WAIT, PLANT_LEAD};
+use formation_config::runtime::{ACK_EVERY, CHILD_WAIT, HOUSEKEEPING_EVERY, PLANT_LEAD};
 use formation_config::wire::{ControlCommand, FaultInjection};
 use formation_plant::Plant;
 
@@ -30,20 +30,17 @@ pub fn run() -> Result<(), String> {
     let mut recorded: Option<u64> = None;
     let mut states_out = false;
     let mut told_blocked = false;
+    // Control (stop) is read every HOUSEKEEPING_EVERY steps and after any wake-up that brought no command;
+    // progress and fault injections then too, and whenever the lead is used up. Reading fewer
+    // subscribers per wake-up keeps the plant, which is on the critical path of every step, short
+    // (docs/runtime.md, "Cost of a step").
+    let mut housekeeping = false;
     loop {
-        while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
-            if c.kind == CONTROL_STOP {
-                tracing::info!(step = k, "stop received");
-                return Ok(());
-            }
-        }
-        while let Some(p) = ports.progress.receive().map_err(|e| format!("{e:?}"))? {
-            recorded = Some(recorded.map_or(p.recorded, |r| r.max(p.recorded)));
-        }
-        while let Some(f) = ports.faults.receive().map_err(|e| format!("{e:?}"))? {
-            faults.push(*f);
-        }
+        let mut fresh = 0;
         for (i, sub) in ports.commands.iter().enumerate() {
+            if commands[i].is_some() {
+                continue;
+            }
             while let Some(c) = sub.receive().map_err(|e| format!("{e:?}"))? {
                 if c.step != k || c.agent as usize != i || commands[i].is_some() {
                     return Err(format!(
@@ -53,6 +50,20 @@ pub fn run() -> Result<(), String> {
                 }
                 commands[i] = Some(*c);
                 got += 1;
+                fresh += 1;
+            }
+        }
+        // A wake-up without a command came from the orchestrator (progress, stop) or the timeout.
+        housekeeping |= fresh == 0;
+        if housekeeping {
+            while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+                if c.kind == CONTROL_STOP {
+                    tracing::info!(step = k, "stop received");
+                    return Ok(());
+                }
+            }
+            if let Some(why) = b.lifeline.must_stop() {
+                return Err(format!("stopping at step {k}: {why}"));
             }
         }
         loop {
@@ -60,6 +71,17 @@ pub fn run() -> Result<(), String> {
                 break;
             }
             if !states_out {
+                let lead_used_up = recorded.is_none_or(|r| k >= r + PLANT_LEAD);
+                if lead_used_up || housekeeping {
+                    // Faults are forwarded before the progress that lets the plant reach their
+                    // step, so they are drained together with (after) the progress.
+                    while let Some(p) = ports.progress.receive().map_err(|e| format!("{e:?}"))? {
+                        recorded = Some(recorded.map_or(p.recorded, |r| r.max(p.recorded)));
+                    }
+                    while let Some(f) = ports.faults.receive().map_err(|e| format!("{e:?}"))? {
+                        faults.push(*f);
+                    }
+                }
                 match recorded {
                     Some(r) if k < r + PLANT_LEAD => {
                         for i in 0..n {
@@ -76,6 +98,7 @@ pub fn run() -> Result<(), String> {
                     _ => {}
                 }
             }
+            housekeeping = false;
             if !(states_out && got == n) {
                 break;
             }
@@ -111,9 +134,7 @@ pub fn run() -> Result<(), String> {
             if k.is_multiple_of(ACK_EVERY) || k == steps {
                 poke(&ports.orchestrator_wake);
             }
-        }
-        if let Some(why) = b.lifeline.must_stop() {
-            return Err(format!("stopping at step {k}: {why}"));
+            housekeeping |= k.is_multiple_of(HOUSEKEEPING_EVERY);
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
