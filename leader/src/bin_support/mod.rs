@@ -24,6 +24,8 @@ pub fn run() -> Result<(), String> {
         .collect::<Result<Vec<_>, _>>()?;
     let wake = Wake::open(node, rt::WAKE_LEADER)?;
     let _greeting = hello(node, ROLE_LEADER, 0)?;
+    // The leader runs LEADER_LEAD steps ahead: it never needs the CPU before a plant or an agent.
+    formation_config::runtime::sched::background_thread();
     let mission = Mission::from_scenario(&b.scenario);
     let mut frame = ReferenceFrame::default();
     let mut head: u64 = 0;

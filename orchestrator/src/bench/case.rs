@@ -58,6 +58,9 @@ fn agent_args(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Vec<
             if let Some(cpu) = case.placement.cpu_of(i + 1) {
                 a.extend(["--cpu".into(), cpu.to_string()]);
             }
+            if case.batch {
+                a.push("--batch".into());
+            }
             if let Some(p) = udp_port {
                 a.extend(["--plant-port".into(), p.to_string()]);
             }
@@ -71,8 +74,14 @@ pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String>
     if let Some(cpu) = case.placement.cpu_of(0) {
         procs::set_affinity(&[cpu]).map_err(|e| format!("pin to cpu {cpu}: {e}"))?;
     }
+    if case.batch {
+        formation_config::runtime::sched::batch_policy()?;
+    }
     let result = run_pinned(ctx, idx, case);
     let _ = procs::set_affinity(ctx.allowed);
+    if case.batch {
+        let _ = formation_config::runtime::sched::other_policy();
+    }
     result
 }
 

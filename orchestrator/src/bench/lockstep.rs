@@ -65,7 +65,7 @@ fn row(n: usize, timing: &Value) -> Option<Row> {
     Some(Row {
         transport: "iox2-event".into(),
         pattern: "lockstep".into(),
-        wait: "block".into(),
+        wait: "block/batch".into(),
         n,
         payload_bytes: std::mem::size_of::<ControlCommand>(),
         p50_us: s["p50"].as_f64()?,
@@ -77,12 +77,16 @@ fn row(n: usize, timing: &Value) -> Option<Row> {
     })
 }
 
-/// Lockstep step cost over the bare fan-out's (same transport, blocking wait, unpinned, same `n`)
-/// measured in the same run: `(lockstep mean µs, fan-out mean µs, ratio)`.
+/// Lockstep step cost over the bare fan-out's measured in the same run, with the same transport,
+/// waiting and scheduling (iceoryx2 event, blocking, unpinned, `SCHED_BATCH` as `formation run`
+/// uses in lockstep) and the same `n`: `(lockstep mean µs, fan-out mean µs, ratio)`.
 pub fn ratio(rows: &[Row]) -> Option<(f64, f64, f64)> {
     let lock = rows.iter().find(|r| r.pattern == "lockstep")?;
     let fan = rows.iter().find(|r| {
-        r.pattern == "fan-out" && r.transport == "iox2-event" && r.wait == "block" && r.n == lock.n
+        r.pattern == "fan-out"
+            && r.transport == lock.transport
+            && r.wait == lock.wait
+            && r.n == lock.n
     })?;
     (fan.mean_us > 0.0).then(|| (lock.mean_us, fan.mean_us, lock.mean_us / fan.mean_us))
 }
@@ -103,7 +107,10 @@ mod tests {
         let mut pinned = fan.clone();
         pinned.wait = "block/one-core".into();
         pinned.mean_us = 30.0;
-        let (l, f, r) = ratio(&[pinned, lock, fan]).unwrap();
+        let mut other_policy = fan.clone();
+        other_policy.wait = "block".into();
+        other_policy.mean_us = 45.0;
+        let (l, f, r) = ratio(&[pinned, other_policy, lock, fan]).unwrap();
         assert_eq!((l, f), (90.0, 60.0));
         assert!((r - 1.5).abs() < 1e-12);
     }

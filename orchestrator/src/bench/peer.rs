@@ -37,6 +37,9 @@ pub struct PeerArgs {
     /// Pin this process to this CPU.
     #[arg(long)]
     pub cpu: Option<usize>,
+    /// Run under SCHED_BATCH.
+    #[arg(long)]
+    pub batch: bool,
     /// UDP port of the plant on 127.0.0.1.
     #[arg(long)]
     pub plant_port: Option<u16>,
@@ -66,6 +69,11 @@ pub fn main(a: PeerArgs) -> ExitCode {
     if let Some(cpu) = a.cpu {
         if let Err(e) = procs::set_affinity(&[cpu]) {
             return bad(format!("cannot pin to cpu {cpu}: {e}"));
+        }
+    }
+    if a.batch {
+        if let Err(e) = formation_config::runtime::sched::batch_policy() {
+            return bad(e);
         }
     }
     match run(&a, transport, wait) {

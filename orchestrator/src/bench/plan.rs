@@ -108,6 +108,8 @@ pub struct Case {
     pub wait: Wait,
     /// CPU placement.
     pub placement: Placement,
+    /// Every process of the case under `SCHED_BATCH` (woken processes do not preempt).
+    pub batch: bool,
 }
 
 impl Case {
@@ -119,7 +121,8 @@ impl Case {
             Wait::SpinBlock(_) => "spin-block",
             Wait::Busy => "busy",
         };
-        format!("{w}{}", self.placement.suffix())
+        let policy = if self.batch { "/batch" } else { "" };
+        format!("{w}{}{policy}", self.placement.suffix())
     }
 }
 
@@ -168,17 +171,23 @@ pub fn plan(input: &PlanInput) -> (Vec<Case>, Vec<(String, String)>) {
             if !wanted(t) {
                 continue;
             }
-            for (wait, placement) in [
-                (Wait::Block, base.clone()),
-                (Wait::SpinBlock(input.spin), base.clone()),
-                (Wait::Block, Placement::OneCore(one)),
+            for (wait, placement, batch) in [
+                (Wait::Block, base.clone(), false),
+                (Wait::SpinBlock(input.spin), base.clone(), false),
+                (Wait::Block, Placement::OneCore(one), false),
+                // SCHED_BATCH matters when processes outnumber cores: the fan-out only.
+                (Wait::Block, base.clone(), true),
             ] {
+                if batch && pattern != Pattern::FanOut {
+                    continue;
+                }
                 cases.push(Case {
                     transport: t,
                     pattern,
                     n,
                     wait,
                     placement,
+                    batch,
                 });
             }
         }
@@ -191,6 +200,7 @@ pub fn plan(input: &PlanInput) -> (Vec<Case>, Vec<(String, String)>) {
                     n,
                     wait: Wait::Busy,
                     placement: base.clone(),
+                    batch: false,
                 });
             } else {
                 skipped.push((
@@ -248,5 +258,16 @@ mod tests {
             .find(|c| c.wait_label() == "block/one-core")
             .unwrap();
         assert_eq!(one.placement.cpu_of(2), Some(1));
+    }
+
+    #[test]
+    fn batch_policy_is_measured_for_fan_out_only() {
+        let (cases, _) = plan(&input(5, None));
+        assert!(cases
+            .iter()
+            .any(|c| c.batch && c.pattern == Pattern::FanOut && c.wait_label() == "block/batch"));
+        assert!(!cases
+            .iter()
+            .any(|c| c.batch && c.pattern == Pattern::PingPong));
     }
 }

@@ -113,8 +113,8 @@ pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
     );
     if let Some((l, f, r)) = super::lockstep::ratio(rows) {
         s.push_str(&format!(
-            "lockstep step / bare iox2-event fan-out (block, same n), means: {l:.1} / {f:.1} µs = \
-             {r:.2}x\n"
+            "lockstep step / bare iox2-event fan-out (block/batch, same n), means: {l:.1} / \
+             {f:.1} µs = {r:.2}x\n"
         ));
     }
     for (what, why) in skipped {

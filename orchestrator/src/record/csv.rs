@@ -114,6 +114,7 @@ impl TrajectoryWriter {
         let handle = std::thread::Builder::new()
             .name("csv-writer".into())
             .spawn(move || -> std::io::Result<()> {
+                formation_config::runtime::sched::background_thread();
                 for msg in rx {
                     match msg {
                         Msg::Step(r) => rows.write_rows(&r)?,

@@ -190,6 +190,14 @@ fn run(
     interrupted: &AtomicBool,
 ) -> Result<(Outcome, crate::record::Summary), String> {
     let start = Instant::now();
+    if !mode.realtime {
+        // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
+        // under SCHED_BATCH: a woken process waits for the running one to block instead of
+        // preempting it (see formation_config::runtime::sched::batch_policy).
+        if let Err(e) = formation_config::runtime::sched::batch_policy() {
+            eprintln!("warning: {e}; running under the normal policy");
+        }
+    }
     let n = scenario.n_agents();
     let dir = spawn::role_binary_dir()?;
     let mut recorder = Recorder::create(scenario, variant, mode.name(), out)
@@ -245,6 +253,9 @@ fn run(
             &child_args(Some(i)),
         )?);
     }
+    // Every child is started (they keep the normal priority): from here on the orchestrator records
+    // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
+    formation_config::runtime::sched::background_thread();
     let pids: Vec<String> = children.0.iter().map(|c| c.pid().to_string()).collect();
     eprintln!(
         "formation run: id {run_id}, iceoryx2 prefix {prefix}, {n} agents, {} steps; pids {}",

@@ -30,6 +30,7 @@ pub fn run() -> Result<(), String> {
     let mut recorded: Option<u64> = None;
     let mut states_out = false;
     let mut told_blocked = false;
+    let mut record_pending = false;
     // Control (stop) is read every HOUSEKEEPING_EVERY steps and after any wake-up that brought no command;
     // progress and fault injections then too, and whenever the lead is used up. Reading fewer
     // subscribers per wake-up keeps the plant, which is on the critical path of every step, short
@@ -67,10 +68,7 @@ pub fn run() -> Result<(), String> {
             }
         }
         loop {
-            if k >= steps {
-                break;
-            }
-            if !states_out {
+            if !states_out && k < steps {
                 let lead_used_up = recorded.is_none_or(|r| k >= r + PLANT_LEAD);
                 if lead_used_up || housekeeping {
                     // Faults are forwarded before the progress that lets the plant reach their
@@ -99,7 +97,16 @@ pub fn run() -> Result<(), String> {
                 }
             }
             housekeeping = false;
-            if !(states_out && got == n) {
+            // The record of the previous step goes out after the states of this one: the agents
+            // are already computing while it is copied.
+            if record_pending {
+                ports.publish_step(&entries)?;
+                record_pending = false;
+                if k.is_multiple_of(ACK_EVERY) || k == steps {
+                    poke(&ports.orchestrator_wake);
+                }
+            }
+            if k >= steps || !(states_out && got == n) {
                 break;
             }
             faults.retain(|f| {
@@ -126,14 +133,11 @@ pub fn run() -> Result<(), String> {
                     command: cmd,
                 };
             }
-            ports.publish_step(&entries)?;
             plant.advance();
+            record_pending = true;
             got = 0;
             states_out = false;
             k += 1;
-            if k.is_multiple_of(ACK_EVERY) || k == steps {
-                poke(&ports.orchestrator_wake);
-            }
             housekeeping |= k.is_multiple_of(HOUSEKEEPING_EVERY);
         }
         ports.wake.wait(CHILD_WAIT)?;
