@@ -70,13 +70,35 @@ fn tiny_bench_reports_every_transport_and_pattern_and_leaves_no_shared_memory() 
         let max = r["max_us"].as_f64().unwrap();
         assert!(samples > 0, "{r}");
         assert!(p50 <= p99 && p99 <= p999 && p999 <= max, "{r}");
-        assert_eq!(r["payload_bytes"], 256);
+        if r["pattern"] == "lockstep" {
+            // The real run: its payload is the largest message of a step (the command).
+            assert!(r["payload_bytes"].as_u64().unwrap() > 256, "{r}");
+        } else {
+            assert_eq!(r["payload_bytes"], 256);
+        }
         let n = r["n"].as_u64().unwrap();
         assert_eq!(n, if r["pattern"] == "ping-pong" { 1 } else { 2 }, "{r}");
         for key in ["wait", "transport", "pattern"] {
             assert!(r[key].is_string(), "{r}");
         }
     }
+
+    // The lockstep case (a real `formation run` with 2 agents) is set against the fan-out with the
+    // same transport and scheduling.
+    assert!(
+        results
+            .iter()
+            .any(|r| r["pattern"] == "lockstep" && r["wait"] == "block/batch"),
+        "missing the lockstep row"
+    );
+    assert!(results
+        .iter()
+        .any(|r| r["pattern"] == "fan-out" && r["wait"] == "block/batch"));
+    let ratio = &v["lockstep_vs_fan_out"];
+    let lock = ratio["lockstep_mean_us"].as_f64().expect("lockstep mean");
+    let fan = ratio["fan_out_mean_us"].as_f64().expect("fan-out mean");
+    let r = ratio["ratio"].as_f64().expect("ratio");
+    assert!(lock > 0.0 && fan > 0.0 && (r - lock / fan).abs() < 1e-3, "{ratio}");
 
     let prefix = prefix_from_stderr(&stderr);
     let mut left = Vec::new();
