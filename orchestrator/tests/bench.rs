@@ -98,7 +98,10 @@ fn tiny_bench_reports_every_transport_and_pattern_and_leaves_no_shared_memory() 
     let lock = ratio["lockstep_mean_us"].as_f64().expect("lockstep mean");
     let fan = ratio["fan_out_mean_us"].as_f64().expect("fan-out mean");
     let r = ratio["ratio"].as_f64().expect("ratio");
-    assert!(lock > 0.0 && fan > 0.0 && (r - lock / fan).abs() < 1e-3, "{ratio}");
+    assert!(
+        lock > 0.0 && fan > 0.0 && (r - lock / fan).abs() < 1e-3,
+        "{ratio}"
+    );
 
     let prefix = prefix_from_stderr(&stderr);
     let mut left = Vec::new();

@@ -61,7 +61,7 @@ pub fn run() -> Result<(), String> {
             own = Some(*s);
             fresh = true;
         }
-        let reference_missing = !refs.back().is_some_and(|r| r.step >= k);
+        let reference_missing = refs.back().is_none_or(|r| r.step < k);
         if housekeeping || !fresh || reference_missing {
             while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
                 if c.kind == CONTROL_STOP {

@@ -127,6 +127,7 @@ pub fn wait_for_hellos(
 
 /// Drives the run to its end (or divergence, interruption, failure); returns the outcome and the
 /// number of steps recorded.
+#[allow(clippy::too_many_arguments)] // the run's parts, each borrowed differently; no natural bundle
 pub fn drive(
     ports: &Ports,
     live: &mut super::Live,
