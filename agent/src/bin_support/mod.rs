@@ -41,9 +41,9 @@ pub fn run() -> Result<(), String> {
         "agent ready"
     );
     // The per-step inputs (own state, neighbour shares) are read on every wake-up; the slow ones
-    // (stop, delay injections, references) every HOUSEKEEPING_EVERY steps, when a reference is
-    // missing, and on any wake-up that brought no state (docs/runtime.md, "Cost of a step").
-    let mut housekeeping = true;
+    // (stop, delay injections, references) with the state of every HOUSEKEEPING_EVERY-th step, when
+    // a reference is missing, and on any wake-up that brought no state (docs/runtime.md, "Cost of a
+    // step").
     loop {
         for sub in &ports.shares_in {
             while let Some(s) = sub.receive().map_err(|e| format!("{e:?}"))? {
@@ -62,7 +62,7 @@ pub fn run() -> Result<(), String> {
             fresh = true;
         }
         let reference_missing = refs.back().is_none_or(|r| r.step < k);
-        if housekeeping || !fresh || reference_missing {
+        if !fresh || reference_missing || k.is_multiple_of(HOUSEKEEPING_EVERY) {
             while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
                 if c.kind == CONTROL_STOP {
                     tracing::info!(
@@ -84,7 +84,6 @@ pub fn run() -> Result<(), String> {
             while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
                 refs.push_back(*r);
             }
-            housekeeping = false;
         }
         while refs.front().is_some_and(|r| r.step <= k) {
             if let Some(r) = refs.pop_front() {
@@ -136,7 +135,6 @@ pub fn run() -> Result<(), String> {
                 k += 1;
                 own = None;
                 observed = false;
-                housekeeping = k.is_multiple_of(HOUSEKEEPING_EVERY);
             }
         }
         ports.wake.wait(CHILD_WAIT)?;

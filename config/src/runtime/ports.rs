@@ -115,7 +115,7 @@ impl Wake {
     }
 
     /// Sleeps until notified or `timeout`, consuming every pending notification. The caller then
-    /// drains all its subscribers (notifications coalesce). A signal (e.g. SIGTERM) ends the sleep
+    /// drains every subscriber that may have new samples (notifications coalesce). A signal (e.g. SIGTERM) ends the sleep
     /// early without an error; the caller checks its flags.
     ///
     /// The sleep is one `ppoll(2)` on the listener's socket, then a non-blocking drain

@@ -1,4 +1,4 @@
-//! Latency histograms of a realtime run. Each role process records into fixed-size HDR histograms
+//! Latency histograms of a realtime run (and the step-time histogram of a lockstep run). Each role process records into fixed-size HDR histograms
 //! (no allocation per sample) and, at the end, writes them as one small JSON file into
 //! `<run dir>/timing/`; the orchestrator merges the files into `summary.json`.
 
@@ -32,6 +32,11 @@ impl NsHistogram {
     /// Records one duration (clamped to the covered range).
     pub fn record(&mut self, ns: u64) {
         self.h.saturating_record(ns.min(HIGHEST_NS));
+    }
+
+    /// Records `count` samples of one duration (clamped to the covered range).
+    pub fn record_n(&mut self, ns: u64, count: u64) {
+        self.h.saturating_record_n(ns.min(HIGHEST_NS), count);
     }
 
     /// Number of samples.

@@ -31,8 +31,8 @@ pub struct Row {
     pub samples: u64,
 }
 
-fn us(ns: u64) -> f64 {
-    (ns as f64 / 100.0).round() / 10.0
+fn us(ns: f64) -> f64 {
+    (ns / 100.0).round() / 10.0
 }
 
 impl Row {
@@ -44,11 +44,11 @@ impl Row {
             wait: case.wait_label(),
             n: case.n,
             payload_bytes: payload,
-            p50_us: us(h.value_at_quantile(0.5)),
-            mean_us: (h.mean() / 100.0).round() / 10.0,
-            p99_us: us(h.value_at_quantile(0.99)),
-            p999_us: us(h.value_at_quantile(0.999)),
-            max_us: us(h.max()),
+            p50_us: us(h.value_at_quantile(0.5) as f64),
+            mean_us: us(h.mean()),
+            p99_us: us(h.value_at_quantile(0.99) as f64),
+            p999_us: us(h.value_at_quantile(0.999) as f64),
+            max_us: us(h.max() as f64),
             samples: h.len(),
         }
     }

@@ -8,7 +8,7 @@
 //! quantiles show how even the pace is at the recorder's granularity (a few steps, since the
 //! plant runs up to `PLANT_LEAD` steps ahead of the recorder).
 
-use hdrhistogram::Histogram;
+use formation_config::runtime::timing::NsHistogram;
 use serde_json::{json, Value};
 use std::time::Instant;
 
@@ -16,26 +16,14 @@ use std::time::Instant;
 pub const WARMUP_STEPS: u64 = 1000;
 
 /// Steady-state step timing of a lockstep run.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct StepTiming {
     /// Time and recorded-step count of the last batch seen after the warm-up.
     last: Option<(Instant, u64)>,
     /// Time and step count when timing began.
     first: Option<(Instant, u64)>,
     /// Per-step wall time, ns, one sample per step.
-    per_step_ns: Histogram<u64>,
-}
-
-impl Default for StepTiming {
-    fn default() -> Self {
-        StepTiming {
-            last: None,
-            first: None,
-            // 1 ns .. 10 s, 3 significant digits.
-            per_step_ns: Histogram::new_with_bounds(1, 10_000_000_000, 3)
-                .expect("static histogram bounds are valid"),
-        }
-    }
+    per_step_ns: NsHistogram,
 }
 
 impl StepTiming {
@@ -52,7 +40,7 @@ impl StepTiming {
             Some((t, k)) if recorded > k => {
                 let m = recorded - k;
                 let per_step = (now.duration_since(t).as_nanos() as u64 / m).max(1);
-                let _ = self.per_step_ns.record_n(per_step, m);
+                self.per_step_ns.record_n(per_step, m);
                 self.last = Some((now, recorded));
             }
             Some(_) => {}
@@ -66,21 +54,14 @@ impl StepTiming {
         if k1 <= k0 {
             return None;
         }
-        let h = &self.per_step_ns;
-        let us = |ns: f64| (ns / 100.0).round() / 10.0;
         let wall = t1.duration_since(t0).as_secs_f64();
+        let mut step_us = super::timing::quantiles(&self.per_step_ns);
+        step_us["mean"] = json!((wall * 1e7 / (k1 - k0) as f64).round() / 10.0);
         Some(json!({
             "warmup_steps": WARMUP_STEPS,
             "timed_steps": k1 - k0,
             "steady_steps_per_s": ((k1 - k0) as f64 / wall).round(),
-            "step_us": {
-                "mean": us(wall * 1e9 / (k1 - k0) as f64),
-                "p50": us(h.value_at_quantile(0.5) as f64),
-                "p99": us(h.value_at_quantile(0.99) as f64),
-                "p999": us(h.value_at_quantile(0.999) as f64),
-                "max": us(h.max() as f64),
-                "samples": h.len(),
-            },
+            "step_us": step_us,
         }))
     }
 }

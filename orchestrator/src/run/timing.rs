@@ -26,7 +26,7 @@ impl WaitMode {
 }
 
 /// p50 / p99 / p99.9 / max of a histogram of ns, in µs (null when empty).
-fn quantiles(h: &NsHistogram) -> Value {
+pub(super) fn quantiles(h: &NsHistogram) -> Value {
     if h.is_empty() {
         return json!({ "p50": null, "p99": null, "p999": null, "max": null, "samples": 0 });
     }

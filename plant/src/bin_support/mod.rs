@@ -31,11 +31,11 @@ pub fn run() -> Result<(), String> {
     let mut states_out = false;
     let mut told_blocked = false;
     let mut record_pending = false;
-    // Control (stop) is read every HOUSEKEEPING_EVERY steps and after any wake-up that brought no command;
-    // progress and fault injections then too, and whenever the lead is used up. Reading fewer
-    // subscribers per wake-up keeps the plant, which is on the critical path of every step, short
-    // (docs/runtime.md, "Cost of a step").
-    let mut housekeeping = false;
+    // Reading fewer subscribers per wake-up keeps the plant, which is on the critical path of every
+    // step, short (docs/runtime.md, "Cost of a step"): the commands still missing on every wake-up;
+    // stop and the lifeline on a wake-up that brought no command (a stop comes with a poke, the
+    // parent's death with SIGTERM); progress and fault injections when the states of a step go out
+    // at a multiple of HOUSEKEEPING_EVERY, on such a wake-up, and whenever the lead is used up.
     loop {
         let mut fresh = 0;
         for (i, sub) in ports.commands.iter().enumerate() {
@@ -55,8 +55,8 @@ pub fn run() -> Result<(), String> {
             }
         }
         // A wake-up without a command came from the orchestrator (progress, stop) or the timeout.
-        housekeeping |= fresh == 0;
-        if housekeeping {
+        let idle = fresh == 0;
+        if idle {
             while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
                 if c.kind == CONTROL_STOP {
                     tracing::info!(step = k, "stop received");
@@ -70,7 +70,7 @@ pub fn run() -> Result<(), String> {
         loop {
             if !states_out && k < steps {
                 let lead_used_up = recorded.is_none_or(|r| k >= r + PLANT_LEAD);
-                if lead_used_up || housekeeping {
+                if lead_used_up || idle || k.is_multiple_of(HOUSEKEEPING_EVERY) {
                     // Faults are forwarded before the progress that lets the plant reach their
                     // step, so they are drained together with (after) the progress.
                     while let Some(p) = ports.progress.receive().map_err(|e| format!("{e:?}"))? {
@@ -96,7 +96,6 @@ pub fn run() -> Result<(), String> {
                     _ => {}
                 }
             }
-            housekeeping = false;
             // The record of the previous step goes out after the states of this one: the agents
             // are already computing while it is copied.
             if record_pending {
@@ -138,7 +137,6 @@ pub fn run() -> Result<(), String> {
             got = 0;
             states_out = false;
             k += 1;
-            housekeeping |= k.is_multiple_of(HOUSEKEEPING_EVERY);
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
