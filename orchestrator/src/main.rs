@@ -14,6 +14,7 @@ use std::process::ExitCode;
 mod bench;
 mod check;
 mod cli;
+mod cpus;
 mod live;
 mod plot;
 pub mod record;

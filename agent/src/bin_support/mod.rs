@@ -4,6 +4,7 @@
 //! and handed to the agent only when their step comes, so its delay histories match the in-process
 //! run exactly.
 
+mod early_references;
 mod neighbour_delay;
 mod ports;
 mod realtime;
@@ -14,8 +15,7 @@ use formation_config::runtime::boot::{boot, hello};
 use formation_config::runtime::messages::{CONTROL_STOP, ROLE_AGENT};
 use formation_config::runtime::ports::{poke, send};
 use formation_config::runtime::{CHILD_WAIT, HOUSEKEEPING_EVERY};
-use formation_config::wire::{DelayInjection, ReferenceFrame, VehicleState};
-use std::collections::VecDeque;
+use formation_config::wire::{DelayInjection, VehicleState};
 
 /// Runs agent `--agent i` until the orchestrator says stop (or goes away).
 pub fn run() -> Result<(), String> {
@@ -29,7 +29,7 @@ pub fn run() -> Result<(), String> {
         return realtime::run(&b, i, agent, &ports);
     }
     let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);
-    let mut refs: VecDeque<ReferenceFrame> = VecDeque::new();
+    let mut refs = early_references::EarlyReferences::default();
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut own: Option<VehicleState> = None;
     let mut observed = false;
@@ -51,17 +51,21 @@ pub fn run() -> Result<(), String> {
             }
         }
         let mut fresh = false;
-        while let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
-            if s.step != k || own.is_some() {
-                return Err(format!(
-                    "protocol error: state of step {} while at step {k}",
-                    s.step
-                ));
+        // One state per step: once it is in, the next one is read at the next step (a duplicate
+        // is then caught as out of step).
+        if own.is_none() {
+            if let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
+                if s.step != k {
+                    return Err(format!(
+                        "protocol error: state of step {} while at step {k}",
+                        s.step
+                    ));
+                }
+                own = Some(*s);
+                fresh = true;
             }
-            own = Some(*s);
-            fresh = true;
         }
-        let reference_missing = refs.back().is_none_or(|r| r.step < k);
+        let reference_missing = refs.missing(k);
         if !fresh || reference_missing || k.is_multiple_of(HOUSEKEEPING_EVERY) {
             while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
                 if c.kind == CONTROL_STOP {
@@ -82,15 +86,13 @@ pub fn run() -> Result<(), String> {
                 pending_delays.push(*d);
             }
             while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
-                refs.push_back(*r);
+                refs.push(&r)?;
             }
         }
-        while refs.front().is_some_and(|r| r.step <= k) {
-            if let Some(r) = refs.pop_front() {
-                agent.observe_reference(&r);
-                sampler.observe_reference(&r);
-            }
-        }
+        refs.take_due(k, |r| {
+            agent.observe_reference(r);
+            sampler.observe_reference(r);
+        });
         pending_delays.retain(|d| {
             if d.step <= k {
                 agent.set_delay(d);

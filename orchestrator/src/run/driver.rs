@@ -13,7 +13,6 @@ use formation_config::runtime::ports::{
 use formation_config::runtime::{self as rt};
 use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use iceoryx2::port::notifier::Notifier;
-use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -145,7 +144,6 @@ pub fn drive(
     // The reference of step k is a pure function of (k, t_k): the recorder computes it with the same
     // code as the leader process (bit-identical), instead of depending on the leader's stream.
     let mut reference = ReferenceFrame::default();
-    let mut records: VecDeque<(Vec<PlantTruth>, Vec<ControlCommand>)> = VecDeque::new();
     let mut truths = vec![PlantTruth::default(); n];
     let mut commands = vec![ControlCommand::default(); n];
     let mut progress = Progress::new(steps, dt);
@@ -159,28 +157,27 @@ pub fn drive(
         }
         let mut got = 0;
         while let Ok(Some(s)) = ports.steps.receive() {
-            if s.payload().len() != n {
-                let msg = format!("protocol error: step record with {} entries", s.len());
+            let entries = s.payload();
+            if entries.len() != n {
+                let msg = format!("protocol error: step record with {} entries", entries.len());
                 return (Outcome::Failed(msg), recorded);
             }
-            records.push_back((
-                s.payload().iter().map(|e| e.truth).collect(),
-                s.payload().iter().map(|e| e.command).collect(),
-            ));
-            got += 1;
-        }
-        while let Some((t, c)) = records.pop_front() {
             let k = recorded;
-            if t.first().is_some_and(|x| x.state.step != k) {
-                let msg = format!(
-                    "protocol error: record of step {} while expecting {k}",
-                    t[0].state.step
-                );
+            let stamped = entries.first().map_or(k, |e| e.truth.state.step);
+            if stamped != k {
+                let msg = format!("protocol error: record of step {stamped} while expecting {k}");
                 return (Outcome::Failed(msg), recorded);
             }
+            for (e, (t, c)) in entries
+                .iter()
+                .zip(truths.iter_mut().zip(commands.iter_mut()))
+            {
+                *t = e.truth;
+                *c = e.command;
+            }
+            drop(s);
+            got += 1;
             mission.reference(k, k as f64 * dt, &mut reference);
-            truths.copy_from_slice(&t);
-            commands.copy_from_slice(&c);
             recorded = k + 1;
             match recorder.record(k, &reference, &truths, &commands) {
                 Ok(Some(_divergence)) => return (Outcome::Completed, recorded),

@@ -9,6 +9,7 @@
 mod cleanup;
 mod driver;
 mod injections;
+pub(crate) mod placement;
 mod progress;
 mod services;
 mod spawn;
@@ -48,6 +49,12 @@ pub struct RunArgs {
     /// CAP_SYS_NICE; 0, the default: normal policy).
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=99))]
     pub rt_priority: u32,
+    /// CPU placement of plant and agents: `auto` (lockstep: plant on the first CPU this process
+    /// may use, agent i on the CPU i + 1 places further, round-robin; realtime: not pinned),
+    /// `off`, or a CPU list such as `0,1` or `0-3` (plant on the first). Leader and orchestrator
+    /// are never pinned. See docs/runtime.md, "Cost of a step".
+    #[arg(long, default_value = "auto", value_name = "auto|off|CPUS")]
+    pub pin: String,
 }
 
 /// How a run is paced.
@@ -88,6 +95,19 @@ pub fn main(args: RunArgs) -> ExitCode {
         );
         return ExitCode::from(cli::EXIT_INVALID);
     }
+    let allowed = crate::cpus::allowed();
+    let pin = match placement::PinRequest::parse(&args.pin, &allowed) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
+    let others = crate::live::registry::list()
+        .iter()
+        .filter(|r| r.is_live())
+        .count();
+    let placement = placement::Placement::resolve(&pin, args.realtime, &allowed, others);
     let mode = Mode {
         realtime: args.realtime,
         wait: args.wait,
@@ -115,6 +135,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         &scenario,
         variant,
         mode,
+        placement.as_ref(),
         &out,
         &run_id,
         &prefix,
@@ -180,10 +201,12 @@ impl Drop for Children {
     }
 }
 
+#[allow(clippy::too_many_arguments)] // the run's settings, each of its own kind
 fn run(
     scenario: &Scenario,
     variant: Variant,
     mode: Mode,
+    placement: Option<&placement::Placement>,
     out: &Path,
     run_id: &str,
     prefix: &str,
@@ -238,12 +261,14 @@ fn run(
         "formation-plant",
         "plant".into(),
         &child_args(None),
+        placement.map(|p| p.plant()),
     )?);
     children.0.push(spawn::spawn(
         &dir,
         "formation-leader",
         "leader".into(),
         &child_args(None),
+        None,
     )?);
     for i in 0..n {
         children.0.push(spawn::spawn(
@@ -251,17 +276,20 @@ fn run(
             "formation-agent",
             format!("agent {} (--agent {i})", i + 1),
             &child_args(Some(i)),
+            placement.map(|p| p.agent(i)),
         )?);
     }
     // Every child is started (they keep the normal priority): from here on the orchestrator records
     // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
     formation_config::runtime::sched::background_thread();
     let pids: Vec<String> = children.0.iter().map(|c| c.pid().to_string()).collect();
+    let pinned = placement.map_or("not pinned".to_string(), |p| p.describe(n));
     eprintln!(
-        "formation run: id {run_id}, iceoryx2 prefix {prefix}, {n} agents, {} steps; pids {}",
+        "formation run: id {run_id}, iceoryx2 prefix {prefix}, {n} agents, {} steps; pids {}; {pinned}",
         scenario.n_steps(),
         pids.join(" ")
     );
+    tracing::info!(placement = %pinned, "role processes started");
     let mut processes = vec![ProcessEntry {
         role: "orchestrator".into(),
         agent: None,

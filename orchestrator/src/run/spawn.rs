@@ -1,5 +1,6 @@
 //! Locating, spawning, supervising and stopping the role processes.
 
+use crate::cpus::CpuSet;
 use formation_config::runtime::args::ChildArgs;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
@@ -71,18 +72,28 @@ impl RoleProcess {
     }
 }
 
-/// Starts `binary` with `args`; it gets SIGTERM when the orchestrator dies and ignores SIGINT.
+/// Starts `binary` with `args`, pinned to `cpu` if given; it gets SIGTERM when the orchestrator
+/// dies and ignores SIGINT.
 pub fn spawn(
     dir: &Path,
     binary: &str,
     label: String,
     args: &ChildArgs,
+    cpu: Option<usize>,
 ) -> Result<RoleProcess, String> {
     let mut cmd = Command::new(dir.join(binary));
     cmd.args(args.to_args()).stdin(Stdio::null());
-    // SAFETY: only async-signal-safe calls (prctl, signal) between fork and exec.
+    let pin = cpu
+        .map(|c| CpuSet::of(&[c]))
+        .transpose()
+        .map_err(|e| format!("cannot pin {label}: {e}"))?;
+    // SAFETY: only async-signal-safe calls (sched_setaffinity, prctl, signal) between fork and
+    // exec; the CPU set was built before the fork.
     unsafe {
-        cmd.pre_exec(|| {
+        cmd.pre_exec(move || {
+            if let Some(set) = &pin {
+                set.apply()?;
+            }
             libc::prctl(
                 libc::PR_SET_PDEATHSIG,
                 libc::SIGTERM as libc::c_ulong,

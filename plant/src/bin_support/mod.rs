@@ -42,8 +42,10 @@ pub fn run() -> Result<(), String> {
             if commands[i].is_some() {
                 continue;
             }
-            while let Some(c) = sub.receive().map_err(|e| format!("{e:?}"))? {
-                if c.step != k || c.agent as usize != i || commands[i].is_some() {
+            // One command per agent and step: a second receive would only find nothing (a
+            // duplicate stays queued and is caught as out of step at the next step).
+            if let Some(c) = sub.receive().map_err(|e| format!("{e:?}"))? {
+                if c.step != k || c.agent as usize != i {
                     return Err(format!(
                         "protocol error: command of agent {} for step {} while at step {k}",
                         c.agent, c.step

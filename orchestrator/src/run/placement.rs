@@ -1,0 +1,139 @@
+//! CPU placement of the role processes (`formation run --pin`).
+//!
+//! On a machine with fewer CPUs than processes the kernel places a woken agent next to the plant
+//! that woke it (a Unix-socket wake-up is a "sync" wake-up), so on 2 vCPUs three of five agents
+//! queued behind the plant while the other CPU idled for half of every step (seen with
+//! `perf sched timehist`). Pinning spreads them: the plant gets the first CPU of the list and
+//! agent i the CPU `i + 1` places further, round-robin, so the agents the plant wakes first run
+//! at once on the other CPUs while it finishes its step (docs/runtime.md, "Cost of a step").
+//! Leader and orchestrator are not pinned: they have slack and run wherever there is room.
+//! With at least N + 1 CPUs every process of the step gets a CPU of its own.
+
+use crate::cpus;
+
+/// What `--pin` asked for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PinRequest {
+    /// Lockstep: pin over the CPUs this process may use (when there are at least 2); realtime:
+    /// do not pin.
+    Auto,
+    /// Do not pin.
+    Off,
+    /// Pin over these CPUs (plant on the first).
+    Cpus(Vec<usize>),
+}
+
+impl PinRequest {
+    /// Parses `auto`, `off` or a CPU list (`0,1`, `0-3`) of CPUs in `allowed`.
+    pub fn parse(s: &str, allowed: &[usize]) -> Result<PinRequest, String> {
+        match s.trim() {
+            "auto" => Ok(PinRequest::Auto),
+            "off" | "none" => Ok(PinRequest::Off),
+            list => cpus::parse_list(list, allowed)
+                .map(PinRequest::Cpus)
+                .map_err(|e| format!("--pin: {e} (expected auto, off or a CPU list like 0,1)")),
+        }
+    }
+}
+
+/// Where each role process runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placement {
+    cpus: Vec<usize>,
+    /// Rotation of the layout (concurrent runs start on different CPUs).
+    offset: usize,
+}
+
+impl Placement {
+    /// The placement for `request`: `None` when nothing is pinned. `allowed` is this process's
+    /// affinity; `others` the number of other live runs on the machine, which rotates an automatic
+    /// layout so that concurrent runs do not stack their plants on the same CPU.
+    pub fn resolve(
+        request: &PinRequest,
+        realtime: bool,
+        allowed: &[usize],
+        others: usize,
+    ) -> Option<Placement> {
+        match request {
+            PinRequest::Off => None,
+            PinRequest::Auto if realtime || allowed.len() < 2 => None,
+            PinRequest::Auto => Some(Placement {
+                cpus: allowed.to_vec(),
+                offset: others % allowed.len(),
+            }),
+            PinRequest::Cpus(c) => Some(Placement {
+                cpus: c.clone(),
+                offset: 0,
+            }),
+        }
+    }
+
+    /// CPU of the plant.
+    pub fn plant(&self) -> usize {
+        self.cpus[self.offset % self.cpus.len()]
+    }
+
+    /// CPU of agent `i` (0-based).
+    pub fn agent(&self, i: usize) -> usize {
+        self.cpus[(self.offset + i + 1) % self.cpus.len()]
+    }
+
+    /// One line for the log and the console, e.g. `plant cpu 0, agents 1 0 1 0 1`.
+    pub fn describe(&self, n: usize) -> String {
+        let agents: Vec<String> = (0..n).map(|i| self.agent(i).to_string()).collect();
+        format!("plant cpu {}, agents {}", self.plant(), agents.join(" "))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn on_two_cpus_the_agents_alternate_starting_on_the_cpu_without_the_plant() {
+        let p = Placement::resolve(&PinRequest::Auto, false, &[0, 1], 0).unwrap();
+        assert_eq!(p.plant(), 0);
+        let agents: Vec<usize> = (0..5).map(|i| p.agent(i)).collect();
+        assert_eq!(agents, [1, 0, 1, 0, 1]);
+        assert_eq!(p.describe(5), "plant cpu 0, agents 1 0 1 0 1");
+    }
+
+    #[test]
+    fn with_enough_cpus_every_process_of_a_step_has_its_own() {
+        let cpus: Vec<usize> = (0..8).collect();
+        let p = Placement::resolve(&PinRequest::Auto, false, &cpus, 0).unwrap();
+        let mut used: Vec<usize> = (0..5).map(|i| p.agent(i)).collect();
+        used.push(p.plant());
+        used.sort_unstable();
+        used.dedup();
+        assert_eq!(used.len(), 6);
+    }
+
+    #[test]
+    fn a_concurrent_run_puts_its_plant_on_another_cpu() {
+        let first = Placement::resolve(&PinRequest::Auto, false, &[0, 1], 0).unwrap();
+        let second = Placement::resolve(&PinRequest::Auto, false, &[0, 1], 1).unwrap();
+        assert_ne!(first.plant(), second.plant());
+    }
+
+    #[test]
+    fn auto_pins_lockstep_only_and_off_never_pins() {
+        assert!(Placement::resolve(&PinRequest::Auto, true, &[0, 1], 0).is_none());
+        assert!(Placement::resolve(&PinRequest::Auto, false, &[3], 0).is_none());
+        assert!(Placement::resolve(&PinRequest::Off, false, &[0, 1], 0).is_none());
+        let explicit = Placement::resolve(&PinRequest::Cpus(vec![1]), true, &[0, 1], 0).unwrap();
+        assert_eq!((explicit.plant(), explicit.agent(3)), (1, 1));
+    }
+
+    #[test]
+    fn pin_requests_parse_and_bad_lists_name_the_flag() {
+        assert_eq!(PinRequest::parse("auto", &[0, 1]), Ok(PinRequest::Auto));
+        assert_eq!(PinRequest::parse("off", &[0, 1]), Ok(PinRequest::Off));
+        assert_eq!(
+            PinRequest::parse("1,0", &[0, 1]),
+            Ok(PinRequest::Cpus(vec![1, 0]))
+        );
+        let e = PinRequest::parse("5", &[0, 1]).unwrap_err();
+        assert!(e.starts_with("--pin:"), "{e}");
+    }
+}
