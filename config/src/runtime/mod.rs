@@ -24,11 +24,11 @@ pub mod timing;
 use std::time::Duration;
 
 /// The plant stays at most this many steps ahead of the orchestrator's recorder.
-pub const PLANT_LEAD: u64 = 32;
+pub const PLANT_LEAD: u64 = 48;
 /// The leader stays at most this many steps ahead of the orchestrator's recorder.
-pub const LEADER_LEAD: u64 = 64;
+pub const LEADER_LEAD: u64 = 96;
 /// The plant wakes the orchestrator every this many steps.
-pub const ACK_EVERY: u64 = 8;
+pub const ACK_EVERY: u64 = 16;
 /// Plant and agents read their slow inputs (stop, progress, injections, references) every this many
 /// steps, and on any wake-up that brought none of their per-step inputs; the per-step inputs
 /// (commands, own state, neighbour shares) are read on every wake-up.
