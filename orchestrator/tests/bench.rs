@@ -62,6 +62,7 @@ fn tiny_bench_reports_every_transport_and_pattern_and_leaves_no_shared_memory() 
             );
         }
     }
+    let mut sizes = std::collections::BTreeSet::new();
     for r in results {
         let samples = r["samples"].as_u64().unwrap();
         let p50 = r["p50_us"].as_f64().unwrap();
@@ -70,12 +71,14 @@ fn tiny_bench_reports_every_transport_and_pattern_and_leaves_no_shared_memory() 
         let max = r["max_us"].as_f64().unwrap();
         assert!(samples > 0, "{r}");
         assert!(p50 <= p99 && p99 <= p999 && p999 <= max, "{r}");
-        if r["pattern"] == "lockstep" {
-            // The real run: its payload is the largest message of a step (the command).
-            assert!(r["payload_bytes"].as_u64().unwrap() > 256, "{r}");
-        } else {
-            assert_eq!(r["payload_bytes"], 256);
-        }
+        // Every case (the real lockstep run included) uses the lockstep's message sizes by
+        // default: the state down to an agent, the larger command back up.
+        let (down, up) = (
+            r["payload_bytes"].as_u64().unwrap(),
+            r["payload_up_bytes"].as_u64().unwrap(),
+        );
+        assert!(16 <= down && down < up, "{r}");
+        sizes.insert((down, up));
         let n = r["n"].as_u64().unwrap();
         assert_eq!(n, if r["pattern"] == "ping-pong" { 1 } else { 2 }, "{r}");
         for key in ["wait", "transport", "pattern"] {
@@ -83,25 +86,52 @@ fn tiny_bench_reports_every_transport_and_pattern_and_leaves_no_shared_memory() 
         }
     }
 
-    // The lockstep case (a real `formation run` with 2 agents) is set against the fan-out with the
-    // same transport and scheduling.
+    assert_eq!(
+        sizes.len(),
+        1,
+        "one pair of message sizes for all cases: {sizes:?}"
+    );
+
+    // The lockstep case (a real `formation run` with 2 agents) is set against every blocking
+    // fan-out of the same n, the fastest (smallest median) first.
     assert!(
         results
             .iter()
-            .any(|r| r["pattern"] == "lockstep" && r["wait"] == "block/batch"),
+            .any(|r| r["pattern"] == "lockstep" && r["wait"] == "block/pinned/batch"),
         "missing the lockstep row"
     );
-    assert!(results
+    let cases = v["lockstep_vs_fan_out_cases"]
+        .as_array()
+        .expect("comparisons");
+    let waits: Vec<&str> = cases
         .iter()
-        .any(|r| r["pattern"] == "fan-out" && r["wait"] == "block/batch"));
-    let ratio = &v["lockstep_vs_fan_out"];
-    let lock = ratio["lockstep_mean_us"].as_f64().expect("lockstep mean");
-    let fan = ratio["fan_out_mean_us"].as_f64().expect("fan-out mean");
-    let r = ratio["ratio"].as_f64().expect("ratio");
+        .map(|c| c["fan_out_wait"].as_str().unwrap())
+        .collect();
     assert!(
-        lock > 0.0 && fan > 0.0 && (r - lock / fan).abs() < 1e-3,
-        "{ratio}"
+        waits.contains(&"block") && waits.contains(&"block/batch"),
+        "{waits:?}"
     );
+    assert!(waits
+        .iter()
+        .all(|w| w.starts_with("block") && !w.contains("one-core")));
+    let p50 = |c: &serde_json::Value| c["fan_out_p50_us"].as_f64().unwrap();
+    assert!(
+        cases.windows(2).all(|w| p50(&w[0]) <= p50(&w[1])),
+        "fastest first"
+    );
+    let ratio = &v["lockstep_vs_fan_out"];
+    assert_eq!(ratio, &cases[0], "the headline is the fastest fan-out");
+    for (l, f, r) in [
+        ("lockstep_p50_us", "fan_out_p50_us", "ratio"),
+        ("lockstep_mean_us", "fan_out_mean_us", "ratio_mean"),
+    ] {
+        let (l, f, r) = (
+            ratio[l].as_f64().unwrap(),
+            ratio[f].as_f64().unwrap(),
+            ratio[r].as_f64().unwrap(),
+        );
+        assert!(l > 0.0 && f > 0.0 && (r - l / f).abs() < 1e-3, "{ratio}");
+    }
 
     let prefix = prefix_from_stderr(&stderr);
     let mut left = Vec::new();

@@ -2,7 +2,7 @@
 //! the agent processes, measures, stops and reaps them.
 
 use super::iox::{self, IoxLink, Ports, Services};
-use super::link::{self, Budget, Link, Wait};
+use super::link::{self, Budget, Link, Sizes, Wait};
 use super::plan::{Case, Transport};
 use super::procs::{self, Peers};
 use super::sock::{self, SockLink};
@@ -17,8 +17,8 @@ pub struct Ctx<'a> {
     pub node: &'a Node<ipc::Service>,
     /// The run's iceoryx2 prefix (also names the Unix sockets).
     pub prefix: &'a str,
-    /// Message size, bytes.
-    pub payload: usize,
+    /// Message sizes, bytes.
+    pub sizes: Sizes,
     /// Measuring time and warm-up.
     pub budget: Budget,
     /// This process's CPUs before any pinning (restored after each case).
@@ -52,7 +52,7 @@ fn agent_args(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Vec<
                 "--index".into(),
                 i.to_string(),
                 "--payload".into(),
-                ctx.payload.to_string(),
+                ctx.sizes.up.to_string(),
             ];
             a.extend(wait_arg(case.wait));
             if let Some(cpu) = case.placement.cpu_of(i + 1) {
@@ -91,7 +91,7 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Stri
             let services =
                 Services::create(ctx.node, idx, case.n).map_err(|e| format!("iceoryx2: {e}"))?;
             let notify = case.transport != Transport::IoxPoll;
-            let ports = Ports::plant(&services, ctx.payload, notify)
+            let ports = Ports::plant(&services, ctx.sizes.down, notify)
                 .map_err(|e| format!("iceoryx2: {e}"))?;
             let peers = spawn(ctx, idx, case, None)?;
             if case.transport == Transport::IoxWaitSet {
@@ -99,17 +99,17 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Stri
                 let _guard = ws
                     .attach_notification(&ports.listener)
                     .map_err(|e| format!("iceoryx2: attach listener: {e:?}"))?;
-                let mut link = IoxLink::new(&ports, Some(&ws), u32::MAX, ctx.payload);
+                let mut link = IoxLink::new(&ports, Some(&ws), u32::MAX, ctx.sizes.down);
                 measure(ctx, case, &mut link, peers)
             } else {
-                let mut link = IoxLink::new(&ports, None, u32::MAX, ctx.payload);
+                let mut link = IoxLink::new(&ports, None, u32::MAX, ctx.sizes.down);
                 measure(ctx, case, &mut link, peers)
             }
         }
         Transport::Uds => {
             let addr = sock::uds_addr(ctx.prefix, idx, None).map_err(|e| format!("uds: {e}"))?;
             let s = sock::bind_uds(&addr).map_err(|e| format!("uds bind: {e}"))?;
-            let mut link = SockLink::plant(s, case.n, ctx.payload, case.wait)
+            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait)
                 .map_err(|e| format!("uds: {e}"))?;
             let peers = spawn(ctx, idx, case, None)?;
             measure(ctx, case, &mut link, peers)
@@ -117,7 +117,7 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Stri
         Transport::Udp => {
             let s = sock::bind_udp(0).map_err(|e| format!("udp bind: {e}"))?;
             let port = s.local_addr().map_err(|e| format!("udp: {e}"))?.port();
-            let mut link = SockLink::plant(s, case.n, ctx.payload, case.wait)
+            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait)
                 .map_err(|e| format!("udp: {e}"))?;
             let peers = spawn(ctx, idx, case, Some(port))?;
             measure(ctx, case, &mut link, peers)

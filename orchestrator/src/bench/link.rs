@@ -15,6 +15,37 @@ pub const STOP: u64 = u64::MAX;
 pub const MIN_PAYLOAD: usize = 16;
 /// Largest payload (fits one UDP datagram and the default Unix datagram buffer).
 pub const MAX_PAYLOAD: usize = 60_000;
+/// Message sizes of a case, bytes: `down` plant -> agents, `up` agents -> plant (in ping-pong the
+/// plant side sends `down` and the peer answers `up`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sizes {
+    /// Plant -> agent message, bytes.
+    pub down: usize,
+    /// Agent -> plant message, bytes.
+    pub up: usize,
+}
+
+impl Sizes {
+    /// The sizes of the lockstep's per-step messages: the state the plant sends agent i
+    /// (`VehicleState`) and the command agent i answers with (`ControlCommand`), so a fan-out with
+    /// these sizes is the bare transport cost of a lockstep step.
+    pub fn lockstep_wire() -> Sizes {
+        Sizes {
+            down: std::mem::size_of::<formation_config::wire::VehicleState>(),
+            up: std::mem::size_of::<formation_config::wire::ControlCommand>(),
+        }
+    }
+
+    /// `128/440`, or one number when both directions have the same size.
+    pub fn label(&self) -> String {
+        if self.down == self.up {
+            self.down.to_string()
+        } else {
+            format!("{}/{}", self.down, self.up)
+        }
+    }
+}
+
 /// Longest a plant waits for the replies of one step, or for the handshake.
 pub const STEP_TIMEOUT: Duration = Duration::from_secs(5);
 /// Longest an agent waits for the next step before it gives up.

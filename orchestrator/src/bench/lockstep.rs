@@ -3,9 +3,10 @@
 //! orchestrator in steady state (`timing.step_us` of its summary.json), so that its cost per step
 //! can be set against the bare fan-out measured in the same bench run.
 
+use super::link::Sizes;
 use super::report::Row;
 use crate::run::step_timing::WARMUP_STEPS;
-use formation_config::wire::ControlCommand;
+use serde::Serialize;
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -65,9 +66,11 @@ fn row(n: usize, timing: &Value) -> Option<Row> {
     Some(Row {
         transport: "iox2-event".into(),
         pattern: "lockstep".into(),
-        wait: "block/batch".into(),
+        // `formation run` in lockstep: blocking waits, pinned (`--pin auto`), SCHED_BATCH.
+        wait: "block/pinned/batch".into(),
         n,
-        payload_bytes: std::mem::size_of::<ControlCommand>(),
+        payload_bytes: Sizes::lockstep_wire().down,
+        payload_up_bytes: Sizes::lockstep_wire().up,
         p50_us: s["p50"].as_f64()?,
         p99_us: s["p99"].as_f64()?,
         p999_us: s["p999"].as_f64()?,
@@ -77,18 +80,65 @@ fn row(n: usize, timing: &Value) -> Option<Row> {
     })
 }
 
-/// Lockstep step cost over the bare fan-out's measured in the same run, with the same transport,
-/// waiting and scheduling (iceoryx2 event, blocking, unpinned, `SCHED_BATCH` as `formation run`
-/// uses in lockstep) and the same `n`: `(lockstep mean µs, fan-out mean µs, ratio)`.
-pub fn ratio(rows: &[Row]) -> Option<(f64, f64, f64)> {
-    let lock = rows.iter().find(|r| r.pattern == "lockstep")?;
-    let fan = rows.iter().find(|r| {
-        r.pattern == "fan-out"
-            && r.transport == lock.transport
-            && r.wait == lock.wait
-            && r.n == lock.n
-    })?;
-    (fan.mean_us > 0.0).then(|| (lock.mean_us, fan.mean_us, lock.mean_us / fan.mean_us))
+/// The lockstep row set against one bare fan-out row of the same run.
+#[derive(Debug, Clone, Serialize)]
+pub struct Comparison {
+    /// Waiting strategy and placement of the fan-out case (`block`, `block/batch`, ...).
+    pub fan_out_wait: String,
+    /// Median lockstep step, µs.
+    pub lockstep_p50_us: f64,
+    /// Median fan-out step, µs.
+    pub fan_out_p50_us: f64,
+    /// `lockstep_p50_us / fan_out_p50_us` (the headline: medians resist the shared machine's
+    /// stalls).
+    pub ratio: f64,
+    /// Same as `ratio` (explicit name).
+    pub ratio_p50: f64,
+    /// Mean lockstep step, µs.
+    pub lockstep_mean_us: f64,
+    /// Mean fan-out step, µs.
+    pub fan_out_mean_us: f64,
+    /// `lockstep_mean_us / fan_out_mean_us`.
+    pub ratio_mean: f64,
+}
+
+fn round3(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}
+
+/// The lockstep step set against every bare fan-out of the same run that shares its transport
+/// (iceoryx2 event), its `n` and its way of waiting (blocking: `block`, `block/batch` and their
+/// pinned variants; not spin-then-block, not all-on-one-core), the fastest fan-out (smallest
+/// median) first. Empty without a lockstep row or a matching fan-out.
+pub fn comparisons(rows: &[Row]) -> Vec<Comparison> {
+    let Some(lock) = rows.iter().find(|r| r.pattern == "lockstep") else {
+        return Vec::new();
+    };
+    let mut fans: Vec<&Row> = rows
+        .iter()
+        .filter(|r| {
+            r.pattern == "fan-out"
+                && r.transport == lock.transport
+                && r.n == lock.n
+                && r.wait.starts_with("block")
+                && !r.wait.contains("one-core")
+                && r.p50_us > 0.0
+                && r.mean_us > 0.0
+        })
+        .collect();
+    fans.sort_by(|a, b| a.p50_us.total_cmp(&b.p50_us));
+    fans.iter()
+        .map(|f| Comparison {
+            fan_out_wait: f.wait.clone(),
+            lockstep_p50_us: lock.p50_us,
+            fan_out_p50_us: f.p50_us,
+            ratio: round3(lock.p50_us / f.p50_us),
+            ratio_p50: round3(lock.p50_us / f.p50_us),
+            lockstep_mean_us: lock.mean_us,
+            fan_out_mean_us: f.mean_us,
+            ratio_mean: round3(lock.mean_us / f.mean_us),
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -97,22 +147,38 @@ mod tests {
     use serde_json::json;
 
     #[test]
-    fn ratio_compares_lockstep_with_the_blocking_fan_out_of_the_same_n() {
+    fn lockstep_is_compared_with_every_blocking_fan_out_of_the_same_n_fastest_first() {
         let t = json!({"step_us": {"mean": 90.0, "p50": 88.0, "p99": 120.0, "p999": 150.0,
                                    "max": 400.0, "samples": 5000}});
         let lock = row(5, &t).unwrap();
-        let mut fan = lock.clone();
-        fan.pattern = "fan-out".into();
-        fan.mean_us = 60.0;
-        let mut pinned = fan.clone();
-        pinned.wait = "block/one-core".into();
-        pinned.mean_us = 30.0;
-        let mut other_policy = fan.clone();
-        other_policy.wait = "block".into();
-        other_policy.mean_us = 45.0;
-        let (l, f, r) = ratio(&[pinned, other_policy, lock, fan]).unwrap();
-        assert_eq!((l, f), (90.0, 60.0));
-        assert!((r - 1.5).abs() < 1e-12);
+        let fan = |wait: &str, p50: f64, n: usize| Row {
+            pattern: "fan-out".into(),
+            wait: wait.into(),
+            p50_us: p50,
+            mean_us: p50 + 2.0,
+            n,
+            ..lock.clone()
+        };
+        let rows = [
+            fan("block/one-core", 30.0, 5),
+            fan("spin-block", 20.0, 5),
+            fan("block/batch", 44.0, 10),
+            fan("block", 48.0, 5),
+            lock.clone(),
+            fan("block/batch", 44.0, 5),
+        ];
+        let c = comparisons(&rows);
+        let waits: Vec<&str> = c.iter().map(|c| c.fan_out_wait.as_str()).collect();
+        assert_eq!(waits, ["block/batch", "block"]);
+        assert_eq!((c[0].lockstep_p50_us, c[0].fan_out_p50_us), (88.0, 44.0));
+        assert_eq!(
+            (c[0].ratio, c[0].ratio_p50, c[0].ratio_mean),
+            (2.0, 2.0, 1.957)
+        );
+        assert!(
+            comparisons(&rows[..4]).is_empty(),
+            "no lockstep row, no comparison"
+        );
     }
 
     #[test]

@@ -28,7 +28,7 @@ pub use peer::{main as peer_main, PeerArgs};
 use crate::cli::EXIT_INVALID;
 use formation_config::ipc as fipc;
 use formation_config::services::run_prefix;
-use link::{Budget, MAX_PAYLOAD, MIN_PAYLOAD};
+use link::{Budget, Sizes, MAX_PAYLOAD, MIN_PAYLOAD};
 use plan::{PlanInput, Transport};
 use std::process::ExitCode;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -42,9 +42,12 @@ pub struct BenchArgs {
     /// Agent processes of the fan-out cases.
     #[arg(long, default_value_t = 5)]
     pub n: usize,
-    /// Message size, bytes (16..=60000), the same for every transport.
-    #[arg(long, default_value_t = 256)]
-    pub payload: usize,
+    /// Message size, bytes (16..=60000), both directions, every transport. Default: the sizes of
+    /// the lockstep's per-step messages, the state sent to an agent (`VehicleState`) and the
+    /// command it answers with (`ControlCommand`), so the fan-out is comparable with the lockstep
+    /// row.
+    #[arg(long)]
+    pub payload: Option<usize>,
     /// Measured time per case, s (a warm-up of 10 %, at most 0.25 s, is discarded first).
     #[arg(long, default_value_t = 1.5)]
     pub seconds: f64,
@@ -67,34 +70,6 @@ pub struct BenchArgs {
     pub json: bool,
 }
 
-/// Parses `0,1`, `0-3`, `2,4-5` into a CPU list; every CPU must be in `allowed`.
-fn parse_cpus(s: &str, allowed: &[usize]) -> Result<Vec<usize>, String> {
-    let mut out = Vec::new();
-    for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (lo, hi) = match part.split_once('-') {
-            Some((a, b)) => (a.trim(), b.trim()),
-            None => (part, part),
-        };
-        let lo: usize = lo.parse().map_err(|_| format!("bad CPU '{part}'"))?;
-        let hi: usize = hi.parse().map_err(|_| format!("bad CPU '{part}'"))?;
-        if lo > hi {
-            return Err(format!("bad CPU range '{part}'"));
-        }
-        for c in lo..=hi {
-            if !allowed.contains(&c) {
-                return Err(format!("CPU {c} is not available (allowed: {allowed:?})"));
-            }
-            if !out.contains(&c) {
-                out.push(c);
-            }
-        }
-    }
-    if out.is_empty() {
-        return Err("empty CPU list".into());
-    }
-    Ok(out)
-}
-
 fn parse_transports(s: &str) -> Result<Vec<Transport>, String> {
     s.split(',')
         .map(str::trim)
@@ -107,10 +82,12 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
     if a.n == 0 || a.n > MAX_N {
         return Err(format!("--n must be in 1..={MAX_N}, got {}", a.n));
     }
-    if !(MIN_PAYLOAD..=MAX_PAYLOAD).contains(&a.payload) {
+    if let Some(p) = a
+        .payload
+        .filter(|p| !(MIN_PAYLOAD..=MAX_PAYLOAD).contains(p))
+    {
         return Err(format!(
-            "--payload must be in {MIN_PAYLOAD}..={MAX_PAYLOAD} bytes, got {}",
-            a.payload
+            "--payload must be in {MIN_PAYLOAD}..={MAX_PAYLOAD} bytes, got {p}"
         ));
     }
     if !a.seconds.is_finite() || a.seconds <= 0.0 || a.seconds > 3600.0 {
@@ -125,7 +102,7 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
     let cpus = a
         .cpu
         .as_deref()
-        .map(|s| parse_cpus(s, allowed))
+        .map(|s| crate::cpus::parse_list(s, allowed))
         .transpose()?;
     let only = match a.transports.as_deref() {
         Some(s) => parse_transports(s)?,
@@ -165,6 +142,9 @@ pub fn main(args: BenchArgs) -> ExitCode {
         }
     };
     let (cases, skipped) = plan::plan(&input);
+    let sizes = args
+        .payload
+        .map_or_else(Sizes::lockstep_wire, |p| Sizes { down: p, up: p });
     procs::install_interrupt_handler();
     let prefix = unique_prefix();
     let warmup = Duration::from_secs_f64((args.seconds * 0.1).clamp(0.02, 0.25));
@@ -174,10 +154,11 @@ pub fn main(args: BenchArgs) -> ExitCode {
         min_warmup_samples: 20,
     };
     eprintln!(
-        "formation bench: iceoryx2 prefix {prefix}, {} cases x {:.2} s (+{:.2} s warm-up)",
+        "formation bench: iceoryx2 prefix {prefix}, {} cases x {:.2} s (+{:.2} s warm-up), messages {} B",
         cases.len(),
         args.seconds,
-        warmup.as_secs_f64()
+        warmup.as_secs_f64(),
+        sizes.label()
     );
     let node = match fipc::node(&prefix, "bench-plant") {
         Ok(n) => n,
@@ -190,7 +171,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     let ctx = case::Ctx {
         node: &node,
         prefix: &prefix,
-        payload: args.payload,
+        sizes,
         budget,
         allowed: &allowed,
     };
@@ -213,7 +194,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
                 failures += 1;
             }
             Ok(h) => {
-                let row = report::Row::new(c, args.payload, &h);
+                let row = report::Row::new(c, sizes, &h);
                 eprintln!(
                     "  {what}: p50 {:.1} µs ({} samples)",
                     row.p50_us, row.samples
@@ -270,15 +251,6 @@ pub fn main(args: BenchArgs) -> ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn cpu_lists_accept_ranges_and_reject_unavailable_cpus() {
-        assert_eq!(parse_cpus("0-1", &[0, 1]), Ok(vec![0, 1]));
-        assert_eq!(parse_cpus("1,0,1", &[0, 1]), Ok(vec![1, 0]));
-        assert!(parse_cpus("7", &[0, 1]).is_err());
-        assert!(parse_cpus("x", &[0, 1]).is_err());
-        assert!(parse_cpus("", &[0, 1]).is_err());
-    }
 
     #[test]
     fn unique_prefix_is_a_valid_iceoryx2_prefix() {

@@ -25,7 +25,7 @@ pub struct PeerArgs {
     /// Agent index (0-based).
     #[arg(long)]
     pub index: u32,
-    /// Message size, bytes.
+    /// Size of the messages this agent sends (the plant's may differ), bytes.
     #[arg(long)]
     pub payload: usize,
     /// `block`, `spin-block` or `busy`.

@@ -1,5 +1,6 @@
 //! Result rows: percentiles from the HDR histograms, printed as a table or as JSON.
 
+use super::link::Sizes;
 use super::plan::{Case, Pattern};
 use hdrhistogram::Histogram;
 use serde::Serialize;
@@ -15,8 +16,10 @@ pub struct Row {
     pub wait: String,
     /// Agent processes.
     pub n: usize,
-    /// Message size, bytes.
+    /// Message size plant -> agent, bytes.
     pub payload_bytes: usize,
+    /// Message size agent -> plant, bytes.
+    pub payload_up_bytes: usize,
     /// Median, µs.
     pub p50_us: f64,
     /// Mean, µs (for lockstep: steady-state wall time per step).
@@ -37,13 +40,14 @@ fn us(ns: f64) -> f64 {
 
 impl Row {
     /// Summarises the histogram (values in ns) of `case`.
-    pub fn new(case: &Case, payload: usize, h: &Histogram<u64>) -> Row {
+    pub fn new(case: &Case, sizes: Sizes, h: &Histogram<u64>) -> Row {
         Row {
             transport: case.transport.name().to_string(),
             pattern: case.pattern.name().to_string(),
             wait: case.wait_label(),
             n: case.n,
-            payload_bytes: payload,
+            payload_bytes: sizes.down,
+            payload_up_bytes: sizes.up,
             p50_us: us(h.value_at_quantile(0.5) as f64),
             mean_us: us(h.mean()),
             p99_us: us(h.value_at_quantile(0.99) as f64),
@@ -54,15 +58,14 @@ impl Row {
     }
 }
 
-/// `{"results": [...]}`, plus `lockstep_vs_fan_out` when both were measured.
+/// `{"results": [...]}`, plus, when both were measured, `lockstep_vs_fan_out` (against the
+/// fastest blocking fan-out) and `lockstep_vs_fan_out_cases` (against each).
 pub fn json(rows: &[Row]) -> String {
     let mut v = serde_json::json!({ "results": rows });
-    if let Some((l, f, r)) = super::lockstep::ratio(rows) {
-        v["lockstep_vs_fan_out"] = serde_json::json!({
-            "lockstep_mean_us": l,
-            "fan_out_mean_us": f,
-            "ratio": (r * 1000.0).round() / 1000.0,
-        });
+    let all = super::lockstep::comparisons(rows);
+    if let Some(fastest) = all.first() {
+        v["lockstep_vs_fan_out"] = serde_json::json!(fastest);
+        v["lockstep_vs_fan_out_cases"] = serde_json::json!(all);
     }
     v.to_string()
 }
@@ -70,7 +73,7 @@ pub fn json(rows: &[Row]) -> String {
 /// A fixed-width table, with a note on what a sample is.
 pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
     let mut s = format!(
-        "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
+        "{:<13} {:<9} {:<18} {:>3} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
         "transport",
         "pattern",
         "wait",
@@ -91,12 +94,16 @@ pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
             "-".to_string()
         };
         s.push_str(&format!(
-            "{:<13} {:<9} {:<17} {:>3} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9} {:>8}\n",
+            "{:<13} {:<9} {:<18} {:>3} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9} {:>8}\n",
             r.transport,
             r.pattern,
             r.wait,
             r.n,
-            r.payload_bytes,
+            Sizes {
+                down: r.payload_bytes,
+                up: r.payload_up_bytes
+            }
+            .label(),
             r.p50_us,
             r.mean_us,
             r.p99_us,
@@ -111,10 +118,19 @@ pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
          (publish to n agents, wait for all n replies); lockstep: wall time per step of `formation \
          run` in steady state (plant + leader + n agents with the control laws).\n",
     );
-    if let Some((l, f, r)) = super::lockstep::ratio(rows) {
+    let all = super::lockstep::comparisons(rows);
+    for (k, c) in all.iter().enumerate() {
+        let what = if k == 0 { "fastest bare" } else { "bare" };
         s.push_str(&format!(
-            "lockstep step / bare iox2-event fan-out (block/batch, same n), means: {l:.1} / \
-             {f:.1} µs = {r:.2}x\n"
+            "lockstep step / {what} iox2-event fan-out ({}, same n and message sizes): medians \
+             {:.1} / {:.1} µs = {:.2}x, means {:.1} / {:.1} µs = {:.2}x\n",
+            c.fan_out_wait,
+            c.lockstep_p50_us,
+            c.fan_out_p50_us,
+            c.ratio_p50,
+            c.lockstep_mean_us,
+            c.fan_out_mean_us,
+            c.ratio_mean
         ));
     }
     for (what, why) in skipped {

@@ -1,7 +1,7 @@
 //! Datagram-socket transports: Unix domain sockets (abstract namespace, so no files) and UDP on
 //! 127.0.0.1. The plant learns each agent's address from its HELLO datagram.
 
-use super::link::{Link, Msg, Wait, BLOCK_SLICE, HELLO};
+use super::link::{Link, Msg, Wait, BLOCK_SLICE, HELLO, MAX_PAYLOAD};
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::os::fd::AsRawFd;
@@ -124,7 +124,8 @@ impl<S: Dgram> SockLink<S> {
             from,
             polled,
             out: vec![0u8; payload],
-            inbuf: vec![0u8; payload.max(64)],
+            // Whatever the other side sends fits (the two directions may differ in size).
+            inbuf: vec![0u8; MAX_PAYLOAD],
         })
     }
 
