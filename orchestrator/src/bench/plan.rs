@@ -191,6 +191,24 @@ pub fn plan(input: &PlanInput) -> (Vec<Case>, Vec<(String, String)>) {
                 });
             }
         }
+        // The lockstep run pins plant and agents round-robin over the allowed CPUs under
+        // SCHED_BATCH (`formation run --pin auto`): its like-for-like baseline is the iceoryx2
+        // event fan-out placed and scheduled the same way (already in the list with `--cpu`).
+        if pattern == Pattern::FanOut
+            && input.lockstep
+            && wanted(Transport::IoxEvent)
+            && input.cpus.is_none()
+            && input.allowed.len() >= 2
+        {
+            cases.push(Case {
+                transport: Transport::IoxEvent,
+                pattern,
+                n,
+                wait: Wait::Block,
+                placement: Placement::RoundRobin(input.allowed.clone()),
+                batch: true,
+            });
+        }
         if wanted(Transport::IoxPoll) {
             let procs = n + 1;
             if procs <= cores {
@@ -258,6 +276,27 @@ mod tests {
             .find(|c| c.wait_label() == "block/one-core")
             .unwrap();
         assert_eq!(one.placement.cpu_of(2), Some(1));
+    }
+
+    #[test]
+    fn with_the_lockstep_the_fan_out_is_also_measured_placed_like_the_lockstep() {
+        let mut i = input(5, None);
+        i.allowed = vec![0, 1];
+        i.lockstep = true;
+        let (cases, _) = plan(&i);
+        let like = cases
+            .iter()
+            .find(|c| c.wait_label() == "block/pinned/batch")
+            .expect("the like-for-like fan-out");
+        assert_eq!(like.transport, Transport::IoxEvent);
+        assert_eq!(like.pattern, Pattern::FanOut);
+        let cpus: Vec<_> = (0..6).map(|k| like.placement.cpu_of(k)).collect();
+        assert_eq!(cpus, [0, 1, 0, 1, 0, 1].map(Some));
+        i.lockstep = false;
+        assert!(plan(&i)
+            .0
+            .iter()
+            .all(|c| c.wait_label() != "block/pinned/batch"));
     }
 
     #[test]
