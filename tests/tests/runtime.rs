@@ -199,3 +199,78 @@ fn two_concurrent_runs_do_not_see_each_other() {
     drop((a, b));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// CPUs in a `Cpus_allowed_list` line of /proc/<pid>/status (e.g. `0-1,3`).
+fn cpus_allowed(pid: u32) -> Vec<usize> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    let list = status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+        .unwrap_or("")
+        .trim()
+        .to_string();
+    let mut out = Vec::new();
+    for part in list.split(',').filter(|p| !p.is_empty()) {
+        let (a, b) = part.split_once('-').unwrap_or((part, part));
+        out.extend(a.parse::<usize>().unwrap()..=b.parse::<usize>().unwrap());
+    }
+    out
+}
+
+fn cmdline(pid: u32) -> String {
+    std::fs::read(format!("/proc/{pid}/cmdline"))
+        .map(|b| String::from_utf8_lossy(&b).replace('\0', " "))
+        .unwrap_or_default()
+}
+
+#[test]
+fn a_lockstep_run_pins_the_plant_to_the_first_cpu_and_the_agents_round_robin_after_it() {
+    let allowed = cpus_allowed(std::process::id());
+    let cpus: Vec<usize> = allowed.iter().copied().take(2).collect();
+    let list: Vec<String> = cpus.iter().map(|c| c.to_string()).collect();
+    let dir = temp_dir("pin");
+    let run = RunningRun::start(
+        &[
+            "--set",
+            "simulation.duration_s=600",
+            "--pin",
+            &list.join(","),
+        ],
+        &dir.join("run"),
+    );
+    assert!(run.prefix().is_some(), "not started: {}", run.stderr());
+    let mut seen = 0;
+    for pid in run.role_processes() {
+        let cmd = cmdline(pid);
+        let expected = if cmd.contains("formation-plant") {
+            vec![cpus[0]]
+        } else if let Some(i) = cmd
+            .split("--agent ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+        {
+            let i: usize = i.parse().unwrap();
+            vec![cpus[(i + 1) % cpus.len()]]
+        } else {
+            // The leader is not pinned.
+            allowed.clone()
+        };
+        assert_eq!(cpus_allowed(pid), expected, "{cmd}");
+        seen += 1;
+    }
+    assert_eq!(seen, 7, "plant, leader and 5 agents: {}", run.stderr());
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_unavailable_cpu_in_pin_is_rejected_with_exit_2_naming_the_flag() {
+    let out = Command::new(bin("formation"))
+        .args(["run", "--pin", "100000", "--out"])
+        .arg(temp_dir("pin-bad"))
+        .output()
+        .expect("formation runs");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--pin"), "{err}");
+}
