@@ -18,6 +18,9 @@ struct Vehicle {
     delta: Vector3<f64>,
     /// Time-only terms of eq. (2) at the start of the current step (the end of the previous one).
     terms_now: TimeTerms,
+    /// True once [`Plant::advance_vehicle`] has integrated this quadrotor over the current step:
+    /// `state` and `terms_now` then already belong to step k + 1.
+    advanced: bool,
 }
 
 /// The plant: N quadrotors, the step counter and the shared body parameters.
@@ -65,6 +68,7 @@ impl Plant {
                     gamma,
                     delta,
                     terms_now: TimeTerms::at(a, 0.0),
+                    advanced: false,
                 }
             })
             .collect();
@@ -96,6 +100,10 @@ impl Plant {
 
     /// The state message of quadrotor `i` at the current step.
     pub fn vehicle_state(&self, i: usize) -> VehicleState {
+        debug_assert!(
+            !self.vehicles[i].advanced,
+            "quadrotor {i} is already at step k + 1"
+        );
         let x = &self.vehicles[i].state;
         VehicleState {
             step: self.step,
@@ -118,6 +126,10 @@ impl Plant {
     /// Sets the inputs of quadrotor `i` for the current step from its command: the thrust is clamped
     /// to [0, T_max], the torque goes through the faults (4) and the saturation (3).
     pub fn apply(&mut self, i: usize, cmd: &ControlCommand) {
+        debug_assert!(
+            !self.vehicles[i].advanced,
+            "quadrotor {i} is already at step k + 1"
+        );
         let t = self.time();
         let step = self.step;
         let veh = &mut self.vehicles[i];
@@ -149,23 +161,41 @@ impl Plant {
         }
     }
 
-    /// Integrates every quadrotor over [t_k, t_k+1] with its held inputs and advances k.
-    pub fn advance(&mut self) {
+    /// Integrates quadrotor `i` over [t_k, t_k+1] with its held input, once [`Plant::apply`] and
+    /// [`Plant::truth`] of step k are done for it. The quadrotors do not interact, so the plant
+    /// process integrates each one as soon as its command is in (only the last one is left when
+    /// the last command arrives); k itself advances in [`Plant::advance`]. A second call in the same
+    /// step does nothing.
+    pub fn advance_vehicle(&mut self, i: usize) {
         let t = self.time();
         let t_next = (self.step + 1) as f64 * self.dt;
+        let veh = &mut self.vehicles[i];
+        if veh.advanced {
+            return;
+        }
+        let terms_next = TimeTerms::at(&veh.spec, t_next);
+        veh.state = rk4_with(
+            &self.body,
+            &veh.spec,
+            &veh.state,
+            &veh.input,
+            t,
+            t_next - t,
+            &veh.terms_now,
+            &terms_next,
+        );
+        veh.terms_now = terms_next;
+        veh.advanced = true;
+    }
+
+    /// Integrates every quadrotor not yet integrated in this step ([`Plant::advance_vehicle`]) over
+    /// [t_k, t_k+1] with its held inputs, and advances k.
+    pub fn advance(&mut self) {
+        for i in 0..self.vehicles.len() {
+            self.advance_vehicle(i);
+        }
         for veh in &mut self.vehicles {
-            let terms_next = TimeTerms::at(&veh.spec, t_next);
-            veh.state = rk4_with(
-                &self.body,
-                &veh.spec,
-                &veh.state,
-                &veh.input,
-                t,
-                t_next - t,
-                &veh.terms_now,
-                &terms_next,
-            );
-            veh.terms_now = terms_next;
+            veh.advanced = false;
         }
         self.step += 1;
     }

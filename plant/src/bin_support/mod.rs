@@ -8,7 +8,7 @@ use formation_config::runtime::boot::{boot, hello};
 use formation_config::runtime::messages::{StepEntry, CONTROL_STOP, ROLE_PLANT};
 use formation_config::runtime::ports::{poke, send};
 use formation_config::runtime::{ACK_EVERY, CHILD_WAIT, HOUSEKEEPING_EVERY, PLANT_LEAD};
-use formation_config::wire::{ControlCommand, FaultInjection};
+use formation_config::wire::FaultInjection;
 use formation_plant::Plant;
 
 /// Runs the plant until the orchestrator says stop (or goes away).
@@ -22,7 +22,7 @@ pub fn run() -> Result<(), String> {
     if b.args.realtime {
         return realtime::run(&b, &ports, plant);
     }
-    let mut commands: Vec<Option<ControlCommand>> = vec![None; n];
+    let mut arrived = vec![false; n];
     let mut entries = vec![StepEntry::default(); n];
     let mut faults: Vec<FaultInjection> = Vec::new();
     let mut got = 0;
@@ -39,7 +39,7 @@ pub fn run() -> Result<(), String> {
     loop {
         let mut fresh = 0;
         for (i, sub) in ports.commands.iter().enumerate() {
-            if commands[i].is_some() {
+            if arrived[i] {
                 continue;
             }
             // One command per agent and step: a second receive would only find nothing (a
@@ -51,7 +51,16 @@ pub fn run() -> Result<(), String> {
                         c.agent, c.step
                     ));
                 }
-                commands[i] = Some(*c);
+                // The quadrotors do not interact: each one moves to step k + 1 as soon as its
+                // command is in, so only the last one is left for the last command (the states of
+                // k + 1 still go out only once all N are in).
+                plant.apply(i, &c);
+                entries[i] = StepEntry {
+                    truth: plant.truth(i),
+                    command: *c,
+                };
+                plant.advance_vehicle(i);
+                arrived[i] = true;
                 got += 1;
                 fresh += 1;
             }
@@ -89,6 +98,23 @@ pub fn run() -> Result<(), String> {
                         }
                         ports.agents_wake.iter().for_each(poke);
                         states_out = true;
+                        // Injections of step k act from its first command on.
+                        faults.retain(|f| {
+                            if f.step <= k {
+                                plant.inject_fault(f);
+                                tracing::info!(
+                                    step = k,
+                                    agent = f.agent + 1,
+                                    gamma = ?f.gamma,
+                                    delta = ?f.delta,
+                                    mode = f.mode,
+                                    "fault injection applied"
+                                );
+                                false
+                            } else {
+                                true
+                            }
+                        });
                         told_blocked = false;
                     }
                     Some(_) if !told_blocked => {
@@ -110,30 +136,7 @@ pub fn run() -> Result<(), String> {
             if k >= steps || !(states_out && got == n) {
                 break;
             }
-            faults.retain(|f| {
-                if f.step <= k {
-                    plant.inject_fault(f);
-                    tracing::info!(
-                        step = k,
-                        agent = f.agent + 1,
-                        gamma = ?f.gamma,
-                        delta = ?f.delta,
-                        mode = f.mode,
-                        "fault injection applied"
-                    );
-                    false
-                } else {
-                    true
-                }
-            });
-            for i in 0..n {
-                let cmd = commands[i].take().unwrap_or_default();
-                plant.apply(i, &cmd);
-                entries[i] = StepEntry {
-                    truth: plant.truth(i),
-                    command: cmd,
-                };
-            }
+            arrived.fill(false);
             plant.advance();
             record_pending = true;
             got = 0;
