@@ -15,7 +15,7 @@ use formation_config::runtime::boot::{boot, hello};
 use formation_config::runtime::messages::{CONTROL_STOP, ROLE_AGENT};
 use formation_config::runtime::ports::{poke, send};
 use formation_config::runtime::{CHILD_WAIT, HOUSEKEEPING_EVERY};
-use formation_config::wire::{DelayInjection, VehicleState};
+use formation_config::wire::{DelayInjection, NeighborState, VehicleState};
 
 /// Runs agent `--agent i` until the orchestrator says stop (or goes away).
 pub fn run() -> Result<(), String> {
@@ -33,6 +33,7 @@ pub fn run() -> Result<(), String> {
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut own: Option<VehicleState> = None;
     let mut observed = false;
+    let mut share_later: Option<NeighborState> = None;
     let mut k: u64 = 0;
     let mut sampler = telemetry::Sampler::new(&b.scenario, i);
     tracing::info!(
@@ -113,7 +114,17 @@ pub fn run() -> Result<(), String> {
         if let Some(s) = own {
             if !observed {
                 let share = agent.observe_own(&s);
-                send(&ports.share_out, share)?;
+                // The share goes out before the command only if a neighbour may need it before
+                // this agent's next step, which cannot start before the command is in (a neighbour
+                // whose delayed step is this one is also woken). Otherwise it goes out after the
+                // command, off the critical path of the step.
+                if (0..ports.neighbours_wake.len())
+                    .any(|idx| delays.needed_before_next_step(idx, k))
+                {
+                    send(&ports.share_out, share)?;
+                } else {
+                    share_later = Some(share);
+                }
                 for (idx, n) in ports.neighbours_wake.iter().enumerate() {
                     if delays.needs_now(idx, k) {
                         poke(n);
@@ -127,6 +138,9 @@ pub fn run() -> Result<(), String> {
                 let cmd = agent.step(&s);
                 send(&ports.command, cmd)?;
                 poke(&ports.plant_wake);
+                if let Some(share) = share_later.take() {
+                    send(&ports.share_out, share)?;
+                }
                 if let Some(t0) = started {
                     let latency = t0.elapsed();
                     let t1 = std::time::Instant::now();

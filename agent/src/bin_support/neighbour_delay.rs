@@ -60,4 +60,58 @@ impl NeighbourDelays {
         let tau = d.tau(step as f64 * self.dt, self.max_delay);
         delay_steps(tau, self.dt) <= 1
     }
+
+    /// True when neighbour number `idx` may need the share of `step` before this agent's command
+    /// of `step` is in: it needs it now, or at `step + 1` (which starts once every command of
+    /// `step` is in) its delay is at most one step. Otherwise the share may go out after the
+    /// command.
+    pub fn needed_before_next_step(&self, idx: usize, step: u64) -> bool {
+        self.needs_now(idx, step) || self.needs_now(idx, step + 1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Agent 0 with neighbour 1, whose delay is `base_s` (constant).
+    fn delays(base_s: f64) -> NeighbourDelays {
+        let mut s = Scenario::paper();
+        s.agents[1].delay = DelaySpec {
+            base_s,
+            amplitude_s: 0.0,
+            angular_rate_rad_s: 0.0,
+        };
+        NeighbourDelays::new(&s, &[1])
+    }
+
+    #[test]
+    fn a_share_is_needed_at_once_only_at_step_0_or_under_a_delay_of_one_step() {
+        let dt = Scenario::paper().simulation.dt_s;
+        let long = delays(20.0 * dt);
+        assert!(long.needs_now(0, 0));
+        assert!(!long.needs_now(0, 5));
+        assert!(!long.needed_before_next_step(0, 5));
+        let short = delays(0.4 * dt);
+        assert!(short.needs_now(0, 5));
+        assert!(short.needed_before_next_step(0, 5));
+    }
+
+    #[test]
+    fn a_delay_injection_that_shortens_the_delay_next_step_makes_the_share_go_out_first() {
+        let dt = Scenario::paper().simulation.dt_s;
+        let mut d = delays(20.0 * dt);
+        d.observe(&DelayInjection {
+            step: 100,
+            agent: 1,
+            base_s: 0.0,
+            ..Default::default()
+        });
+        assert!(!d.needs_now(0, 99));
+        assert!(
+            d.needed_before_next_step(0, 99),
+            "at step 100 the neighbour needs the share of step 99 or 100"
+        );
+        assert!(d.needs_now(0, 100));
+    }
 }

@@ -93,10 +93,14 @@ pub fn run() -> Result<(), String> {
                 }
                 match recorded {
                     Some(r) if k < r + PLANT_LEAD => {
-                        for i in 0..n {
-                            send(&ports.states[i], plant.vehicle_state(i))?;
+                        // Each agent is woken right after its state is out: the first ones
+                        // start while the plant still publishes to the others.
+                        for (i, (state, wake)) in
+                            ports.states.iter().zip(&ports.agents_wake).enumerate()
+                        {
+                            send(state, plant.vehicle_state(i))?;
+                            poke(wake);
                         }
-                        ports.agents_wake.iter().for_each(poke);
                         states_out = true;
                         // Injections of step k act from its first command on.
                         faults.retain(|f| {
