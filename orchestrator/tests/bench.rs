@@ -148,6 +148,8 @@ fn bad_bench_arguments_exit_with_code_2_and_a_message() {
         vec!["bench", "--seconds", "-1"],
         vec!["bench", "--cpu", "9999"],
         vec!["bench", "--transports", "carrier-pigeon"],
+        vec!["bench", "--rounds", "0"],
+        vec!["bench", "--rounds", "21"],
     ] {
         let out = formation().args(&args).output().expect("formation runs");
         assert_eq!(out.status.code(), Some(2), "{args:?}");
@@ -156,5 +158,65 @@ fn bad_bench_arguments_exit_with_code_2_and_a_message() {
             String::from_utf8_lossy(&out.stderr).contains("error"),
             "{args:?}"
         );
+    }
+}
+
+#[test]
+fn over_several_rounds_every_case_is_reported_once_and_each_ratio_comes_from_its_own_round() {
+    let out = formation()
+        .args([
+            "bench",
+            "--json",
+            "--seconds",
+            "0.1",
+            "--n",
+            "2",
+            "--transports",
+            "iox2-event",
+            "--rounds",
+            "3",
+        ])
+        .output()
+        .expect("formation runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "bench failed: {stderr}");
+    assert_eq!(stderr.matches("round ").count(), 3, "{stderr}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert_eq!(v["rounds"], 3);
+    let results = v["results"].as_array().expect("results");
+    let mut keys: Vec<String> = results
+        .iter()
+        .map(|r| {
+            format!(
+                "{} {} {} {}",
+                r["transport"], r["pattern"], r["wait"], r["n"]
+            )
+        })
+        .collect();
+    let all = keys.len();
+    keys.sort();
+    keys.dedup();
+    assert_eq!(keys.len(), all, "one row per case: {keys:?}");
+    for c in v["lockstep_vs_fan_out_cases"]
+        .as_array()
+        .expect("comparisons")
+    {
+        let ratios: Vec<f64> = c["ratios"]
+            .as_array()
+            .expect("ratios")
+            .iter()
+            .map(|r| r.as_f64().unwrap())
+            .collect();
+        assert_eq!(ratios.len() as u64, c["rounds"].as_u64().unwrap(), "{c}");
+        assert_eq!(ratios.len(), 3, "{c}");
+        let (lo, mid, hi) = (
+            c["ratio_min"].as_f64().unwrap(),
+            c["ratio"].as_f64().unwrap(),
+            c["ratio_max"].as_f64().unwrap(),
+        );
+        assert!(lo <= mid && mid <= hi && lo > 0.0, "{c}");
+        let mut sorted = ratios.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert_eq!(mid, sorted[1], "the median of the rounds: {c}");
     }
 }

@@ -100,6 +100,15 @@ pub struct Comparison {
     pub fan_out_mean_us: f64,
     /// `lockstep_mean_us / fan_out_mean_us`.
     pub ratio_mean: f64,
+    /// Rounds the comparison is made of (`formation bench --rounds`). With more than one, every
+    /// figure above is the median over the rounds, the ratios of each round taken within it.
+    pub rounds: usize,
+    /// `ratio_p50` of each round, in order.
+    pub ratios: Vec<f64>,
+    /// Smallest of `ratios`.
+    pub ratio_min: f64,
+    /// Largest of `ratios`.
+    pub ratio_max: f64,
 }
 
 fn round3(x: f64) -> f64 {
@@ -137,6 +146,81 @@ pub fn comparisons(rows: &[Row]) -> Vec<Comparison> {
             lockstep_mean_us: lock.mean_us,
             fan_out_mean_us: f.mean_us,
             ratio_mean: round3(lock.mean_us / f.mean_us),
+            rounds: 1,
+            ratios: vec![round3(lock.p50_us / f.p50_us)],
+            ratio_min: round3(lock.p50_us / f.p50_us),
+            ratio_max: round3(lock.p50_us / f.p50_us),
+        })
+        .collect()
+}
+
+/// The median of `v` (the lower middle one for an even count); 0 when empty.
+pub fn median(v: &[f64]) -> f64 {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len().saturating_sub(1) / 2).copied().unwrap_or(0.0)
+}
+
+/// [`comparisons`] over several rounds of the same cases (`formation bench --rounds`), each ratio
+/// taken within its round, where fan-out and lockstep ran minutes apart at most, so that the
+/// shared machine's slow and fast phases cancel; then, per fan-out, the median over the rounds of
+/// every figure, the fastest fan-out (smallest median) first. A fan-out missing from a round (a
+/// failed case) is compared over the rounds that have it.
+pub fn across_rounds(rounds: &[Vec<Row>]) -> Vec<Comparison> {
+    let per_round: Vec<Vec<Comparison>> = rounds.iter().map(|r| comparisons(r)).collect();
+    let mut waits: Vec<String> = Vec::new();
+    for c in per_round.iter().flatten() {
+        if !waits.contains(&c.fan_out_wait) {
+            waits.push(c.fan_out_wait.clone());
+        }
+    }
+    let mut out: Vec<Comparison> = waits
+        .into_iter()
+        .map(|wait| {
+            let of: Vec<&Comparison> = per_round
+                .iter()
+                .flatten()
+                .filter(|c| c.fan_out_wait == wait)
+                .collect();
+            let m =
+                |f: fn(&Comparison) -> f64| median(&of.iter().map(|c| f(c)).collect::<Vec<_>>());
+            let ratios: Vec<f64> = of.iter().map(|c| c.ratio_p50).collect();
+            let ratio = m(|c| c.ratio_p50);
+            Comparison {
+                fan_out_wait: wait,
+                lockstep_p50_us: m(|c| c.lockstep_p50_us),
+                fan_out_p50_us: m(|c| c.fan_out_p50_us),
+                ratio,
+                ratio_p50: ratio,
+                lockstep_mean_us: m(|c| c.lockstep_mean_us),
+                fan_out_mean_us: m(|c| c.fan_out_mean_us),
+                ratio_mean: m(|c| c.ratio_mean),
+                rounds: of.len(),
+                ratio_min: ratios.iter().copied().fold(f64::INFINITY, f64::min),
+                ratio_max: ratios.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                ratios,
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| a.fan_out_p50_us.total_cmp(&b.fan_out_p50_us));
+    out
+}
+
+/// One row per case over several rounds: for each case (transport, pattern, wait, n, in the order
+/// of the first round it appears in) the row of the round with its median `p50_us`.
+pub fn median_rows(rounds: &[Vec<Row>]) -> Vec<Row> {
+    let key = |r: &Row| (r.transport.clone(), r.pattern.clone(), r.wait.clone(), r.n);
+    let mut keys = Vec::new();
+    for r in rounds.iter().flatten() {
+        if !keys.contains(&key(r)) {
+            keys.push(key(r));
+        }
+    }
+    keys.iter()
+        .filter_map(|k| {
+            let mut of: Vec<&Row> = rounds.iter().flatten().filter(|r| key(r) == *k).collect();
+            of.sort_by(|a, b| a.p50_us.total_cmp(&b.p50_us));
+            of.get(of.len().saturating_sub(1) / 2).map(|r| (*r).clone())
         })
         .collect()
 }
@@ -178,6 +262,52 @@ mod tests {
         assert!(
             comparisons(&rows[..4]).is_empty(),
             "no lockstep row, no comparison"
+        );
+    }
+
+    #[test]
+    fn over_rounds_each_ratio_is_taken_within_its_round_and_the_median_reported() {
+        let t = |p50: f64| {
+            json!({"step_us": {"mean": p50, "p50": p50, "p99": 120.0,
+                                              "p999": 150.0, "max": 400.0, "samples": 5000}})
+        };
+        let lock = |p50: f64| row(5, &t(p50)).unwrap();
+        let fan = |wait: &str, p50: f64| Row {
+            pattern: "fan-out".into(),
+            wait: wait.into(),
+            p50_us: p50,
+            mean_us: p50,
+            ..lock(p50)
+        };
+        // A slow round (everything 2x) must not move the ratio; a round without `block` is
+        // compared over the rounds that have it.
+        let rounds = vec![
+            vec![fan("block", 50.0), fan("block/batch", 40.0), lock(60.0)],
+            vec![fan("block", 100.0), fan("block/batch", 80.0), lock(120.0)],
+            vec![fan("block/batch", 40.0), lock(56.0)],
+        ];
+        let c = across_rounds(&rounds);
+        assert_eq!(c[0].fan_out_wait, "block/batch");
+        assert_eq!(c[0].ratios, vec![1.5, 1.5, 1.4]);
+        assert_eq!(
+            (c[0].ratio, c[0].ratio_min, c[0].ratio_max),
+            (1.5, 1.4, 1.5)
+        );
+        assert_eq!(
+            (c[0].rounds, c[0].fan_out_p50_us, c[0].lockstep_p50_us),
+            (3, 40.0, 60.0)
+        );
+        assert_eq!((c[1].fan_out_wait.as_str(), c[1].rounds), ("block", 2));
+        assert_eq!(c[1].ratio, 1.2);
+        let rows = median_rows(&rounds);
+        let waits: Vec<(&str, f64)> = rows.iter().map(|r| (r.wait.as_str(), r.p50_us)).collect();
+        assert_eq!(
+            waits,
+            [
+                ("block", 50.0),
+                ("block/batch", 40.0),
+                ("block/pinned/batch", 60.0)
+            ]
         );
     }
 

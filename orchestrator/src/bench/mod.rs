@@ -36,6 +36,9 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 /// Largest `--n` (agent processes).
 pub const MAX_N: usize = 200;
 
+/// Largest `--rounds`.
+pub const MAX_ROUNDS: usize = 20;
+
 /// Arguments of `formation bench`.
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
@@ -65,6 +68,12 @@ pub struct BenchArgs {
     /// the iceoryx2 event fan-out; it runs whenever iox2-event is measured and `--n` <= 64).
     #[arg(long)]
     pub no_lockstep: bool,
+    /// Run every case (and the lockstep) this many times, alternated: round 1 runs them all, then
+    /// round 2, ... The table shows each case's median round, and each lockstep / fan-out ratio is
+    /// the median of the ratios taken within each round, so that slow and fast phases of a shared
+    /// machine cancel out (1..=20).
+    #[arg(long, default_value_t = 1)]
+    pub rounds: usize,
     /// Print `{"results": [...]}` on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -92,6 +101,12 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
     }
     if !a.seconds.is_finite() || a.seconds <= 0.0 || a.seconds > 3600.0 {
         return Err(format!("--seconds must be in (0, 3600], got {}", a.seconds));
+    }
+    if !(1..=MAX_ROUNDS).contains(&a.rounds) {
+        return Err(format!(
+            "--rounds must be in 1..={MAX_ROUNDS}, got {}",
+            a.rounds
+        ));
     }
     if a.spin_us > 1_000_000 {
         return Err(format!(
@@ -175,7 +190,63 @@ pub fn main(args: BenchArgs) -> ExitCode {
         budget,
         allowed: &allowed,
     };
-    let mut rows = Vec::new();
+    let mut rounds: Vec<Vec<report::Row>> = Vec::new();
+    let mut failures = 0;
+    for round in 1..=args.rounds {
+        if procs::aborted() {
+            break;
+        }
+        if args.rounds > 1 {
+            eprintln!("round {round} of {}", args.rounds);
+        }
+        let mut rows = Vec::new();
+        failures += run_round(
+            &ctx,
+            &cases,
+            (round - 1) * cases.len(),
+            &input,
+            &args,
+            &mut rows,
+        );
+        rounds.push(rows);
+    }
+    drop(node);
+    match fipc::remove_residue(&prefix) {
+        Ok(_) => {}
+        Err(e) => eprintln!("warning: could not remove iceoryx2 files of {prefix}: {e}"),
+    }
+    if procs::aborted() {
+        eprintln!("formation bench: interrupted");
+        return ExitCode::from(130);
+    }
+    let rows = lockstep::median_rows(&rounds);
+    let comparisons = lockstep::across_rounds(&rounds);
+    if args.json {
+        println!("{}", report::json(&rows, &comparisons, rounds.len()));
+    } else {
+        print!(
+            "{}",
+            report::table(&rows, &comparisons, rounds.len(), &skipped)
+        );
+    }
+    if failures > 0 {
+        eprintln!("formation bench: {failures} case(s) failed");
+        return ExitCode::from(1);
+    }
+    ExitCode::SUCCESS
+}
+
+/// One round: every case, then the lockstep run if planned. Appends the rows to `rows` and returns
+/// the number of failed cases. Case numbers (which name services and sockets) start at `first`, so
+/// that no round reuses a name of an earlier one.
+fn run_round(
+    ctx: &case::Ctx,
+    cases: &[plan::Case],
+    first: usize,
+    input: &PlanInput,
+    args: &BenchArgs,
+    rows: &mut Vec<report::Row>,
+) -> usize {
     let mut failures = 0;
     for (idx, c) in cases.iter().enumerate() {
         if procs::aborted() {
@@ -188,13 +259,13 @@ pub fn main(args: BenchArgs) -> ExitCode {
             c.wait_label(),
             c.n
         );
-        match case::run(&ctx, idx, c) {
+        match case::run(ctx, first + idx, c) {
             Ok(h) if h.is_empty() => {
                 eprintln!("  {what}: no samples");
                 failures += 1;
             }
             Ok(h) => {
-                let row = report::Row::new(c, sizes, &h);
+                let row = report::Row::new(c, ctx.sizes, &h);
                 eprintln!(
                     "  {what}: p50 {:.1} µs ({} samples)",
                     row.p50_us, row.samples
@@ -227,25 +298,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         }
         let _ = std::fs::remove_dir_all(&scratch);
     }
-    drop(node);
-    match fipc::remove_residue(&prefix) {
-        Ok(_) => {}
-        Err(e) => eprintln!("warning: could not remove iceoryx2 files of {prefix}: {e}"),
-    }
-    if procs::aborted() {
-        eprintln!("formation bench: interrupted");
-        return ExitCode::from(130);
-    }
-    if args.json {
-        println!("{}", report::json(&rows));
-    } else {
-        print!("{}", report::table(&rows, &skipped));
-    }
-    if failures > 0 {
-        eprintln!("formation bench: {failures} case(s) failed");
-        return ExitCode::from(1);
-    }
-    ExitCode::SUCCESS
+    failures
 }
 
 #[cfg(test)]

@@ -60,9 +60,8 @@ impl Row {
 
 /// `{"results": [...]}`, plus, when both were measured, `lockstep_vs_fan_out` (against the
 /// fastest blocking fan-out) and `lockstep_vs_fan_out_cases` (against each).
-pub fn json(rows: &[Row]) -> String {
-    let mut v = serde_json::json!({ "results": rows });
-    let all = super::lockstep::comparisons(rows);
+pub fn json(rows: &[Row], all: &[super::lockstep::Comparison], rounds: usize) -> String {
+    let mut v = serde_json::json!({ "results": rows, "rounds": rounds });
     if let Some(fastest) = all.first() {
         v["lockstep_vs_fan_out"] = serde_json::json!(fastest);
         v["lockstep_vs_fan_out_cases"] = serde_json::json!(all);
@@ -71,7 +70,12 @@ pub fn json(rows: &[Row]) -> String {
 }
 
 /// A fixed-width table, with a note on what a sample is.
-pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
+pub fn table(
+    rows: &[Row],
+    all: &[super::lockstep::Comparison],
+    rounds: usize,
+    skipped: &[(String, String)],
+) -> String {
     let mut s = format!(
         "{:<13} {:<9} {:<18} {:>3} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>8}\n",
         "transport",
@@ -118,12 +122,25 @@ pub fn table(rows: &[Row], skipped: &[(String, String)]) -> String {
          (publish to n agents, wait for all n replies); lockstep: wall time per step of `formation \
          run` in steady state (plant + leader + n agents with the control laws).\n",
     );
-    let all = super::lockstep::comparisons(rows);
+    if rounds > 1 {
+        s.push_str(&format!(
+            "{rounds} rounds: each row is the case's round with the median p50; each ratio below \
+             is the median of the ratios taken within each round (range in brackets).\n"
+        ));
+    }
     for (k, c) in all.iter().enumerate() {
         let what = if k == 0 { "fastest bare" } else { "bare" };
+        let range = if c.rounds > 1 {
+            format!(
+                " [{:.2}-{:.2}x over {} rounds]",
+                c.ratio_min, c.ratio_max, c.rounds
+            )
+        } else {
+            String::new()
+        };
         s.push_str(&format!(
             "lockstep step / {what} iox2-event fan-out ({}, same n and message sizes): medians \
-             {:.1} / {:.1} µs = {:.2}x, means {:.1} / {:.1} µs = {:.2}x\n",
+             {:.1} / {:.1} µs = {:.2}x{range}, means {:.1} / {:.1} µs = {:.2}x\n",
             c.fan_out_wait,
             c.lockstep_p50_us,
             c.fan_out_p50_us,
