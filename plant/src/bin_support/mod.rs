@@ -1,5 +1,7 @@
-//! The plant's event loop around [`formation_plant::Plant`], in the call order of the in-process
-//! runner: apply the commands in agent order, take the truths, publish the step record, advance.
+//! The plant's event loop around [`formation_plant::Plant`]. Each command is applied, its truth
+//! taken and its quadrotor integrated as soon as it arrives (the quadrotors do not interact, so the
+//! order of arrival changes nothing: `plant/tests/physics.rs`); once all N are in, k advances, the
+//! states of k + 1 go out and then the step record of k.
 
 mod ports;
 mod realtime;
