@@ -42,16 +42,19 @@ fn a_notification_racing_with_the_listeners_drain_still_wakes_it() {
     let published = Arc::new(AtomicU64::new(0));
     let seen = Arc::new(AtomicU64::new(0));
     let done = Arc::new(AtomicBool::new(false));
+    let listening = Arc::new(AtomicBool::new(false));
     let listener = {
-        let (prefix, published, seen, done) = (
+        let (prefix, published, seen, done, listening) = (
             prefix.clone(),
             published.clone(),
             seen.clone(),
             done.clone(),
+            listening.clone(),
         );
         std::thread::spawn(move || {
             let node = ipc::node(&prefix, "listener").expect("node");
             let wake = Wake::open(&node, name).expect("listener");
+            listening.store(true, Ordering::SeqCst);
             let mut lost = 0;
             while !done.load(Ordering::SeqCst) {
                 let before = published.load(Ordering::SeqCst);
@@ -69,7 +72,10 @@ fn a_notification_racing_with_the_listeners_drain_still_wakes_it() {
             lost
         })
     };
-    std::thread::sleep(Duration::from_millis(50));
+    // Notifiers only reach listeners that exist: start once the listener is there.
+    while !listening.load(Ordering::SeqCst) {
+        std::thread::sleep(Duration::from_millis(1));
+    }
     let notifiers: Vec<_> = (0..NOTIFIERS)
         .map(|i| {
             let (prefix, published, seen) = (prefix.clone(), published.clone(), seen.clone());

@@ -137,19 +137,22 @@ pub fn comparisons(rows: &[Row]) -> Vec<Comparison> {
         .collect();
     fans.sort_by(|a, b| a.p50_us.total_cmp(&b.p50_us));
     fans.iter()
-        .map(|f| Comparison {
-            fan_out_wait: f.wait.clone(),
-            lockstep_p50_us: lock.p50_us,
-            fan_out_p50_us: f.p50_us,
-            ratio: round3(lock.p50_us / f.p50_us),
-            ratio_p50: round3(lock.p50_us / f.p50_us),
-            lockstep_mean_us: lock.mean_us,
-            fan_out_mean_us: f.mean_us,
-            ratio_mean: round3(lock.mean_us / f.mean_us),
-            rounds: 1,
-            ratios: vec![round3(lock.p50_us / f.p50_us)],
-            ratio_min: round3(lock.p50_us / f.p50_us),
-            ratio_max: round3(lock.p50_us / f.p50_us),
+        .map(|f| {
+            let ratio = round3(lock.p50_us / f.p50_us);
+            Comparison {
+                fan_out_wait: f.wait.clone(),
+                lockstep_p50_us: lock.p50_us,
+                fan_out_p50_us: f.p50_us,
+                ratio,
+                ratio_p50: ratio,
+                lockstep_mean_us: lock.mean_us,
+                fan_out_mean_us: f.mean_us,
+                ratio_mean: round3(lock.mean_us / f.mean_us),
+                rounds: 1,
+                ratios: vec![ratio],
+                ratio_min: ratio,
+                ratio_max: ratio,
+            }
         })
         .collect()
 }
