@@ -4,7 +4,7 @@
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
 use formation_agent::Agent;
-use formation_config::wire::{NeighborState, ReferenceFrame, VehicleState};
+use formation_config::protocol::wire::{NeighborState, ReferenceFrame, VehicleState};
 use formation_config::{Scenario, Variant};
 use formation_leader::mission::Mission;
 use formation_plant::Plant;

@@ -10,11 +10,11 @@ use crate::delay::{delay_steps, StepHistory};
 use crate::params::AgentParams;
 use crate::position::{consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
-use formation_config::scenario::{DelaySpec, Scenario};
-use formation_config::wire::{
+use formation_config::protocol::wire::{
     ControlCommand, ControllerTelemetry, DelayInjection, NeighborState, ReferenceFrame,
     VehicleState,
 };
+use formation_config::scenario::{DelaySpec, Scenario};
 use formation_config::Variant;
 use nalgebra::Vector3;
 

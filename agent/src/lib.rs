@@ -18,5 +18,9 @@ pub mod params;
 pub mod position;
 pub mod rbfnn;
 
+/// The role process around the library: its ports, its event loop (lockstep and realtime).
+#[cfg(feature = "node")]
+pub mod node;
+
 pub use agent::Agent;
 pub use params::AgentParams;

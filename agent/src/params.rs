@@ -1,6 +1,6 @@
 //! Parameters of one agent, taken from the scenario once at construction.
 
-use formation_config::graph::Topology;
+use formation_config::scenario::graph::Topology;
 use formation_config::scenario::{Controller, DelaySpec, Scenario};
 use formation_config::Variant;
 

@@ -1,28 +1,28 @@
-//! The contract every formation process shares.
+//! The contract every formation process shares, in three layers:
 //!
-//! * [`scenario`]: the scenario schema (TOML, unknown fields rejected) with the paper scenario embedded
-//!   as the default ([`Scenario::paper`]).
-//! * [`validate`]: checks of the paper's assumptions with errors naming the field and the assumption.
-//! * [`wire`]: `#[repr(C)]` zero-copy messages exchanged over iceoryx2, stamped with step and time.
-//! * [`services`]: service names under a per-run prefix.
-//! * [`ipc`]: iceoryx2 plumbing: nodes under a run prefix, services sized for N, residue cleanup.
-//! * [`runtime`]: the lockstep protocol of `formation run` (pacing, control messages, role-process
-//!   plumbing).
-//! * [`graph`]: the communication graph (Laplacian `L`, leader weights `B`) built from a scenario.
+//! * [`scenario`]: the scenario model (TOML schema, unknown fields rejected, the paper scenario
+//!   embedded as the default), its validation against the paper's assumptions, the communication
+//!   graph and the controller variants. Pure data; what the control libraries build on.
+//! * [`protocol`]: the wire messages (`#[repr(C)]`, stamped with step and time), the typed service
+//!   table (each service's name, message type, limits, publishers and subscribers, declared once)
+//!   and the pacing constants of the lockstep protocol. With the `ipc` feature the messages are
+//!   iceoryx2 `ZeroCopySend` types.
+//! * [`node`] (feature `node`): the plumbing of a role process — iceoryx2 nodes under a run prefix,
+//!   ports opened from the service table, process boot, scheduling, clock, logging, histograms.
+//!
+//! The agent, plant and leader *libraries* depend on this crate without default features: they see
+//! the scenario and the message structs, and none of the process plumbing.
 #![warn(missing_docs)]
 
-pub mod graph;
-pub mod ipc;
-pub mod runtime;
+pub mod protocol;
 pub mod scenario;
-pub mod services;
-pub mod validate;
-pub mod variant;
-pub mod wire;
 
+#[cfg(feature = "node")]
+pub mod node;
+
+pub use scenario::validate::{ValidationError, ValidationErrors};
+pub use scenario::variant::Variant;
 pub use scenario::Scenario;
-pub use validate::{ValidationError, ValidationErrors};
-pub use variant::Variant;
 
 /// Largest number of quadrotors a run may have; fixes the size of the wire messages that carry
 /// per-agent arrays (the reference frame).

@@ -1,10 +1,10 @@
 //! Every check of `validate`: starting from the paper scenario, break one thing at a time and assert
 //! the error names the offending field and the right assumption.
 
-use formation_config::scenario::{Edge, PAPER_TOML};
-use formation_config::validate::{
+use formation_config::scenario::validate::{
     validate, ValidationError, A1, A2, A4, A5, CTRL, FINITE, INDEX, PHYS, SAT, SIM,
 };
+use formation_config::scenario::{Edge, PAPER_TOML};
 use formation_config::{Scenario, MAX_AGENTS};
 
 /// The errors `validate` returns (empty when the scenario is valid).

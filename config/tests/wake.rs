@@ -4,9 +4,9 @@
 //! run in two (one in a million notifications); the lockstep then stalled for the 25-100 ms
 //! timeouts of its processes about once in 15 runs of 20 000 steps.
 
-use formation_config::ipc::{self, event_with_limits, Limits};
-use formation_config::runtime::ports::{notifier, poke, Wake};
-use formation_config::services::run_prefix;
+use formation_config::node::ipc::{self, event_with_limits, Limits};
+use formation_config::node::ports::{notifier, poke, Wake};
+use formation_config::protocol::services::{run_prefix, WAKE_PLANT};
 use iceoryx2::prelude::ServiceName;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -21,7 +21,8 @@ const LOST: Duration = Duration::from_millis(150);
 #[test]
 fn a_notification_racing_with_the_listeners_drain_still_wakes_it() {
     let prefix = run_prefix(&format!("w{}t", std::process::id()));
-    let name = "test/wake";
+    // The plant's wake-up event of the service table (created here with test limits).
+    let name = WAKE_PLANT.pattern;
     let node = ipc::node(&prefix, "creator").expect("node");
     let limits = Limits {
         nodes: NOTIFIERS + 2,
@@ -53,7 +54,7 @@ fn a_notification_racing_with_the_listeners_drain_still_wakes_it() {
         );
         std::thread::spawn(move || {
             let node = ipc::node(&prefix, "listener").expect("node");
-            let wake = Wake::open(&node, name).expect("listener");
+            let wake = Wake::open(&node, &WAKE_PLANT.named()).expect("listener");
             listening.store(true, Ordering::SeqCst);
             let mut lost = 0;
             while !done.load(Ordering::SeqCst) {
@@ -81,7 +82,7 @@ fn a_notification_racing_with_the_listeners_drain_still_wakes_it() {
             let (prefix, published, seen) = (prefix.clone(), published.clone(), seen.clone());
             std::thread::spawn(move || {
                 let node = ipc::node(&prefix, &format!("notifier{i}")).expect("node");
-                let n = notifier(&node, name).expect("notifier");
+                let n = notifier(&node, &WAKE_PLANT.named()).expect("notifier");
                 for _ in 0..ROUNDS {
                     let mine = published.fetch_add(1, Ordering::SeqCst) + 1;
                     poke(&n);
@@ -99,7 +100,7 @@ fn a_notification_racing_with_the_listeners_drain_still_wakes_it() {
     }
     done.store(true, Ordering::SeqCst);
     // Wake the listener a last time, from a fresh notifier.
-    let n = notifier(&node, name).expect("notifier");
+    let n = notifier(&node, &WAKE_PLANT.named()).expect("notifier");
     poke(&n);
     let lost = listener.join().expect("listener");
     drop(n);

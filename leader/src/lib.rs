@@ -7,4 +7,8 @@
 pub mod mission;
 pub mod smooth;
 
+/// The role process around the library: its ports, its event loop (lockstep and realtime).
+#[cfg(feature = "node")]
+pub mod node;
+
 pub use mission::Mission;

@@ -2,8 +2,8 @@
 //! parameters and docs/deviations.md for our readings D1-D3).
 
 use crate::smooth::{rise, smooth_step, time, Jet};
+use formation_config::protocol::wire::ReferenceFrame;
 use formation_config::scenario::Scenario;
-use formation_config::wire::ReferenceFrame;
 use formation_config::MAX_AGENTS;
 
 /// Precomputed mission parameters.

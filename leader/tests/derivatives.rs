@@ -1,6 +1,6 @@
 //! The leader's analytic derivatives agree with finite differences, and the formation is centred.
 
-use formation_config::wire::ReferenceFrame;
+use formation_config::protocol::wire::ReferenceFrame;
 use formation_config::Scenario;
 use formation_leader::Mission;
 

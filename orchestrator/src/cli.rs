@@ -1,6 +1,6 @@
 //! Shared command-line plumbing: loading and validating scenarios with exit code 2 on bad input.
 
-use formation_config::validate::validate;
+use formation_config::scenario::validate::validate;
 use formation_config::Scenario;
 use std::process::ExitCode;
 

@@ -4,8 +4,8 @@
 //! (b_1 = b_N = 1, as in Fig. 4) or a ring (b_1 = b_{N/2+1} = 1).
 
 use crate::cli::EXIT_INVALID;
+use formation_config::scenario::validate::validate;
 use formation_config::scenario::{Edge, Scenario};
-use formation_config::validate::validate;
 use std::path::PathBuf;
 use std::process::ExitCode;
 

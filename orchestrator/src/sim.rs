@@ -4,7 +4,7 @@
 use crate::cli;
 use crate::record::{Recorder, Summary};
 use formation_agent::Agent;
-use formation_config::wire::{
+use formation_config::protocol::wire::{
     ControlCommand, NeighborState, PlantTruth, ReferenceFrame, VehicleState,
 };
 use formation_config::{Scenario, Variant};

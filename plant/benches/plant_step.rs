@@ -3,7 +3,7 @@
 //! plant (the clone is not timed).
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use formation_config::wire::ControlCommand;
+use formation_config::protocol::wire::ControlCommand;
 use formation_config::Scenario;
 use formation_plant::Plant;
 use std::hint::black_box;

@@ -12,4 +12,8 @@ pub mod kinematics;
 pub mod perturbations;
 pub mod plant;
 
+/// The role process around the library: its ports, its event loop (lockstep and realtime).
+#[cfg(feature = "node")]
+pub mod node;
+
 pub use plant::Plant;

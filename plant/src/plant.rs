@@ -3,8 +3,8 @@
 use crate::dynamics::{rk4_with, Body, HeldInput, RigidState, TimeTerms};
 use crate::faults::{actuate, FaultModel};
 use crate::perturbations::{disturbance, uncertainty};
+use formation_config::protocol::wire::{ControlCommand, FaultInjection, PlantTruth, VehicleState};
 use formation_config::scenario::{AgentSpec, Scenario};
-use formation_config::wire::{ControlCommand, FaultInjection, PlantTruth, VehicleState};
 use nalgebra::Vector3;
 
 /// One quadrotor: its body, its perturbation profiles, its faults, its state and held input.

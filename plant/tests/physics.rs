@@ -1,6 +1,6 @@
 //! Physical facts of the plant model (eq. (1)-(4)).
 
-use formation_config::wire::{ControlCommand, FaultInjection};
+use formation_config::protocol::wire::{ControlCommand, FaultInjection};
 use formation_config::Scenario;
 use formation_plant::dynamics::{derivative, rk4, Body, HeldInput, RigidState};
 use formation_plant::faults::{actuate, saturate, FaultModel};
@@ -245,7 +245,7 @@ fn integrating_each_quadrotor_as_its_command_arrives_matches_stepping_all_togeth
         for i in 0..n {
             let (a, b) = (together.vehicle_state(i), one_by_one.vehicle_state(i));
             assert_eq!(a.step, b.step);
-            let bits = |v: &formation_config::wire::VehicleState| {
+            let bits = |v: &formation_config::protocol::wire::VehicleState| {
                 [v.position, v.velocity, v.attitude, v.rate].map(|c| c.map(f64::to_bits))
             };
             assert_eq!(bits(&a), bits(&b), "quadrotor {i} at step {}", a.step);

@@ -143,7 +143,7 @@ impl Drop for RunningRun {
             let prefix = prefix.split([',', ' ']).next().unwrap_or("").to_string();
             if !prefix.is_empty() {
                 std::thread::sleep(Duration::from_millis(100));
-                let _ = formation_config::ipc::remove_residue(&prefix);
+                let _ = formation_config::node::ipc::remove_residue(&prefix);
             }
         }
     }

@@ -177,7 +177,7 @@ fn iox2_cli_in_the_run_config_dir_lists_the_live_runs_nodes_and_services_and_not
     let mut expected: Vec<String> = ["fm-orchestrator", "fm-plant", "fm-leader"]
         .map(String::from)
         .to_vec();
-    expected.extend((0..5).map(|i| format!("fm-agent-{i}")));
+    expected.extend((1..=5).map(|i| format!("fm-agent-{i}")));
     let names: BTreeSet<&str> = listed.iter().map(|(n, _, _)| n.as_str()).collect();
     assert_eq!(
         names,
@@ -258,7 +258,7 @@ fn iox2_cli_in_the_run_config_dir_lists_the_live_runs_nodes_and_services_and_not
     let (status, _) = run.wait(TIMEOUT).expect("the run stops");
     assert_eq!(status.code(), Some(130), "stderr: {}", run.stderr());
     assert!(run.role_processes().is_empty(), "role processes survived");
-    let left = formation_config::ipc::residue(&prefix).expect("can list the iceoryx2 files");
+    let left = formation_config::node::ipc::residue(&prefix).expect("can list the iceoryx2 files");
     assert!(left.is_empty(), "residue of {prefix}: {left:?}");
     drop(run);
     let _ = std::fs::remove_dir_all(&dir);

@@ -70,7 +70,7 @@ fn realtime_run_reports_timing_and_keeps_the_constraints() {
     }
     assert_eq!(s["diverged"], false);
     // The run itself cleaned up (checked before the guard's own clean-up runs).
-    let left = formation_config::ipc::residue(&prefix).expect("can list the iceoryx2 files");
+    let left = formation_config::node::ipc::residue(&prefix).expect("can list the iceoryx2 files");
     assert!(left.is_empty(), "residue: {left:?}");
     assert!(run.role_processes().is_empty(), "role processes left");
     drop(run);

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 
 fn residue(prefix: &str) -> Vec<std::path::PathBuf> {
-    formation_config::ipc::residue(prefix).expect("can list /dev/shm and /tmp/iceoryx2")
+    formation_config::node::ipc::residue(prefix).expect("can list /dev/shm and /tmp/iceoryx2")
 }
 
 fn sim(args: &[&str], out: &Path) {
@@ -242,7 +242,7 @@ fn a_lockstep_run_pins_the_plant_to_the_first_cpu_and_the_agents_round_robin_aft
     let mut seen = 0;
     for pid in run.role_processes() {
         let cmd = cmdline(pid);
-        let expected = if cmd.contains("formation-plant") {
+        let expected = if cmd.contains("node plant") {
             vec![cpus[0]]
         } else if let Some(i) = cmd
             .split("--agent ")

@@ -75,12 +75,12 @@ pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String>
         procs::set_affinity(&[cpu]).map_err(|e| format!("pin to cpu {cpu}: {e}"))?;
     }
     if case.batch {
-        formation_config::runtime::sched::batch_policy()?;
+        formation_config::node::sched::batch_policy()?;
     }
     let result = run_pinned(ctx, idx, case);
     let _ = procs::set_affinity(ctx.allowed);
     if case.batch {
-        let _ = formation_config::runtime::sched::other_policy();
+        let _ = formation_config::node::sched::other_policy();
     }
     result
 }

@@ -7,7 +7,7 @@
 //! before the agents start; agents only open them.
 
 use super::link::{Link, Msg};
-use formation_config::ipc::{self as fipc, Limits};
+use formation_config::node::ipc::{self as fipc, Limits};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;

@@ -31,8 +31,8 @@ impl Sizes {
     /// these sizes is the bare transport cost of a lockstep step.
     pub fn lockstep_wire() -> Sizes {
         Sizes {
-            down: std::mem::size_of::<formation_config::wire::VehicleState>(),
-            up: std::mem::size_of::<formation_config::wire::ControlCommand>(),
+            down: std::mem::size_of::<formation_config::protocol::wire::VehicleState>(),
+            up: std::mem::size_of::<formation_config::protocol::wire::ControlCommand>(),
         }
     }
 

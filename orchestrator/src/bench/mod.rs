@@ -26,8 +26,8 @@ mod sock;
 pub use peer::{main as peer_main, PeerArgs};
 
 use crate::cli::EXIT_INVALID;
-use formation_config::ipc as fipc;
-use formation_config::services::run_prefix;
+use formation_config::node::ipc as fipc;
+use formation_config::protocol::services::run_prefix;
 use link::{Budget, Sizes, MAX_PAYLOAD, MIN_PAYLOAD};
 use plan::{PlanInput, Transport};
 use std::process::ExitCode;

@@ -5,7 +5,7 @@ use super::link::{self, Wait, MAX_PAYLOAD, MIN_PAYLOAD};
 use super::plan::Transport;
 use super::procs;
 use super::sock::{self, SockLink};
-use formation_config::ipc as fipc;
+use formation_config::node::ipc as fipc;
 use std::net::SocketAddr;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -72,8 +72,8 @@ pub fn main(a: PeerArgs) -> ExitCode {
         }
     }
     if a.batch {
-        if let Err(e) = formation_config::runtime::sched::batch_policy() {
-            return bad(e);
+        if let Err(e) = formation_config::node::sched::batch_policy() {
+            return bad(e.to_string());
         }
     }
     match run(&a, transport, wait) {

@@ -48,7 +48,7 @@ pub mod verdict;
 mod verdicts;
 
 use crate::cli::load_with_overrides;
-use formation_config::graph::Topology;
+use formation_config::scenario::graph::Topology;
 use formation_config::Scenario;
 use serde::Serialize;
 use std::process::ExitCode;

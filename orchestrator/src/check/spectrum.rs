@@ -1,6 +1,6 @@
 //! Spectrum of L + B (Lemma 1, Assumption 1) and the derived norms Theorem 1 uses.
 
-use formation_config::graph::Topology;
+use formation_config::scenario::graph::Topology;
 use serde::Serialize;
 
 /// Eigenvalues of L + B and the quantities of Theorem 1 that depend only on the graph.

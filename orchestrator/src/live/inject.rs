@@ -5,10 +5,11 @@
 use super::registry::{self, RunRecord};
 use super::validate;
 use crate::cli::EXIT_INVALID;
-use formation_config::runtime::messages::{InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT};
-use formation_config::runtime::ports::{notifier, poke, publisher, send};
-use formation_config::runtime::WAKE_ORCHESTRATOR;
-use formation_config::services;
+use formation_config::node::ports::{notifier, poke, publisher, send};
+use formation_config::protocol::messages::{
+    InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT,
+};
+use formation_config::protocol::services;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -171,8 +172,8 @@ pub fn main(args: InjectArgs) -> ExitCode {
 /// then, so the sample cannot be lost).
 fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, String> {
     let node = super::client_node(run, "inject")?;
-    let p = publisher::<InjectRequest>(&node, services::INJECT_REQUEST)?;
-    let wake = notifier(&node, WAKE_ORCHESTRATOR)?;
+    let p = publisher::<InjectRequest>(&node, &services::INJECT_REQUEST.named())?;
+    let wake = notifier(&node, &services::WAKE_ORCHESTRATOR.named())?;
     send(&p, *req)?;
     poke(&wake);
     let events = run.out_dir.join("events.jsonl");

@@ -2,9 +2,9 @@
 
 use super::registry;
 use crate::cli::EXIT_INVALID;
-use formation_config::runtime::ports::{subscriber, Sub};
-use formation_config::services;
-use formation_config::wire::AgentTelemetry;
+use formation_config::node::ports::{subscriber, Input};
+use formation_config::protocol::services;
+use formation_config::protocol::wire::AgentTelemetry;
 use serde_json::{json, Value};
 use std::io::Write;
 use std::process::ExitCode;
@@ -35,7 +35,7 @@ const FIRST_SAMPLE: Duration = Duration::from_secs(10);
 const REFRESH: Duration = Duration::from_millis(250);
 
 /// The newest sample in the subscriber's queue, if any.
-fn newest(sub: &Sub<AgentTelemetry>) -> Result<Option<AgentTelemetry>, String> {
+fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, String> {
     let mut last = None;
     while let Some(s) = sub.receive().map_err(|e| format!("telemetry: {e:?}"))? {
         last = Some(*s);
@@ -147,7 +147,7 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
         let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
     }
     let node = super::client_node(run, "inspect")?;
-    let sub: Sub<AgentTelemetry> = subscriber(&node, &services::telemetry(args.agent - 1))?;
+    let sub: Input<AgentTelemetry> = subscriber(&node, &services::TELEMETRY.at(args.agent - 1))?;
     let start = Instant::now();
     let mut last_step = None;
     let mut out = std::io::stdout();

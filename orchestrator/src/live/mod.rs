@@ -13,8 +13,9 @@ pub mod ps;
 pub mod registry;
 pub mod validate;
 
-use formation_config::runtime::ports::RunNode;
-use formation_config::{ipc, Scenario};
+use formation_config::node::ipc;
+use formation_config::node::ports::RunNode;
+use formation_config::Scenario;
 
 /// The scenario a run is executing (its `scenario.toml`).
 pub fn run_scenario(run: &registry::RunRecord) -> Result<Scenario, String> {

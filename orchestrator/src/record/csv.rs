@@ -2,7 +2,7 @@
 //! round-trip form, so equal trajectories give byte-equal files.
 
 use super::metrics::Metrics;
-use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use formation_config::Scenario;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -114,7 +114,7 @@ impl TrajectoryWriter {
         let handle = std::thread::Builder::new()
             .name("csv-writer".into())
             .spawn(move || -> std::io::Result<()> {
-                formation_config::runtime::sched::background_thread();
+                formation_config::node::sched::background_thread();
                 for msg in rx {
                     match msg {
                         Msg::Step(r) => rows.write_rows(&r)?,

@@ -2,7 +2,7 @@
 //! torque saturation, coverage, and the divergence detector.
 
 use super::coverage::CoverageGrid;
-use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use formation_config::Scenario;
 
 /// Where and why a run diverged.

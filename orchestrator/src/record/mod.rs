@@ -12,7 +12,7 @@ pub mod summary;
 pub use metrics::Divergence;
 pub use summary::Summary;
 
-use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use formation_config::{Scenario, Variant};
 use std::path::{Path, PathBuf};
 

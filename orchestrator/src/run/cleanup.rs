@@ -1,6 +1,6 @@
 //! Removing what a run leaves under its iceoryx2 prefix (after every process of the run has exited).
 
-use formation_config::ipc;
+use formation_config::node::ipc;
 
 /// Deletes the run's files in /dev/shm and /tmp/iceoryx2; errors name what is left.
 pub fn remove(prefix: &str) -> Result<(), String> {

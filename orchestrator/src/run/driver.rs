@@ -4,14 +4,14 @@
 use super::progress::Progress;
 use super::spawn::{self, RoleProcess};
 use crate::record::Recorder;
-use formation_config::runtime::messages::{
+use formation_config::node::ports::{
+    notifier, poke, publisher, slice_subscriber, subscriber, Input, Output, RunNode, Sub, Svc, Wake,
+};
+use formation_config::protocol::messages::{
     Hello, RunControl, RunProgress, StepEntry, CONTROL_STOP,
 };
-use formation_config::runtime::ports::{
-    notifier, poke, publisher, slice_subscriber, subscriber, Pub, RunNode, Sub, Svc, Wake,
-};
-use formation_config::runtime::{self as rt};
-use formation_config::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use formation_config::protocol::services;
+use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use iceoryx2::port::notifier::Notifier;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -29,10 +29,10 @@ pub enum Outcome {
 
 /// The orchestrator's ports.
 pub struct Ports {
-    hello: Sub<Hello>,
+    hello: Input<Hello>,
     steps: Sub<[StepEntry]>,
-    control: Pub<RunControl>,
-    progress: Pub<RunProgress>,
+    control: Output<RunControl>,
+    progress: Output<RunProgress>,
     wakes: Vec<Notifier<Svc>>,
     wake: Wake,
     /// Lockstep: progress paces the plant, so it is woken; realtime: the plant keeps its own clock.
@@ -43,26 +43,26 @@ impl Ports {
     /// Makes the orchestrator's ports on the created services.
     pub fn open(node: &RunNode, n: usize, wake_plant_on_progress: bool) -> Result<Ports, String> {
         let mut wakes = vec![
-            notifier(node, rt::WAKE_PLANT)?,
-            notifier(node, rt::WAKE_LEADER)?,
+            notifier(node, &services::WAKE_PLANT.named())?,
+            notifier(node, &services::WAKE_LEADER.named())?,
         ];
         for i in 0..n {
-            wakes.push(notifier(node, &rt::wake_agent(i))?);
+            wakes.push(notifier(node, &services::WAKE_AGENT.at(i))?);
         }
         Ok(Ports {
-            hello: subscriber(node, rt::HELLO)?,
-            steps: slice_subscriber(node, rt::STEPS)?,
-            control: publisher(node, rt::CONTROL)?,
-            progress: publisher(node, rt::PROGRESS)?,
+            hello: subscriber(node, &services::HELLO.named())?,
+            steps: slice_subscriber(node, &services::STEPS.named())?,
+            control: publisher(node, &services::CONTROL.named())?,
+            progress: publisher(node, &services::PROGRESS.named())?,
             wakes,
-            wake: Wake::open(node, rt::WAKE_ORCHESTRATOR)?,
+            wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named())?,
             wake_plant_on_progress,
         })
     }
 
     /// Tells every role process to stop.
     pub fn stop(&self, recorded: u64) {
-        let _ = rt::ports::send(
+        let _ = formation_config::node::ports::send(
             &self.control,
             RunControl {
                 kind: CONTROL_STOP,
@@ -74,7 +74,7 @@ impl Ports {
     }
 
     fn announce(&self, recorded: u64) -> Result<(), String> {
-        rt::ports::send(&self.progress, RunProgress { recorded })?;
+        formation_config::node::ports::send(&self.progress, RunProgress { recorded })?;
         if self.wake_plant_on_progress || recorded == 0 {
             poke(&self.wakes[0]);
         }
@@ -116,7 +116,10 @@ pub fn wait_for_hellos(
                 START_TIMEOUT.as_secs()
             )));
         }
-        ports.wake.wait(SUPERVISE_EVERY).map_err(Outcome::Failed)?;
+        ports
+            .wake
+            .wait(SUPERVISE_EVERY)
+            .map_err(|e| Outcome::Failed(e.to_string()))?;
         while let Ok(Some(_)) = ports.hello.receive() {
             seen += 1;
         }
@@ -153,7 +156,7 @@ pub fn drive(
     }
     loop {
         if let Err(e) = ports.wake.wait(SUPERVISE_EVERY) {
-            return (Outcome::Failed(e), recorded);
+            return (Outcome::Failed(e.to_string()), recorded);
         }
         let mut got = 0;
         while let Ok(Some(s)) = ports.steps.receive() {
@@ -197,12 +200,12 @@ pub fn drive(
         }
         // Injections are forwarded before the progress that lets the plant move on.
         if let Err(e) = live.injections.poll(recorded) {
-            return (Outcome::Failed(e), recorded);
+            return (Outcome::Failed(e.to_string()), recorded);
         }
         live.registration.update(recorded);
         if got > 0 {
             if let Err(e) = ports.announce(recorded) {
-                return (Outcome::Failed(e), recorded);
+                return (Outcome::Failed(e.to_string()), recorded);
             }
         }
         if last_check.elapsed() >= SUPERVISE_EVERY {

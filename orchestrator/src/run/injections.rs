@@ -9,11 +9,13 @@
 
 use crate::live::registry::unix_now;
 use crate::live::validate::{self, DelayProfile};
-use formation_config::runtime::messages::{InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT};
-use formation_config::runtime::ports::{publisher, send, subscriber, Pub, RunNode, Sub};
-use formation_config::runtime::PLANT_LEAD;
-use formation_config::services;
-use formation_config::wire::{DelayInjection, FaultInjection};
+use formation_config::node::ports::{publisher, send, subscriber, Input, Output, RunNode};
+use formation_config::protocol::messages::{
+    InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT,
+};
+use formation_config::protocol::pacing::PLANT_LEAD;
+use formation_config::protocol::services;
+use formation_config::protocol::wire::{DelayInjection, FaultInjection};
 use formation_config::Scenario;
 use serde_json::json;
 use std::fs::File;
@@ -23,13 +25,13 @@ use std::path::Path;
 /// Steps beyond the plant's lead before an injection may apply: the role processes read the
 /// injection services every `HOUSEKEEPING_EVERY` steps, so one such read always falls between the
 /// forwarding and the step the injection applies at (plus margin).
-pub const SLACK: u64 = formation_config::runtime::HOUSEKEEPING_EVERY + 4;
+pub const SLACK: u64 = formation_config::protocol::pacing::HOUSEKEEPING_EVERY + 4;
 
 /// Ports and log of the injections of one run.
 pub struct Injections {
-    requests: Sub<InjectRequest>,
-    faults: Pub<FaultInjection>,
-    delays: Pub<DelayInjection>,
+    requests: Input<InjectRequest>,
+    faults: Output<FaultInjection>,
+    delays: Output<DelayInjection>,
     events: File,
     scenario: Scenario,
 }
@@ -39,9 +41,9 @@ impl Injections {
     pub fn open(node: &RunNode, scenario: &Scenario, out: &Path) -> Result<Injections, String> {
         let path = out.join("events.jsonl");
         Ok(Injections {
-            requests: subscriber(node, services::INJECT_REQUEST)?,
-            faults: publisher(node, services::FAULT_INJECTION)?,
-            delays: publisher(node, services::DELAY_INJECTION)?,
+            requests: subscriber(node, &services::INJECT_REQUEST.named())?,
+            faults: publisher(node, &services::FAULT_INJECTION.named())?,
+            delays: publisher(node, &services::DELAY_INJECTION.named())?,
             events: File::create(&path)
                 .map_err(|e| format!("cannot create {}: {e}", path.display()))?,
             scenario: scenario.clone(),

@@ -20,8 +20,11 @@ use crate::cli;
 use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord};
 use crate::record::Recorder;
 use driver::Outcome;
-use formation_config::runtime::args::ChildArgs;
-use formation_config::{ipc, services as names, Scenario, Variant};
+use formation_config::node::args::ChildArgs;
+use formation_config::node::ipc;
+use formation_config::protocol::messages::Role;
+use formation_config::protocol::services as names;
+use formation_config::{Scenario, Variant};
 use spawn::RoleProcess;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -216,13 +219,13 @@ fn run(
     if !mode.realtime {
         // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
         // under SCHED_BATCH: a woken process waits for the running one to block instead of
-        // preempting it (see formation_config::runtime::sched::batch_policy).
-        if let Err(e) = formation_config::runtime::sched::batch_policy() {
+        // preempting it (see formation_config::node::sched::batch_policy).
+        if let Err(e) = formation_config::node::sched::batch_policy() {
             eprintln!("warning: {e}; running under the normal policy");
         }
     }
     let n = scenario.n_agents();
-    let dir = spawn::role_binary_dir()?;
+    let exe = spawn::self_exe()?;
     let mut recorder = Recorder::create(scenario, variant, mode.name(), out)
         .map_err(|e| format!("cannot write outputs to {}: {e}", out.display()))?;
     let run_dir = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
@@ -231,13 +234,13 @@ fn run(
     if let Err(e) = cleanup::write_iox2_config(&run_dir, prefix) {
         eprintln!("warning: {e}");
     }
-    if let Err(e) = formation_config::runtime::logging::init(&run_dir, "orchestrator.log", true) {
+    if let Err(e) = formation_config::node::logging::init(&run_dir, "orchestrator.log", true) {
         eprintln!("warning: {e}");
     }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
     let services = services::RunServices::create(&node, n, mode.realtime)?;
     let ports = driver::Ports::open(&node, n, !mode.realtime)?;
-    let timing_dir = formation_config::runtime::timing::dir(&run_dir);
+    let timing_dir = formation_config::node::timing::dir(&run_dir);
     if mode.realtime {
         // Stale files of an earlier run in the same directory must not be merged.
         let _ = std::fs::remove_dir_all(&timing_dir);
@@ -257,23 +260,23 @@ fn run(
     };
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(spawn::spawn(
-        &dir,
-        "formation-plant",
+        &exe,
+        Role::Plant,
         "plant".into(),
         &child_args(None),
         placement.map(|p| p.plant()),
     )?);
     children.0.push(spawn::spawn(
-        &dir,
-        "formation-leader",
+        &exe,
+        Role::Leader,
         "leader".into(),
         &child_args(None),
         None,
     )?);
     for i in 0..n {
         children.0.push(spawn::spawn(
-            &dir,
-            "formation-agent",
+            &exe,
+            Role::Agent,
             format!("agent {} (--agent {i})", i + 1),
             &child_args(Some(i)),
             placement.map(|p| p.agent(i)),
@@ -281,7 +284,7 @@ fn run(
     }
     // Every child is started (they keep the normal priority): from here on the orchestrator records
     // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
-    formation_config::runtime::sched::background_thread();
+    formation_config::node::sched::background_thread();
     let pids: Vec<String> = children.0.iter().map(|c| c.pid().to_string()).collect();
     let pinned = placement.map_or("not pinned".to_string(), |p| p.describe(n));
     eprintln!(

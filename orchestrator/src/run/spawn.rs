@@ -1,60 +1,17 @@
 //! Locating, spawning, supervising and stopping the role processes.
 
 use crate::cpus::CpuSet;
-use formation_config::runtime::args::ChildArgs;
+use formation_config::node::args::ChildArgs;
+use formation_config::protocol::messages::Role;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
-/// The role binaries, in the directory of the running `formation`.
-pub const ROLE_BINARIES: [&str; 3] = ["formation-plant", "formation-leader", "formation-agent"];
-
-/// Directory holding the role binaries: the one of the running executable. When they are missing and
-/// `formation` was started by `cargo run` (the `CARGO` variable is set), builds them for the same
-/// profile first.
-pub fn role_binary_dir() -> Result<PathBuf, String> {
-    let exe = std::env::current_exe().map_err(|e| format!("cannot locate formation: {e}"))?;
-    let dir = exe
-        .parent()
-        .ok_or("cannot locate formation's directory")?
-        .to_path_buf();
-    let missing = || ROLE_BINARIES.iter().any(|b| !dir.join(b).is_file());
-    if !missing() {
-        return Ok(dir);
-    }
-    let profile = match dir.file_name().and_then(|s| s.to_str()) {
-        Some("debug") => "dev".to_string(),
-        Some(p) => p.to_string(),
-        None => "release".to_string(),
-    };
-    let hint = format!(
-        "cargo build --profile {profile} -p formation-plant -p formation-leader -p formation-agent"
-    );
-    let Some(cargo) = std::env::var_os("CARGO") else {
-        return Err(format!(
-            "the role binaries ({}) are not next to {}: build them with `{hint}`",
-            ROLE_BINARIES.join(", "),
-            exe.display()
-        ));
-    };
-    eprintln!("building the role binaries: {hint}");
-    let status = Command::new(cargo)
-        .args(["build", "--profile", &profile])
-        .args([
-            "-p",
-            "formation-plant",
-            "-p",
-            "formation-leader",
-            "-p",
-            "formation-agent",
-        ])
-        .status()
-        .map_err(|e| format!("cannot run cargo ({hint}): {e}"))?;
-    if !status.success() || missing() {
-        return Err(format!("building the role binaries failed: `{hint}`"));
-    }
-    Ok(dir)
+/// The executable the role processes are started from: the running `formation` itself, whose hidden
+/// subcommand `formation node <role> ...` runs a role (one install, no second binary to find).
+pub fn self_exe() -> Result<PathBuf, String> {
+    std::env::current_exe().map_err(|e| format!("cannot locate the formation executable: {e}"))
 }
 
 /// One role process of the run.
@@ -72,17 +29,20 @@ impl RoleProcess {
     }
 }
 
-/// Starts `binary` with `args`, pinned to `cpu` if given; it gets SIGTERM when the orchestrator
+/// Starts `formation node <role> <args>` (shown by `ps` as `fm-<role>[-<id>]`), pinned to `cpu` if given; it gets SIGTERM when the orchestrator
 /// dies and ignores SIGINT.
 pub fn spawn(
-    dir: &Path,
-    binary: &str,
+    exe: &Path,
+    role: Role,
     label: String,
     args: &ChildArgs,
     cpu: Option<usize>,
 ) -> Result<RoleProcess, String> {
-    let mut cmd = Command::new(dir.join(binary));
-    cmd.args(args.to_args()).stdin(Stdio::null());
+    let mut cmd = Command::new(exe);
+    cmd.arg0(role.process_name(args.agent))
+        .args(["node", role.name()])
+        .args(args.to_args())
+        .stdin(Stdio::null());
     let pin = cpu
         .map(|c| CpuSet::of(&[c]))
         .transpose()
@@ -107,7 +67,7 @@ pub fn spawn(
     }
     let child = cmd
         .spawn()
-        .map_err(|e| format!("cannot start {label} ({}): {e}", dir.join(binary).display()))?;
+        .map_err(|e| format!("cannot start {label} ({}): {e}", exe.display()))?;
     Ok(RoleProcess {
         label,
         child,

@@ -8,7 +8,7 @@
 //! quantiles show how even the pace is at the recorder's granularity (a few steps, since the
 //! plant runs up to `PLANT_LEAD` steps ahead of the recorder).
 
-use formation_config::runtime::timing::NsHistogram;
+use formation_config::node::timing::NsHistogram;
 use serde_json::{json, Value};
 use std::time::Instant;
 

@@ -1,7 +1,7 @@
 //! Realtime runs: merges the timing files the role processes wrote into `<run dir>/timing/` into
 //! the `timing` object of `summary.json`, and prints it.
 
-use formation_config::runtime::timing::{self, NsHistogram, TimingReport};
+use formation_config::node::timing::{self, NsHistogram, TimingReport};
 use serde_json::{json, Value};
 use std::path::Path;
 

@@ -4,9 +4,9 @@
 //! when their own state arrives. This only decides wake-ups; the controller's inputs are unchanged,
 //! and a missed wake-up costs at most one wait timeout.
 
-use formation_agent::delay::delay_steps;
+use crate::delay::delay_steps;
+use formation_config::protocol::wire::DelayInjection;
 use formation_config::scenario::{DelaySpec, Scenario};
-use formation_config::wire::DelayInjection;
 
 /// Neighbour j, its scenario profile, and its runtime override (from step on).
 type Profile = (usize, DelaySpec, Option<(u64, DelaySpec)>);

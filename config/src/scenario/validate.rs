@@ -6,7 +6,7 @@
 // `!(x > 0.0)` rather than `x <= 0.0` throughout: the negated form also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
-use crate::graph::Topology;
+use crate::scenario::graph::Topology;
 use crate::scenario::{AgentSpec, Scenario};
 use crate::MAX_AGENTS;
 

@@ -17,12 +17,17 @@
 //! Injections from the orchestrator: [`FaultInjection`] (-> plant), [`DelayInjection`] (-> agents).
 
 use crate::MAX_AGENTS;
+#[cfg(feature = "ipc")]
 use iceoryx2::prelude::ZeroCopySend;
 
 /// Plant -> agent i: the state of quadrotor i at step k (eq. (1)-(2) states).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v2.VehicleState")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v2.VehicleState")
+)]
 pub struct VehicleState {
     /// Simulation step k.
     pub step: u64,
@@ -46,8 +51,12 @@ pub struct VehicleState {
 
 /// Agent i -> neighbours: the information the paper exchanges, (P_i, V_i) at step k.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v2.NeighborState")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v2.NeighborState")
+)]
 pub struct NeighborState {
     /// Simulation step k at which the state was measured.
     pub step: u64,
@@ -68,8 +77,12 @@ pub struct NeighborState {
 /// Leader -> agents: virtual leader P_d and the formation offsets Delta_i0 = Lambda_i - Lambda_0 with
 /// their first and second derivatives, at step k.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.ReferenceFrame")]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.ReferenceFrame")
+)]
 pub struct ReferenceFrame {
     /// Simulation step k.
     pub step: u64,
@@ -135,8 +148,12 @@ impl Default for ReferenceFrame {
 
 /// What the controller computed at step k besides the command (recorded and shown by `inspect`).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.ControllerTelemetry")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.ControllerTelemetry")
+)]
 pub struct ControllerTelemetry {
     /// Delay tau_i(t_k) the agent applied, s.
     pub tau_s: f64,
@@ -184,8 +201,12 @@ pub struct ControllerTelemetry {
 
 /// Agent i -> plant: total thrust and torque command U_iAC for step k, with the telemetry.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v2.ControlCommand")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v2.ControlCommand")
+)]
 pub struct ControlCommand {
     /// Simulation step k the command is for.
     pub step: u64,
@@ -207,8 +228,12 @@ pub struct ControlCommand {
 
 /// Plant -> recorder: the true quantities of quadrotor i at step k that only the plant knows.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v2.PlantTruth")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v2.PlantTruth")
+)]
 pub struct PlantTruth {
     /// The state at step k.
     pub state: VehicleState,
@@ -228,8 +253,12 @@ pub struct PlantTruth {
 
 /// Orchestrator -> plant: actuator fault override of agent i from step `step` on.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.FaultInjection")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.FaultInjection")
+)]
 pub struct FaultInjection {
     /// First step the new fault applies to.
     pub step: u64,
@@ -247,8 +276,12 @@ pub struct FaultInjection {
 
 /// Orchestrator -> agents: new delay profile of agent i from step `step` on.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.DelayInjection")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.DelayInjection")
+)]
 pub struct DelayInjection {
     /// First step the new delay applies to.
     pub step: u64,
@@ -266,11 +299,15 @@ pub struct DelayInjection {
     pub angular_rate_rad_s: f64,
 }
 
-/// Agent i -> `formation inspect` (service [`crate::services::telemetry`]): a live sample of the
+/// Agent i -> `formation inspect` (service [`crate::protocol::services::telemetry`]): a live sample of the
 /// controller, published every [`TELEMETRY_EVERY_S`] of simulation time without waiting for anyone.
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
-#[type_name("formation.v1.AgentTelemetry")]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.AgentTelemetry")
+)]
 pub struct AgentTelemetry {
     /// Simulation step k of the sample.
     pub step: u64,

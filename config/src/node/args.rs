@@ -1,5 +1,6 @@
 //! Command line of the role processes, written by the orchestrator and parsed by the children.
 
+use super::error::NodeError;
 use std::path::PathBuf;
 
 /// What a role process is told on its command line.
@@ -51,7 +52,9 @@ impl ChildArgs {
     }
 
     /// Parses `std::env::args_os()` minus the program name.
-    pub fn parse(args: impl IntoIterator<Item = std::ffi::OsString>) -> Result<ChildArgs, String> {
+    pub fn parse(
+        args: impl IntoIterator<Item = std::ffi::OsString>,
+    ) -> Result<ChildArgs, NodeError> {
         let mut out = ChildArgs {
             run_id: String::new(),
             prefix: String::new(),
@@ -67,14 +70,14 @@ impl ChildArgs {
             let flag = flag.to_string_lossy().into_owned();
             let value = it
                 .next()
-                .ok_or_else(|| format!("missing value after {flag}"))?;
+                .ok_or_else(|| NodeError::Args(format!("missing value after {flag}")))?;
             let text = value.to_string_lossy().into_owned();
             match flag.as_str() {
                 "--agent" => {
-                    out.agent = Some(
-                        text.parse()
-                            .map_err(|_| format!("--agent: not an index: {text}"))?,
-                    )
+                    out.agent =
+                        Some(text.parse().map_err(|_| {
+                            NodeError::Args(format!("--agent: not an index: {text}"))
+                        })?)
                 }
                 "--run-id" => out.run_id = text,
                 "--prefix" => out.prefix = text,
@@ -84,24 +87,30 @@ impl ChildArgs {
                     out.realtime = match text.as_str() {
                         "realtime" => true,
                         "lockstep" => false,
-                        _ => return Err(format!("--mode: lockstep or realtime, not {text}")),
+                        _ => {
+                            return Err(NodeError::Args(format!(
+                                "--mode: lockstep or realtime, not {text}"
+                            )))
+                        }
                     }
                 }
                 "--spin-us" => {
-                    out.spin_us = text
-                        .parse()
-                        .map_err(|_| format!("--spin-us: not a number of µs: {text}"))?
+                    out.spin_us = text.parse().map_err(|_| {
+                        NodeError::Args(format!("--spin-us: not a number of µs: {text}"))
+                    })?
                 }
                 "--rt-priority" => {
-                    out.rt_priority = text
-                        .parse()
-                        .map_err(|_| format!("--rt-priority: not a priority: {text}"))?
+                    out.rt_priority = text.parse().map_err(|_| {
+                        NodeError::Args(format!("--rt-priority: not a priority: {text}"))
+                    })?
                 }
-                _ => return Err(format!("unknown argument {flag}")),
+                _ => return Err(NodeError::Args(format!("unknown argument {flag}"))),
             }
         }
         if out.prefix.is_empty() || out.run_dir.as_os_str().is_empty() {
-            return Err("--prefix and --run-dir are required".into());
+            return Err(NodeError::Args(
+                "--prefix and --run-dir are required".into(),
+            ));
         }
         Ok(out)
     }

@@ -2,6 +2,7 @@
 //! (no allocation per sample) and, at the end, writes them as one small JSON file into
 //! `<run dir>/timing/`; the orchestrator merges the files into `summary.json`.
 
+use super::error::NodeError;
 use hdrhistogram::Histogram;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -100,9 +101,9 @@ pub fn dir(run_dir: &Path) -> PathBuf {
 
 impl TimingReport {
     /// Writes the report to `<run dir>/timing/<name>.json`.
-    pub fn write(&self, run_dir: &Path, name: &str) -> Result<(), String> {
+    pub fn write(&self, run_dir: &Path, name: &str) -> Result<(), NodeError> {
         let d = dir(run_dir);
-        std::fs::create_dir_all(&d).map_err(|e| format!("cannot create {}: {e}", d.display()))?;
+        std::fs::create_dir_all(&d).map_err(|e| file_error(&d, "cannot create", e))?;
         let hist: serde_json::Map<String, serde_json::Value> = self
             .histograms
             .iter()
@@ -110,21 +111,19 @@ impl TimingReport {
             .collect();
         let v = serde_json::json!({ "histograms": hist, "counters": self.counters });
         let path = d.join(format!("{name}.json"));
-        std::fs::write(&path, v.to_string())
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        std::fs::write(&path, v.to_string()).map_err(|e| file_error(&path, "cannot write", e))
     }
 
     /// Reads a report written by [`TimingReport::write`].
-    pub fn read(path: &Path) -> Result<TimingReport, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let v: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| format!("cannot parse {}: {e}", path.display()))?;
+    pub fn read(path: &Path) -> Result<TimingReport, NodeError> {
+        let text = std::fs::read_to_string(path).map_err(|e| file_error(path, "cannot read", e))?;
+        let v: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| file_error(path, "cannot parse", e))?;
         let mut out = TimingReport::default();
         if let Some(h) = v.get("histograms").and_then(|h| h.as_object()) {
             for (k, b) in h {
                 let pairs: Vec<(u64, u64)> = serde_json::from_value(b.clone())
-                    .map_err(|e| format!("{}: histogram {k}: {e}", path.display()))?;
+                    .map_err(|e| file_error(path, &format!("histogram {k}"), e))?;
                 out.histograms
                     .insert(k.clone(), NsHistogram::from_buckets(&pairs));
             }
@@ -171,5 +170,12 @@ mod tests {
         a.merge(&b);
         assert_eq!(a.len(), 2);
         assert!(a.max() >= 999_000);
+    }
+}
+
+fn file_error(path: &Path, what: &str, e: impl std::fmt::Display) -> NodeError {
+    NodeError::File {
+        path: path.to_path_buf(),
+        detail: format!("{what}: {e}"),
     }
 }

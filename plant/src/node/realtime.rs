@@ -14,14 +14,15 @@
 //! steps instead.
 
 use super::ports::Ports;
-use formation_config::runtime::boot::Boot;
-use formation_config::runtime::clock::{now_ns, sleep_until_ns};
-use formation_config::runtime::messages::{StepEntry, CONTROL_STOP};
-use formation_config::runtime::ports::{poke, send};
-use formation_config::runtime::timing::{NsHistogram, TimingReport};
-use formation_config::runtime::{ACK_EVERY, CHILD_WAIT};
-use formation_config::wire::{ControlCommand, FaultInjection};
-use formation_plant::Plant;
+use crate::Plant;
+use formation_config::node::boot::Boot;
+use formation_config::node::clock::{now_ns, sleep_until_ns};
+use formation_config::node::error::NodeError;
+use formation_config::node::ports::{poke, send};
+use formation_config::node::timing::{NsHistogram, TimingReport};
+use formation_config::protocol::messages::{StepEntry, CONTROL_STOP};
+use formation_config::protocol::pacing::{ACK_EVERY, CHILD_WAIT};
+use formation_config::protocol::wire::{ControlCommand, FaultInjection};
 use std::time::Duration;
 
 /// What the plant measures.
@@ -55,18 +56,18 @@ struct Loop<'a> {
 /// Why the loop ended early.
 enum Stop {
     Asked,
-    Error(String),
+    Error(NodeError),
 }
 
-impl From<String> for Stop {
-    fn from(e: String) -> Stop {
-        Stop::Error(e)
+impl<E: Into<NodeError>> From<E> for Stop {
+    fn from(e: E) -> Stop {
+        Stop::Error(e.into())
     }
 }
 
 /// Runs the realtime plant until every step is done, then waits for the stop message.
-pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), String> {
-    if let Some(w) = formation_config::runtime::sched::realtime_setup(b.args.rt_priority) {
+pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), NodeError> {
+    if let Some(w) = formation_config::node::sched::realtime_setup(b.args.rt_priority) {
         eprintln!("warning: {w}");
     }
     let n = b.scenario.n_agents();
@@ -104,7 +105,9 @@ pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), String> {
             Ok(()) => {}
         }
         if let Some(why) = b.lifeline.must_stop() {
-            return Err(format!("stopping after the last step: {why}"));
+            return Err(NodeError::Stopped(format!(
+                "stopping after the last step: {why}"
+            )));
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
@@ -169,7 +172,10 @@ impl Loop<'_> {
 
     fn check(&self) -> Result<(), Stop> {
         match self.b.lifeline.must_stop() {
-            Some(why) => Err(Stop::Error(format!("stopping at step {}: {why}", self.k))),
+            Some(why) => Err(Stop::Error(NodeError::Stopped(format!(
+                "stopping at step {}: {why}",
+                self.k
+            )))),
             None => Ok(()),
         }
     }
@@ -181,18 +187,13 @@ impl Loop<'_> {
     /// Drains control and progress; true once the start signal has come.
     fn drain_start(&mut self) -> Result<bool, Stop> {
         let p = self.ports;
-        while let Some(c) = p.control.receive().map_err(|e| format!("{e:?}"))? {
+        while let Some(c) = p.control.receive()? {
             if c.kind == CONTROL_STOP {
                 return Err(Stop::Asked);
             }
         }
         let mut started = false;
-        while p
-            .progress
-            .receive()
-            .map_err(|e| format!("{e:?}"))?
-            .is_some()
-        {
+        while p.progress.receive()?.is_some() {
             started = true;
         }
         Ok(started)
@@ -202,17 +203,17 @@ impl Loop<'_> {
     fn drain(&mut self) -> Result<(), Stop> {
         self.drain_start()?;
         let p = self.ports;
-        while let Some(f) = p.faults.receive().map_err(|e| format!("{e:?}"))? {
+        while let Some(f) = p.faults.receive()? {
             self.faults.push(*f);
         }
         for (i, sub) in p.commands.iter().enumerate() {
-            while let Some(c) = sub.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(c) = sub.receive()? {
                 let now = now_ns();
                 if c.agent as usize != i || c.step > self.k {
-                    return Err(Stop::Error(format!(
+                    return Err(Stop::Error(NodeError::Protocol(format!(
                         "protocol error: command of agent {} for step {} while at step {}",
                         c.agent, c.step, self.k
-                    )));
+                    ))));
                 }
                 if c.step < self.k || self.commands[i].is_some() {
                     self.m.late += 1;
@@ -277,7 +278,7 @@ impl Loop<'_> {
     }
 
     /// Writes `<run dir>/timing/plant.json`.
-    fn report(&self) -> Result<(), String> {
+    fn report(&self) -> Result<(), NodeError> {
         let mut r = TimingReport::default();
         for (i, h) in self.m.latency.iter().enumerate() {
             r.histograms

@@ -1,8 +1,8 @@
-//! The lockstep protocol of `formation run`: who paces whom, the control messages, the extra service
-//! names, and the plumbing every role process (plant, leader, agent) shares.
+//! Pacing of the lockstep protocol of `formation run`: who paces whom, how far ahead, and the
+//! subscriber buffers that follow from it.
 //!
 //! Pacing (all counts in simulation steps; `recorded` is the number of steps the orchestrator has
-//! recorded, announced in [`messages::RunProgress`]):
+//! recorded, announced in [`super::messages::RunProgress`]):
 //! * the plant starts step k only when `k < recorded + PLANT_LEAD`;
 //! * the leader publishes the reference of step k only when `k < recorded + LEADER_LEAD`
 //!   (`LEADER_LEAD > PLANT_LEAD`, so references are always ahead of the plant);
@@ -10,16 +10,6 @@
 //!   orchestrator answers with a new progress value, waking plant and leader.
 //!
 //! Subscriber buffers are sized from these leads, so no sample is ever overwritten.
-
-pub mod args;
-pub mod boot;
-pub mod clock;
-pub mod logging;
-pub mod messages;
-pub mod ports;
-pub mod process;
-pub mod sched;
-pub mod timing;
 
 use std::time::Duration;
 
@@ -35,26 +25,6 @@ pub const ACK_EVERY: u64 = 16;
 pub const HOUSEKEEPING_EVERY: u64 = ACK_EVERY;
 /// Longest a role process sleeps before it rechecks its parent and its stop flags.
 pub const CHILD_WAIT: Duration = Duration::from_millis(100);
-
-/// Orchestrator -> everyone: [`messages::RunControl`].
-pub const CONTROL: &str = "formation/run/control";
-/// Orchestrator -> plant and leader: [`messages::RunProgress`].
-pub const PROGRESS: &str = "formation/run/progress";
-/// Role processes -> orchestrator: [`messages::Hello`] once their ports exist.
-pub const HELLO: &str = "formation/run/hello";
-/// Plant -> orchestrator: one slice of [`messages::StepEntry`] (N entries) per step.
-pub const STEPS: &str = "formation/plant/steps";
-/// Event the orchestrator sleeps on.
-pub const WAKE_ORCHESTRATOR: &str = "formation/wake/orchestrator";
-/// Event the plant sleeps on.
-pub const WAKE_PLANT: &str = "formation/wake/plant";
-/// Event the leader sleeps on.
-pub const WAKE_LEADER: &str = "formation/wake/leader";
-
-/// Event agent i sleeps on.
-pub fn wake_agent(i: usize) -> String {
-    format!("formation/wake/agent/{i}")
-}
 
 /// Subscriber buffer of the reference service: everything the leader may publish between two drains of
 /// the slowest subscriber (the orchestrator). At one drain the leader may have published only up to the

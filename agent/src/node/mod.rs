@@ -1,4 +1,4 @@
-//! Agent i's event loop around [`formation_agent::Agent`]. Per step k, as in the in-process
+//! Agent i's event loop around [`crate::Agent`]. Per step k, as in the in-process
 //! runner: observe the reference of k, the own state of k (sharing it at once), the neighbours'
 //! shares, and compute the command of k once `ready(k)`. References arriving early are held here
 //! and handed to the agent only when their step comes, so its delay histories match the in-process
@@ -10,21 +10,25 @@ mod ports;
 mod realtime;
 mod telemetry;
 
-use formation_agent::Agent;
-use formation_config::runtime::boot::{boot, hello};
-use formation_config::runtime::messages::{CONTROL_STOP, ROLE_AGENT};
-use formation_config::runtime::ports::{poke, send};
-use formation_config::runtime::{CHILD_WAIT, HOUSEKEEPING_EVERY};
-use formation_config::wire::{DelayInjection, NeighborState, VehicleState};
+use crate::Agent;
+use formation_config::node::boot::{boot, hello};
+use formation_config::node::error::NodeError;
+use formation_config::node::ports::{poke, send};
+use formation_config::protocol::messages::{Role, CONTROL_STOP};
+use formation_config::protocol::pacing::{CHILD_WAIT, HOUSEKEEPING_EVERY};
+use formation_config::protocol::wire::{DelayInjection, NeighborState, VehicleState};
 
 /// Runs agent `--agent i` until the orchestrator says stop (or goes away).
-pub fn run() -> Result<(), String> {
-    let b = boot("agent")?;
-    let i = b.args.agent.ok_or("--agent is required")?;
+pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeError> {
+    let b = boot(Role::Agent, args)?;
+    let i = b
+        .args
+        .agent
+        .ok_or_else(|| NodeError::Args("--agent is required".into()))?;
     let mut agent = Agent::new(&b.scenario, i, b.variant);
     let neighbours: Vec<usize> = agent.neighbour_ids().collect();
     let ports = ports::Ports::open(&b.node, i, &neighbours)?;
-    let _greeting = hello(&b.node, ROLE_AGENT, i as u32)?;
+    let _greeting = hello(&b.node, Role::Agent, i as u32)?;
     if b.args.realtime {
         return realtime::run(&b, i, agent, &ports);
     }
@@ -47,7 +51,7 @@ pub fn run() -> Result<(), String> {
     // step").
     loop {
         for sub in &ports.shares_in {
-            while let Some(s) = sub.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(s) = sub.receive()? {
                 agent.observe_neighbor(&s);
             }
         }
@@ -55,12 +59,12 @@ pub fn run() -> Result<(), String> {
         // One state per step: once it is in, the next one is read at the next step (a duplicate
         // is then caught as out of step).
         if own.is_none() {
-            if let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
+            if let Some(s) = ports.state.receive()? {
                 if s.step != k {
-                    return Err(format!(
+                    return Err(NodeError::Protocol(format!(
                         "protocol error: state of step {} while at step {k}",
                         s.step
-                    ));
+                    )));
                 }
                 own = Some(*s);
                 fresh = true;
@@ -68,7 +72,7 @@ pub fn run() -> Result<(), String> {
         }
         let reference_missing = refs.missing(k);
         if !fresh || reference_missing || k.is_multiple_of(HOUSEKEEPING_EVERY) {
-            while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(c) = ports.control.receive()? {
                 if c.kind == CONTROL_STOP {
                     tracing::info!(
                         step = k,
@@ -80,13 +84,15 @@ pub fn run() -> Result<(), String> {
                 }
             }
             if let Some(why) = b.lifeline.must_stop() {
-                return Err(format!("agent {i} stopping at step {k}: {why}"));
+                return Err(NodeError::Stopped(format!(
+                    "agent {i} stopping at step {k}: {why}"
+                )));
             }
-            while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(d) = ports.delays.receive()? {
                 delays.observe(&d);
                 pending_delays.push(*d);
             }
-            while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(r) = ports.reference.receive()? {
                 refs.push(&r)?;
             }
         }

@@ -1,6 +1,8 @@
 //! Scheduling of the role processes in realtime mode: a 1 ns timer slack (the default 50 µs slack
 //! would delay every absolute sleep by up to 50 µs) and, on request, the `SCHED_FIFO` policy.
 
+use super::error::NodeError;
+
 /// Sets a 1 ns timer slack, and `SCHED_FIFO` at `priority` (1..=99) unless `priority` is 0.
 /// Returns a warning when the policy cannot be set (e.g. without `CAP_SYS_NICE`); the run then
 /// goes on under the normal policy.
@@ -46,25 +48,25 @@ pub fn background_thread() {
 /// switches of a plant that is preempted by the first agent it wakes while it still has agents to
 /// wake (measured on the paper scenario, 2 vCPUs: 74 -> 65 µs per step, median of 6 alternated
 /// runs, and 141 -> 129 µs of CPU per step; docs/runtime.md). Returns an error text on failure.
-pub fn batch_policy() -> Result<(), String> {
+pub fn batch_policy() -> Result<(), NodeError> {
     set_normal_policy(libc::SCHED_BATCH, "SCHED_BATCH")
 }
 
 /// Puts the calling thread back under the default `SCHED_OTHER` policy.
-pub fn other_policy() -> Result<(), String> {
+pub fn other_policy() -> Result<(), NodeError> {
     set_normal_policy(libc::SCHED_OTHER, "SCHED_OTHER")
 }
 
-fn set_normal_policy(policy: libc::c_int, name: &str) -> Result<(), String> {
+fn set_normal_policy(policy: libc::c_int, name: &str) -> Result<(), NodeError> {
     let param = libc::sched_param { sched_priority: 0 };
     // SAFETY: valid pointer to a sched_param; pid 0 is the calling thread.
     let rc = unsafe { libc::sched_setscheduler(0, policy, &param) };
     if rc == 0 {
         Ok(())
     } else {
-        Err(format!(
+        Err(NodeError::System(format!(
             "cannot use {name}: {}",
             std::io::Error::last_os_error()
-        ))
+        )))
     }
 }

@@ -1,10 +1,13 @@
 //! Start-up of a role process: arguments, process name, scenario, node, and the final hello.
 
 use super::args::ChildArgs;
-use super::messages::Hello;
+use super::error::{NodeError, PortError};
 use super::ports::{publisher, RunNode};
 use super::process::Lifeline;
-use crate::{ipc, Scenario, Variant};
+use crate::node::ipc;
+use crate::protocol::messages::{Hello, Role};
+use crate::protocol::services;
+use crate::{Scenario, Variant};
 
 /// Everything a role process starts with.
 #[derive(Debug)]
@@ -21,16 +24,12 @@ pub struct Boot {
     pub node: RunNode,
 }
 
-/// Parses the command line, names the process `fm-<role>[-<agent>]`, starts its log
+/// Names the process `fm-<role>[-<agent>]`, starts its log
 /// (`<run dir>/logs/<role>[-<agent>].log`), loads the scenario and creates the node.
-pub fn boot(role: &str) -> Result<Boot, String> {
-    let args = ChildArgs::parse(std::env::args_os().skip(1))?;
-    let name = match args.agent {
-        Some(i) => format!("fm-{role}-{i}"),
-        None => format!("fm-{role}"),
-    };
+pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
+    let name = role.process_name(args.agent);
     let lifeline = Lifeline::install(&name);
-    let log_name = super::logging::log_file_name(role, args.agent);
+    let log_name = super::logging::log_file_name(role.name(), args.agent);
     if let Err(e) = super::logging::init(&args.run_dir, &log_name, false) {
         eprintln!("{name}: {e}");
     }
@@ -41,21 +40,26 @@ pub fn boot(role: &str) -> Result<Boot, String> {
         "{name} starting"
     );
     let path = args.run_dir.join("scenario.toml");
-    let text = std::fs::read_to_string(&path)
-        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    let scenario = Scenario::from_toml_str(&text)
-        .map_err(|e| format!("cannot parse {}: {e}", path.display()))?;
+    let text = std::fs::read_to_string(&path).map_err(|e| NodeError::File {
+        path: path.clone(),
+        detail: format!("cannot read: {e}"),
+    })?;
+    let scenario = Scenario::from_toml_str(&text).map_err(|e| NodeError::File {
+        path: path.clone(),
+        detail: format!("cannot parse: {e}"),
+    })?;
     let variant = Variant::parse(&args.variant)
-        .ok_or_else(|| format!("unknown variant '{}'", args.variant))?;
+        .ok_or_else(|| NodeError::Args(format!("unknown variant '{}'", args.variant)))?;
     if let Some(i) = args.agent {
         if i >= scenario.n_agents() {
-            return Err(format!(
-                "agent {i} does not exist (N = {})",
+            return Err(NodeError::Scenario(format!(
+                "agent {} does not exist (N = {})",
+                i + 1,
                 scenario.n_agents()
-            ));
+            )));
         }
     }
-    let node = ipc::node(&args.prefix, &name).map_err(|e| e.to_string())?;
+    let node = ipc::node(&args.prefix, &name)?;
     Ok(Boot {
         args,
         scenario,
@@ -68,7 +72,7 @@ pub fn boot(role: &str) -> Result<Boot, String> {
 /// The ports of the hello; keep them alive until the run ends (a dropped publisher may take its
 /// undelivered samples with it).
 pub struct Greeting {
-    _publisher: super::ports::Pub<Hello>,
+    _publisher: super::ports::Output<Hello>,
     _notifier: iceoryx2::port::notifier::Notifier<super::ports::Svc>,
 }
 
@@ -79,13 +83,13 @@ impl std::fmt::Debug for Greeting {
 }
 
 /// Tells the orchestrator that every port of this process exists.
-pub fn hello(node: &RunNode, role: u32, agent: u32) -> Result<Greeting, String> {
-    let p = publisher::<Hello>(node, super::HELLO)?;
-    let n = super::ports::notifier(node, super::WAKE_ORCHESTRATOR)?;
+pub fn hello(node: &RunNode, role: Role, agent: u32) -> Result<Greeting, PortError> {
+    let p = publisher(node, &services::HELLO.named())?;
+    let n = super::ports::notifier(node, &services::WAKE_ORCHESTRATOR.named())?;
     super::ports::send(
         &p,
         Hello {
-            role,
+            role: role as u32,
             agent,
             pid: std::process::id(),
             _pad: 0,

@@ -3,10 +3,10 @@
 //! the reference of the same step. Sent without waiting; the service keeps the latest sample for
 //! late subscribers.
 
-use formation_config::scenario::Scenario;
-use formation_config::wire::{
+use formation_config::protocol::wire::{
     AgentTelemetry, ControlCommand, ReferenceFrame, VehicleState, TELEMETRY_EVERY_S,
 };
+use formation_config::scenario::Scenario;
 use std::time::Duration;
 
 /// Decides which steps are sampled and builds the samples.

@@ -7,8 +7,9 @@
 //! a queue was the largest memory traffic of an agent process (`perf record`: `memmove` from
 //! `VecDeque::pop_front`, ~6 % of the agent's time).
 
-use formation_config::runtime::REFERENCE_BUFFER;
-use formation_config::wire::ReferenceFrame;
+use formation_config::node::error::NodeError;
+use formation_config::protocol::pacing::REFERENCE_BUFFER;
+use formation_config::protocol::wire::ReferenceFrame;
 
 /// The held references, steps `next..=newest`, contiguous.
 pub struct EarlyReferences {
@@ -36,20 +37,20 @@ impl EarlyReferences {
     }
 
     /// Holds `r`; references must come in step order without gaps and fit in the ring.
-    pub fn push(&mut self, r: &ReferenceFrame) -> Result<(), String> {
+    pub fn push(&mut self, r: &ReferenceFrame) -> Result<(), NodeError> {
         let expected = self.newest.map_or(self.next, |s| s + 1);
         if r.step != expected {
-            return Err(format!(
+            return Err(NodeError::Protocol(format!(
                 "protocol error: reference of step {} while expecting {expected}",
                 r.step
-            ));
+            )));
         }
         let cap = self.slots.len() as u64;
         if r.step >= self.next + cap {
-            return Err(format!(
+            return Err(NodeError::Protocol(format!(
                 "protocol error: reference of step {} is more than {cap} steps ahead of step {}",
                 r.step, self.next
-            ));
+            )));
         }
         self.slots[(r.step % cap) as usize].copy_valid_from(r);
         self.newest = Some(r.step);

@@ -1,6 +1,7 @@
 //! `tracing` set-up of every formation process: `RUST_LOG` (default `info`), one log file per
 //! process under `<run dir>/logs/<role>[-<agent>].log`, and optionally a console on stderr.
 
+use super::error::NodeError;
 use std::fs::File;
 use std::io::IsTerminal;
 use std::path::Path;
@@ -20,12 +21,15 @@ pub fn log_file_name(role: &str, agent: Option<usize>) -> String {
 /// Installs the global subscriber: a file layer writing to `<run_dir>/logs/<name>` (created if
 /// needed) and, if `console`, a compact layer on stderr. Returns an error text (logging then stays
 /// off or console-only) when the file cannot be created; never panics.
-pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), String> {
+pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), NodeError> {
     let filter = || EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let dir = run_dir.join("logs");
     let file = std::fs::create_dir_all(&dir)
         .and_then(|_| File::create(dir.join(file_name)))
-        .map_err(|e| format!("cannot create {}: {e}", dir.join(file_name).display()));
+        .map_err(|e| NodeError::File {
+            path: dir.join(file_name),
+            detail: format!("cannot create: {e}"),
+        });
     let file_layer = file.as_ref().ok().map(|f| {
         let f = f.try_clone().ok().map(Mutex::new);
         f.map(|w| {

@@ -94,32 +94,7 @@ pub fn service_name(name: &str) -> Result<ServiceName, IpcError> {
     ServiceName::new(name).map_err(|_| IpcError::BadName(name.to_string()))
 }
 
-/// Upper bounds a service is created with. Openers of an existing service cannot raise them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Limits {
-    /// Nodes that may open the service.
-    pub nodes: usize,
-    /// Publishers (publish-subscribe) or notifiers (event).
-    pub senders: usize,
-    /// Subscribers (publish-subscribe) or listeners (event).
-    pub receivers: usize,
-    /// Samples a subscriber can hold before the oldest is overwritten (publish-subscribe only).
-    pub buffer: usize,
-}
-
-impl Limits {
-    /// Limits for a service that `processes` processes open, each with at most one port of each
-    /// kind: every process may send and receive, and a subscriber buffers one sample per sender.
-    pub fn for_processes(processes: usize) -> Self {
-        let p = processes.max(1);
-        Limits {
-            nodes: p + 1,
-            senders: p,
-            receivers: p,
-            buffer: p.max(2),
-        }
-    }
-}
+pub use crate::protocol::services::Limits;
 
 /// Applies `limits` to a publish-subscribe builder (any payload and user header).
 pub fn pubsub_with_limits<P, H>(

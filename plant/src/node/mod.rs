@@ -1,4 +1,4 @@
-//! The plant's event loop around [`formation_plant::Plant`]. Each command is applied, its truth
+//! The plant's event loop around [`crate::Plant`]. Each command is applied, its truth
 //! taken and its quadrotor integrated as soon as it arrives (the quadrotors do not interact, so the
 //! order of arrival changes nothing: `plant/tests/physics.rs`); once all N are in, k advances, the
 //! states of k + 1 go out and then the step record of k.
@@ -6,20 +6,21 @@
 mod ports;
 mod realtime;
 
-use formation_config::runtime::boot::{boot, hello};
-use formation_config::runtime::messages::{StepEntry, CONTROL_STOP, ROLE_PLANT};
-use formation_config::runtime::ports::{poke, send};
-use formation_config::runtime::{ACK_EVERY, CHILD_WAIT, HOUSEKEEPING_EVERY, PLANT_LEAD};
-use formation_config::wire::FaultInjection;
-use formation_plant::Plant;
+use crate::Plant;
+use formation_config::node::boot::{boot, hello};
+use formation_config::node::error::NodeError;
+use formation_config::node::ports::{poke, send};
+use formation_config::protocol::messages::{Role, StepEntry, CONTROL_STOP};
+use formation_config::protocol::pacing::{ACK_EVERY, CHILD_WAIT, HOUSEKEEPING_EVERY, PLANT_LEAD};
+use formation_config::protocol::wire::FaultInjection;
 
 /// Runs the plant until the orchestrator says stop (or goes away).
-pub fn run() -> Result<(), String> {
-    let b = boot("plant")?;
+pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeError> {
+    let b = boot(Role::Plant, args)?;
     let n = b.scenario.n_agents();
     let steps = b.scenario.n_steps();
     let ports = ports::Ports::open(&b.node, n)?;
-    let _greeting = hello(&b.node, ROLE_PLANT, 0)?;
+    let _greeting = hello(&b.node, Role::Plant, 0)?;
     let mut plant = Plant::from_scenario(&b.scenario);
     if b.args.realtime {
         return realtime::run(&b, &ports, plant);
@@ -46,12 +47,12 @@ pub fn run() -> Result<(), String> {
             }
             // One command per agent and step: a second receive would only find nothing (a
             // duplicate stays queued and is caught as out of step at the next step).
-            if let Some(c) = sub.receive().map_err(|e| format!("{e:?}"))? {
+            if let Some(c) = sub.receive()? {
                 if c.step != k || c.agent as usize != i {
-                    return Err(format!(
+                    return Err(NodeError::Protocol(format!(
                         "protocol error: command of agent {} for step {} while at step {k}",
                         c.agent, c.step
-                    ));
+                    )));
                 }
                 // The quadrotors do not interact: each one moves to step k + 1 as soon as its
                 // command is in, so only the last one is left for the last command (the states of
@@ -70,14 +71,14 @@ pub fn run() -> Result<(), String> {
         // A wake-up without a command came from the orchestrator (progress, stop) or the timeout.
         let idle = fresh == 0;
         if idle {
-            while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(c) = ports.control.receive()? {
                 if c.kind == CONTROL_STOP {
                     tracing::info!(step = k, "stop received");
                     return Ok(());
                 }
             }
             if let Some(why) = b.lifeline.must_stop() {
-                return Err(format!("stopping at step {k}: {why}"));
+                return Err(NodeError::Stopped(format!("stopping at step {k}: {why}")));
             }
         }
         loop {
@@ -86,10 +87,10 @@ pub fn run() -> Result<(), String> {
                 if lead_used_up || idle || k.is_multiple_of(HOUSEKEEPING_EVERY) {
                     // Faults are forwarded before the progress that lets the plant reach their
                     // step, so they are drained together with (after) the progress.
-                    while let Some(p) = ports.progress.receive().map_err(|e| format!("{e:?}"))? {
+                    while let Some(p) = ports.progress.receive()? {
                         recorded = Some(recorded.map_or(p.recorded, |r| r.max(p.recorded)));
                     }
-                    while let Some(f) = ports.faults.receive().map_err(|e| format!("{e:?}"))? {
+                    while let Some(f) = ports.faults.receive()? {
                         faults.push(*f);
                     }
                 }

@@ -7,10 +7,14 @@
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+pub mod graph;
+pub mod validate;
+pub mod variant;
+
 /// The paper scenario with our tuned gains (the default of every command).
-pub const PAPER_TOML: &str = include_str!("../scenarios/paper.toml");
+pub const PAPER_TOML: &str = include_str!("../../scenarios/paper.toml");
 /// The paper scenario with every printed value as printed (our readings where the paper is silent).
-pub const PAPER_EXACT_TOML: &str = include_str!("../scenarios/paper-exact.toml");
+pub const PAPER_EXACT_TOML: &str = include_str!("../../scenarios/paper-exact.toml");
 
 /// A complete scenario: simulation settings, mission, graph, vehicles, controller and per-agent data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

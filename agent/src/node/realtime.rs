@@ -1,7 +1,7 @@
 //! Agent i on the wall clock (`formation run --realtime`): it reacts to every fresh state at once
 //! and never waits for its delayed inputs. At step k it uses, through the step-keyed histories, the
 //! newest information stamped at or before t_k - tau_i(t_k) that has actually arrived
-//! ([`formation_agent::delay::StepHistory::at_or_before`]), so the injected delay adds to the real
+//! ([`crate::delay::StepHistory::at_or_before`]), so the injected delay adds to the real
 //! IPC latency. Step 0 is the warm-up: the agent waits for everything step 0 needs, as in lockstep.
 //!
 //! If several states are queued (the agent fell behind), all enter the history and only the newest
@@ -10,14 +10,15 @@
 //! to `<run dir>/timing/agent-<i>.json`.
 
 use super::ports::Ports;
-use formation_agent::Agent;
-use formation_config::runtime::boot::Boot;
-use formation_config::runtime::clock::now_ns;
-use formation_config::runtime::messages::CONTROL_STOP;
-use formation_config::runtime::ports::{poke, send};
-use formation_config::runtime::timing::{NsHistogram, TimingReport};
-use formation_config::runtime::CHILD_WAIT;
-use formation_config::wire::{DelayInjection, ReferenceFrame, VehicleState};
+use crate::Agent;
+use formation_config::node::boot::Boot;
+use formation_config::node::clock::now_ns;
+use formation_config::node::error::NodeError;
+use formation_config::node::ports::{poke, send};
+use formation_config::node::timing::{NsHistogram, TimingReport};
+use formation_config::protocol::messages::CONTROL_STOP;
+use formation_config::protocol::pacing::CHILD_WAIT;
+use formation_config::protocol::wire::{DelayInjection, ReferenceFrame, VehicleState};
 use std::collections::VecDeque;
 
 /// What the agent measures.
@@ -30,8 +31,8 @@ struct Meters {
 }
 
 /// Runs agent i in realtime mode until the orchestrator says stop (or goes away).
-pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), String> {
-    if let Some(w) = formation_config::runtime::sched::realtime_setup(b.args.rt_priority) {
+pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), NodeError> {
+    if let Some(w) = formation_config::node::sched::realtime_setup(b.args.rt_priority) {
         eprintln!("warning: {w}");
     }
     let mut m = Meters::default();
@@ -39,26 +40,26 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), St
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut latest: Option<VehicleState> = None;
     loop {
-        while let Some(c) = ports.control.receive().map_err(|e| format!("{e:?}"))? {
+        while let Some(c) = ports.control.receive()? {
             if c.kind == CONTROL_STOP {
                 return report(b, i, &m);
             }
         }
-        while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
+        while let Some(d) = ports.delays.receive()? {
             pending_delays.push(*d);
         }
-        while let Some(r) = ports.reference.receive().map_err(|e| format!("{e:?}"))? {
+        while let Some(r) = ports.reference.receive()? {
             refs.push_back(*r);
         }
         for sub in &ports.shares_in {
-            while let Some(s) = sub.receive().map_err(|e| format!("{e:?}"))? {
+            while let Some(s) = sub.receive()? {
                 if s.sent_ns != 0 {
                     m.share_hop.record(now_ns().saturating_sub(s.sent_ns));
                 }
                 agent.observe_neighbor(&s);
             }
         }
-        while let Some(s) = ports.state.receive().map_err(|e| format!("{e:?}"))? {
+        while let Some(s) = ports.state.receive()? {
             if s.sent_ns != 0 {
                 m.state_hop.record(now_ns().saturating_sub(s.sent_ns));
             }
@@ -103,14 +104,14 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), St
             }
         }
         if let Some(why) = b.lifeline.must_stop() {
-            return Err(format!("agent {i} stopping: {why}"));
+            return Err(NodeError::Stopped(format!("agent {i} stopping: {why}")));
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
 }
 
 /// Writes `<run dir>/timing/agent-<i>.json`.
-fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), String> {
+fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), NodeError> {
     let mut r = TimingReport::default();
     r.histograms.insert("state_hop".into(), m.state_hop.clone());
     r.histograms.insert("share_hop".into(), m.share_hop.clone());

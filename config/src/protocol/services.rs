@@ -1,0 +1,562 @@
+//! The service table: every service of a run, declared once — its name pattern, its message type,
+//! who publishes and who subscribes, and the limits it is created with.
+//!
+//! A [`Topic<T>`] ties a name to its message type `T`: ports are opened from the topic
+//! (`node::ports::publisher(node, &VEHICLE_STATE.at(i))` gives a `Publisher<VehicleState>`), so a
+//! name used with the wrong type does not compile. The orchestrator creates every service by walking
+//! the table ([`visit`]) with limits sized for the run ([`Sizing`]); the role processes only open
+//! them (limits are fixed by the creator, see `iceoryx2-notes`).
+//!
+//! Names are relative to the run's iceoryx2 prefix ([`run_prefix`]), so concurrent runs never see
+//! each other. Per-agent names carry the 0-based agent index (`formation/agent/0/state` is agent 1's).
+
+use super::messages::{Hello, InjectRequest, RunControl, RunProgress, StepEntry};
+use super::pacing::{
+    CONTROL_BUFFER, LOCKSTEP_BUFFER, REALTIME_STEPS_BUFFER, REFERENCE_BUFFER, STEPS_BUFFER,
+};
+use super::wire::{
+    AgentTelemetry, ControlCommand, DelayInjection, FaultInjection, NeighborState, ReferenceFrame,
+    VehicleState,
+};
+use core::marker::PhantomData;
+
+/// iceoryx2 global prefix of a run: `fm<run_id>_` (short: it becomes part of file names in /dev/shm).
+pub fn run_prefix(run_id: &str) -> String {
+    format!("fm{run_id}_")
+}
+
+/// Most concurrent client processes (`formation inspect`, `ps`, `inject`) a run admits.
+pub const MAX_CLIENTS: usize = 8;
+
+/// A message type that crosses a process boundary: `#[repr(C)]`, `Copy`, and (feature `ipc`)
+/// iceoryx2's `ZeroCopySend` with an explicit, versioned type name.
+#[cfg(feature = "ipc")]
+pub trait Message: core::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend + 'static {}
+/// A message type that crosses a process boundary: `#[repr(C)]`, `Copy`, and (feature `ipc`)
+/// iceoryx2's `ZeroCopySend` with an explicit, versioned type name.
+#[cfg(not(feature = "ipc"))]
+pub trait Message: core::fmt::Debug + Copy + 'static {}
+
+macro_rules! messages {
+    ($($t:ty),* $(,)?) => { $(impl Message for $t {})* };
+}
+messages!(
+    VehicleState,
+    NeighborState,
+    ReferenceFrame,
+    ControlCommand,
+    FaultInjection,
+    DelayInjection,
+    AgentTelemetry,
+    RunControl,
+    RunProgress,
+    Hello,
+    StepEntry,
+    InjectRequest,
+);
+
+/// A process (or set of processes) that opens ports on a service.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Party {
+    /// `formation run`'s own process.
+    Orchestrator,
+    /// The plant process.
+    Plant,
+    /// The leader process.
+    Leader,
+    /// Agent i, for a per-agent service; every agent for a run-wide one.
+    Agent,
+    /// The agents that have agent i as a neighbour (per-agent services).
+    Neighbours,
+    /// Client processes: `formation inspect`, `formation inject`, outside observers.
+    Clients,
+}
+
+impl Party {
+    /// How it is written in the docs and in `formation schema`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Party::Orchestrator => "orchestrator",
+            Party::Plant => "plant",
+            Party::Leader => "leader",
+            Party::Agent => "agent",
+            Party::Neighbours => "neighbours",
+            Party::Clients => "clients",
+        }
+    }
+}
+
+/// Whether a service exists once per run or once per agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scope {
+    /// One service per run; its pattern is its name.
+    Run,
+    /// One service per agent; `{i}` in the pattern is the 0-based agent index.
+    PerAgent,
+}
+
+/// What a run's services are sized for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sizing {
+    /// Number of agents N.
+    pub n: usize,
+    /// Client processes admitted besides the run's own ([`MAX_CLIENTS`]).
+    pub clients: usize,
+    /// Realtime mode: the plant does not wait for the recorder (deeper step-record buffer).
+    pub realtime: bool,
+}
+
+impl Sizing {
+    /// A run of `n` agents with the default number of clients.
+    pub fn run(n: usize, realtime: bool) -> Sizing {
+        Sizing {
+            n,
+            clients: MAX_CLIENTS,
+            realtime,
+        }
+    }
+
+    /// Nodes that may open any service: N agents, plant, leader, orchestrator, one spare, and the
+    /// clients.
+    pub fn nodes(&self) -> usize {
+        self.n + 4 + self.clients
+    }
+
+    fn limits(&self, senders: usize, receivers: usize, buffer: usize) -> Limits {
+        Limits {
+            nodes: self.nodes(),
+            senders,
+            receivers,
+            buffer,
+        }
+    }
+}
+
+/// Upper bounds a service is created with. Openers of an existing service cannot raise them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Limits {
+    /// Nodes that may open the service.
+    pub nodes: usize,
+    /// Publishers (publish-subscribe) or notifiers (event).
+    pub senders: usize,
+    /// Subscribers (publish-subscribe) or listeners (event).
+    pub receivers: usize,
+    /// Samples a subscriber can hold before the oldest is overwritten (publish-subscribe only).
+    pub buffer: usize,
+}
+
+impl Limits {
+    /// Limits for a service that `processes` processes open, each with at most one port of each
+    /// kind: every process may send and receive, and a subscriber buffers one sample per sender.
+    pub fn for_processes(processes: usize) -> Self {
+        let p = processes.max(1);
+        Limits {
+            nodes: p + 1,
+            senders: p,
+            receivers: p,
+            buffer: p.max(2),
+        }
+    }
+}
+
+/// Marker: each sample is one `T`.
+#[derive(Debug, Clone, Copy)]
+pub struct One;
+/// Marker: each sample is a slice of `T` (one element per agent).
+#[derive(Debug, Clone, Copy)]
+pub struct Slice;
+
+/// A publish-subscribe service carrying `T` (or slices of `T`, with `S = Slice`).
+#[derive(Debug)]
+pub struct Topic<T, S = One> {
+    /// Name pattern (`{i}`: 0-based agent index for [`Scope::PerAgent`]).
+    pub pattern: &'static str,
+    /// Once per run or once per agent.
+    pub scope: Scope,
+    /// Who publishes.
+    pub publishers: &'static [Party],
+    /// Who subscribes.
+    pub subscribers: &'static [Party],
+    /// Samples kept for a subscriber that arrives late (0: none).
+    pub history: usize,
+    /// What it carries, in one line.
+    pub doc: &'static str,
+    limits: fn(&Sizing) -> Limits,
+    _message: PhantomData<fn() -> (T, S)>,
+}
+
+/// An event service (wake-ups; every notification carries event id 0).
+#[derive(Debug)]
+pub struct Event {
+    /// Name pattern (`{i}`: 0-based agent index for [`Scope::PerAgent`]).
+    pub pattern: &'static str,
+    /// Once per run or once per agent.
+    pub scope: Scope,
+    /// Who notifies.
+    pub notifiers: &'static [Party],
+    /// Who listens (sleeps on it).
+    pub listeners: &'static [Party],
+    /// What it wakes, in one line.
+    pub doc: &'static str,
+    limits: fn(&Sizing) -> Limits,
+}
+
+/// One service of the table with its concrete name (the agent index filled in).
+#[derive(Debug)]
+pub struct Named<D: 'static> {
+    /// The service name, relative to the run prefix.
+    pub name: String,
+    /// Its declaration.
+    pub spec: &'static D,
+}
+
+fn named<D>(spec: &'static D, pattern: &str, scope: Scope, i: usize) -> Named<D> {
+    let name = match scope {
+        Scope::PerAgent => pattern.replace("{i}", &i.to_string()),
+        Scope::Run => pattern.to_string(),
+    };
+    Named { name, spec }
+}
+
+impl<T, S> Topic<T, S> {
+    /// The run-wide service (or agent 0's, for a per-agent one).
+    pub fn named(&'static self) -> Named<Self> {
+        self.at(0)
+    }
+
+    /// Agent `i`'s service (0-based index); the pattern itself for a run-wide one.
+    pub fn at(&'static self, i: usize) -> Named<Self> {
+        named(self, self.pattern, self.scope, i)
+    }
+
+    /// Limits it is created with for a run of this size.
+    pub fn limits(&self, sizing: &Sizing) -> Limits {
+        (self.limits)(sizing)
+    }
+
+    /// The message type's size and alignment in bytes.
+    pub fn layout(&self) -> (usize, usize) {
+        (core::mem::size_of::<T>(), core::mem::align_of::<T>())
+    }
+}
+
+impl Event {
+    /// The run-wide event.
+    pub fn named(&'static self) -> Named<Self> {
+        self.at(0)
+    }
+
+    /// Agent `i`'s event (0-based index).
+    pub fn at(&'static self, i: usize) -> Named<Self> {
+        named(self, self.pattern, self.scope, i)
+    }
+
+    /// Limits it is created with for a run of this size.
+    pub fn limits(&self, sizing: &Sizing) -> Limits {
+        (self.limits)(sizing)
+    }
+}
+
+use Party::{Agent, Clients, Leader, Neighbours, Orchestrator, Plant};
+
+/// Leader -> agents, plant and orchestrator: the reference of each step.
+pub static REFERENCE: Topic<ReferenceFrame> = Topic {
+    pattern: "formation/reference",
+    scope: Scope::Run,
+    publishers: &[Leader],
+    subscribers: &[Agent, Orchestrator],
+    history: 0,
+    doc: "the leader's reference of each step (P_d, its derivatives, the formation shape)",
+    limits: |s| s.limits(1, s.n + 1, REFERENCE_BUFFER),
+    _message: PhantomData,
+};
+
+/// Orchestrator -> plant: actuator faults injected at run time.
+pub static FAULT_INJECTION: Topic<FaultInjection> = Topic {
+    pattern: "formation/inject/fault",
+    scope: Scope::Run,
+    publishers: &[Orchestrator],
+    subscribers: &[Plant],
+    history: 0,
+    doc: "an actuator fault (Gamma, delta) applied from a given step",
+    limits: |s| s.limits(1, 1, CONTROL_BUFFER),
+    _message: PhantomData,
+};
+
+/// Orchestrator -> agents: delay profiles injected at run time.
+pub static DELAY_INJECTION: Topic<DelayInjection> = Topic {
+    pattern: "formation/inject/delay",
+    scope: Scope::Run,
+    publishers: &[Orchestrator],
+    subscribers: &[Agent],
+    history: 0,
+    doc: "a delay profile tau_i(t) applied from a given step",
+    limits: |s| s.limits(1, s.n, CONTROL_BUFFER),
+    _message: PhantomData,
+};
+
+/// Clients (`formation inject`) -> orchestrator: requests to inject.
+pub static INJECT_REQUEST: Topic<InjectRequest> = Topic {
+    pattern: "formation/inject/request",
+    scope: Scope::Run,
+    publishers: &[Clients],
+    subscribers: &[Orchestrator],
+    history: 0,
+    doc: "a client's request to inject a fault or a delay",
+    limits: |s| s.limits(s.clients, 1, CONTROL_BUFFER),
+    _message: PhantomData,
+};
+
+/// Orchestrator -> every role process: stop.
+pub static CONTROL: Topic<RunControl> = Topic {
+    pattern: "formation/run/control",
+    scope: Scope::Run,
+    publishers: &[Orchestrator],
+    subscribers: &[Plant, Leader, Agent],
+    history: 0,
+    doc: "run control (stop)",
+    limits: |s| s.limits(1, s.n + 2, CONTROL_BUFFER),
+    _message: PhantomData,
+};
+
+/// Orchestrator -> plant and leader: steps recorded so far (the pacing reference).
+pub static PROGRESS: Topic<RunProgress> = Topic {
+    pattern: "formation/run/progress",
+    scope: Scope::Run,
+    publishers: &[Orchestrator],
+    subscribers: &[Plant, Leader],
+    history: 0,
+    doc: "how many steps the orchestrator has recorded (the first one starts the run)",
+    limits: |s| s.limits(1, 2, CONTROL_BUFFER),
+    _message: PhantomData,
+};
+
+/// Role processes -> orchestrator: all my ports exist.
+pub static HELLO: Topic<Hello> = Topic {
+    pattern: "formation/run/hello",
+    scope: Scope::Run,
+    publishers: &[Plant, Leader, Agent],
+    subscribers: &[Orchestrator],
+    history: 0,
+    doc: "a role process is ready (role, agent, pid)",
+    limits: |s| s.limits(s.n + 2, 1, s.n + 2),
+    _message: PhantomData,
+};
+
+/// Plant -> orchestrator: one slice of N step entries per step.
+pub static STEPS: Topic<StepEntry, Slice> = Topic {
+    pattern: "formation/plant/steps",
+    scope: Scope::Run,
+    publishers: &[Plant],
+    subscribers: &[Orchestrator],
+    history: 0,
+    doc: "each step's truth and command of every quadrotor (N entries), for the recorder",
+    limits: |s| {
+        let buffer = if s.realtime {
+            REALTIME_STEPS_BUFFER
+        } else {
+            STEPS_BUFFER
+        };
+        s.limits(1, 1, buffer)
+    },
+    _message: PhantomData,
+};
+
+/// Plant -> agent i: the state of quadrotor i.
+pub static VEHICLE_STATE: Topic<VehicleState> = Topic {
+    pattern: "formation/agent/{i}/state",
+    scope: Scope::PerAgent,
+    publishers: &[Plant],
+    subscribers: &[Agent],
+    history: 0,
+    doc: "quadrotor i's state at step k (position, velocity, attitude, rate)",
+    limits: |s| s.limits(1, 1, LOCKSTEP_BUFFER),
+    _message: PhantomData,
+};
+
+/// Agent i -> its neighbours: what it shares for consensus.
+pub static NEIGHBOR_STATE: Topic<NeighborState> = Topic {
+    pattern: "formation/agent/{i}/share",
+    scope: Scope::PerAgent,
+    publishers: &[Agent],
+    subscribers: &[Neighbours],
+    history: 0,
+    doc: "agent i's shared position and velocity, stamped with its step",
+    limits: |s| s.limits(1, s.n.max(1), LOCKSTEP_BUFFER),
+    _message: PhantomData,
+};
+
+/// Agent i -> plant: its command.
+pub static CONTROL_COMMAND: Topic<ControlCommand> = Topic {
+    pattern: "formation/agent/{i}/command",
+    scope: Scope::PerAgent,
+    publishers: &[Agent],
+    subscribers: &[Plant],
+    history: 0,
+    doc: "agent i's command for step k (thrust and torques) and its controller telemetry",
+    limits: |s| s.limits(1, 1, LOCKSTEP_BUFFER),
+    _message: PhantomData,
+};
+
+/// Agent i -> clients (`formation inspect`): live telemetry, the latest kept for late subscribers.
+pub static TELEMETRY: Topic<AgentTelemetry> = Topic {
+    pattern: "formation/agent/{i}/telemetry",
+    scope: Scope::PerAgent,
+    publishers: &[Agent],
+    subscribers: &[Clients],
+    history: 1,
+    doc: "agent i's live telemetry (errors, estimates, constraint margins)",
+    limits: |s| s.limits(1, s.clients, 2),
+    _message: PhantomData,
+};
+
+/// Event the orchestrator sleeps on.
+pub static WAKE_ORCHESTRATOR: Event = Event {
+    pattern: "formation/wake/orchestrator",
+    scope: Scope::Run,
+    notifiers: &[Plant, Leader, Agent, Clients],
+    listeners: &[Orchestrator],
+    doc: "wakes the orchestrator (hello, step records ready, injection requests)",
+    limits: |s| s.limits(s.n + 3 + s.clients, 1, 0),
+};
+
+/// Event the plant sleeps on.
+pub static WAKE_PLANT: Event = Event {
+    pattern: "formation/wake/plant",
+    scope: Scope::Run,
+    notifiers: &[Orchestrator, Leader, Agent],
+    listeners: &[Plant],
+    doc: "wakes the plant (commands in, progress, stop)",
+    limits: |s| s.limits(s.n + 3, 1, 0),
+};
+
+/// Event the leader sleeps on.
+pub static WAKE_LEADER: Event = Event {
+    pattern: "formation/wake/leader",
+    scope: Scope::Run,
+    notifiers: &[Orchestrator, Plant, Agent],
+    listeners: &[Leader],
+    doc: "wakes the leader (progress, stop)",
+    limits: |s| s.limits(s.n + 3, 1, 0),
+};
+
+/// Event agent i sleeps on.
+pub static WAKE_AGENT: Event = Event {
+    pattern: "formation/wake/agent/{i}",
+    scope: Scope::PerAgent,
+    notifiers: &[Orchestrator, Plant, Leader, Neighbours],
+    listeners: &[Agent],
+    doc: "wakes agent i (its state, a neighbour's share, a reference, stop)",
+    limits: |s| s.limits(s.n + 3, 1, 0),
+};
+
+/// What walks the table: the orchestrator (creating every service), `formation schema`, the docs.
+pub trait Visitor {
+    /// What stops the walk.
+    type Error;
+    /// A publish-subscribe service of single samples.
+    fn topic<T: Message>(
+        &mut self,
+        service: Named<Topic<T>>,
+        limits: Limits,
+    ) -> Result<(), Self::Error>;
+    /// A publish-subscribe service of slices.
+    fn slices<T: Message>(
+        &mut self,
+        service: Named<Topic<T, Slice>>,
+        limits: Limits,
+    ) -> Result<(), Self::Error>;
+    /// An event service.
+    fn event(&mut self, service: Named<Event>, limits: Limits) -> Result<(), Self::Error>;
+}
+
+/// Walks every service of a run of this size, run-wide ones first, then agent by agent.
+pub fn visit<V: Visitor>(sizing: &Sizing, v: &mut V) -> Result<(), V::Error> {
+    let s = sizing;
+    v.topic(REFERENCE.named(), REFERENCE.limits(s))?;
+    v.topic(FAULT_INJECTION.named(), FAULT_INJECTION.limits(s))?;
+    v.topic(DELAY_INJECTION.named(), DELAY_INJECTION.limits(s))?;
+    v.topic(CONTROL.named(), CONTROL.limits(s))?;
+    v.topic(PROGRESS.named(), PROGRESS.limits(s))?;
+    v.topic(HELLO.named(), HELLO.limits(s))?;
+    v.slices(STEPS.named(), STEPS.limits(s))?;
+    v.topic(INJECT_REQUEST.named(), INJECT_REQUEST.limits(s))?;
+    v.event(WAKE_ORCHESTRATOR.named(), WAKE_ORCHESTRATOR.limits(s))?;
+    v.event(WAKE_PLANT.named(), WAKE_PLANT.limits(s))?;
+    v.event(WAKE_LEADER.named(), WAKE_LEADER.limits(s))?;
+    for i in 0..s.n {
+        v.topic(VEHICLE_STATE.at(i), VEHICLE_STATE.limits(s))?;
+        v.topic(NEIGHBOR_STATE.at(i), NEIGHBOR_STATE.limits(s))?;
+        v.topic(CONTROL_COMMAND.at(i), CONTROL_COMMAND.limits(s))?;
+        v.event(WAKE_AGENT.at(i), WAKE_AGENT.limits(s))?;
+        v.topic(TELEMETRY.at(i), TELEMETRY.limits(s))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Collects the names and limits of every service.
+    #[derive(Default)]
+    struct Names(Vec<(String, Limits)>);
+
+    impl Visitor for Names {
+        type Error = ();
+        fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), ()> {
+            self.0.push((s.name, l));
+            Ok(())
+        }
+        fn slices<T: Message>(&mut self, s: Named<Topic<T, Slice>>, l: Limits) -> Result<(), ()> {
+            self.0.push((s.name, l));
+            Ok(())
+        }
+        fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), ()> {
+            self.0.push((s.name, l));
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_run_has_eleven_run_wide_services_and_five_per_agent_all_with_distinct_names() {
+        let mut names = Names::default();
+        visit(&Sizing::run(5, false), &mut names).unwrap();
+        assert_eq!(names.0.len(), 11 + 5 * 5);
+        let mut unique: Vec<&String> = names.0.iter().map(|(n, _)| n).collect();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), names.0.len());
+        assert!(names.0.iter().any(|(n, _)| n == "formation/agent/4/state"));
+        assert!(names.0.iter().all(|(n, _)| !n.contains('{')));
+    }
+
+    #[test]
+    fn every_service_admits_every_process_of_the_run_and_its_clients() {
+        let s = Sizing::run(7, false);
+        let mut names = Names::default();
+        visit(&s, &mut names).unwrap();
+        for (name, l) in &names.0 {
+            assert_eq!(l.nodes, 7 + 4 + MAX_CLIENTS, "{name}");
+        }
+        assert_eq!(TELEMETRY.limits(&s).receivers, MAX_CLIENTS);
+        assert_eq!(WAKE_ORCHESTRATOR.limits(&s).senders, 7 + 3 + MAX_CLIENTS);
+    }
+
+    #[test]
+    fn realtime_runs_get_a_deeper_step_record_buffer_than_lockstep_runs() {
+        let lock = STEPS.limits(&Sizing::run(5, false)).buffer;
+        let rt = STEPS.limits(&Sizing::run(5, true)).buffer;
+        assert_eq!(lock, STEPS_BUFFER);
+        assert_eq!(rt, REALTIME_STEPS_BUFFER);
+        assert!(rt > lock);
+    }
+
+    #[test]
+    fn a_per_agent_name_carries_the_zero_based_index_and_a_run_wide_name_is_its_pattern() {
+        assert_eq!(TELEMETRY.at(2).name, "formation/agent/2/telemetry");
+        assert_eq!(WAKE_AGENT.at(0).name, "formation/wake/agent/0");
+        assert_eq!(REFERENCE.at(3).name, "formation/reference");
+        assert_eq!(STEPS.named().name, "formation/plant/steps");
+    }
+}
