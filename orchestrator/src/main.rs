@@ -6,21 +6,11 @@
 //! * `check`   — what decides whether a gain set can work (graph spectrum, Theorem 1, bandwidths).
 //! * `ps`, `inspect`, `inject` — look at and act on a running `run` from another terminal.
 //! * `bench`   — IPC latency and jitter: iceoryx2 vs Unix sockets vs UDP.
-#![warn(missing_docs)]
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-mod bench;
-mod check;
-mod cli;
-mod cpus;
-mod live;
-mod plot;
-pub mod record;
-mod run;
-mod scenario_gen;
-mod sim;
+use formation::{bench, check, live, plot, role, run, scenario_gen, sim};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -57,49 +47,7 @@ enum Command {
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.
     #[command(hide = true)]
-    Node(NodeArgs),
-}
-
-/// `formation node <role> <args>`: what the orchestrator starts for each role process.
-#[derive(clap::Args, Debug)]
-struct NodeArgs {
-    /// plant, leader or agent.
-    role: String,
-    /// The role's arguments, as written by the orchestrator (`ChildArgs`).
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
-    args: Vec<std::ffi::OsString>,
-}
-
-/// Runs one role process; exit code 1 with a one-line error (also in its log) on failure.
-fn node_main(a: NodeArgs) -> ExitCode {
-    use formation_config::protocol::messages::Role;
-    let Some(role) = Role::from_name(&a.role) else {
-        eprintln!(
-            "formation node: unknown role '{}' (plant, leader or agent)",
-            a.role
-        );
-        return ExitCode::from(cli::EXIT_INVALID);
-    };
-    let args = match formation_config::node::args::ChildArgs::parse(a.args) {
-        Ok(args) => args,
-        Err(e) => {
-            eprintln!("formation node {role}: {e}");
-            return ExitCode::from(cli::EXIT_INVALID);
-        }
-    };
-    let result = match role {
-        Role::Plant => formation_plant::node::run(args),
-        Role::Leader => formation_leader::node::run(args),
-        Role::Agent => formation_agent::node::run(args),
-    };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e}");
-            eprintln!("fm-{role}: {e}");
-            ExitCode::from(1)
-        }
-    }
+    Node(role::NodeArgs),
 }
 
 fn main() -> ExitCode {
@@ -121,7 +69,7 @@ fn main() -> ExitCode {
         Some(Command::Inspect(a)) => live::inspect::main(a),
         Some(Command::Inject(a)) => live::inject::main(a),
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
-        Some(Command::Node(a)) => node_main(a),
+        Some(Command::Node(a)) => role::main(a),
         None => run::main(run::RunArgs::default()),
     }
 }

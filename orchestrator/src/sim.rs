@@ -1,15 +1,9 @@
-//! `formation sim`: the whole closed loop in one process. The loop passes the same wire messages
-//! between the same library calls as the processes of `formation run` do.
+//! `formation sim`: the whole closed loop in one process ([`ClosedLoop`]), recorded like a run.
 
 use crate::cli;
+use crate::closed_loop::ClosedLoop;
 use crate::record::{Recorder, Summary};
-use formation_agent::Agent;
-use formation_config::protocol::wire::{
-    ControlCommand, NeighborState, PlantTruth, ReferenceFrame, VehicleState,
-};
 use formation_config::{Scenario, Variant};
-use formation_leader::Mission;
-use formation_plant::Plant;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
@@ -103,47 +97,21 @@ pub fn run_in_process(
     out: &Path,
 ) -> std::io::Result<Summary> {
     let start = Instant::now();
-    let n = scenario.n_agents();
-    let mut plant = Plant::from_scenario(scenario);
-    let mission = Mission::from_scenario(scenario);
-    let mut agents: Vec<Agent> = (0..n).map(|i| Agent::new(scenario, i, variant)).collect();
-    let neighbours: Vec<Vec<usize>> = agents.iter().map(|a| a.neighbour_ids().collect()).collect();
+    let mut lp = ClosedLoop::new(scenario, variant);
     let mut recorder = Recorder::create(scenario, variant, "in-process", out)?;
-    let mut reference = ReferenceFrame::default();
-    let mut states = vec![VehicleState::default(); n];
-    let mut shares = vec![NeighborState::default(); n];
-    let mut commands = vec![ControlCommand::default(); n];
-    let mut truths = vec![PlantTruth::default(); n];
-    let dt = scenario.simulation.dt_s;
     let steps = scenario.n_steps();
     let mut done = 0;
     for k in 0..steps {
-        mission.reference(k, k as f64 * dt, &mut reference);
-        for a in agents.iter_mut() {
-            a.observe_reference(&reference);
-        }
-        for i in 0..n {
-            states[i] = plant.vehicle_state(i);
-            shares[i] = agents[i].observe_own(&states[i]);
-        }
-        for i in 0..n {
-            for &j in &neighbours[i] {
-                agents[i].observe_neighbor(&shares[j]);
-            }
-        }
-        for i in 0..n {
-            commands[i] = agents[i].step(&states[i]);
-            plant.apply(i, &commands[i]);
-            truths[i] = plant.truth(i);
-        }
+        lp.observe();
+        lp.act();
         done = k + 1;
         if recorder
-            .record(k, &reference, &truths, &commands)?
+            .record(k, lp.reference(), lp.truths(), lp.commands())?
             .is_some()
         {
             break;
         }
-        plant.advance();
+        lp.advance();
     }
     recorder.finish(done, start.elapsed().as_secs_f64())
 }

@@ -1,0 +1,25 @@
+//! The orchestrator of `formation`: everything behind the `formation` command, as a library.
+//!
+//! * [`closed_loop`]: the whole closed loop in one process (the in-process runner).
+//! * [`sim`], [`run`]: `formation sim` (in process) and `formation run` (one OS process per role
+//!   over iceoryx2), recorded by [`record`] into the same outputs.
+//! * [`role`]: `formation node <role>`, the role processes started from this same executable.
+//! * [`live`]: `ps`, `inspect`, `inject` on a running run.
+//! * [`plot`], [`check`], [`bench`], [`scenario_gen`]: figures, gain checks, IPC benchmarks,
+//!   generated scenarios.
+//! * [`cli`], [`cpus`]: shared command-line plumbing and CPU sets.
+
+pub mod bench;
+pub mod check;
+pub mod cli;
+pub mod closed_loop;
+pub mod cpus;
+pub mod live;
+pub mod plot;
+pub mod record;
+pub mod role;
+pub mod run;
+pub mod scenario_gen;
+pub mod sim;
+
+pub use closed_loop::ClosedLoop;
