@@ -18,6 +18,7 @@ mod cpus;
 mod live;
 mod plot;
 pub mod record;
+mod rng;
 mod run;
 mod scenario_gen;
 mod sim;
@@ -37,7 +38,7 @@ enum Command {
     /// Run one OS process per quadrotor (plus plant and leader) over iceoryx2, in lockstep (or on
     /// the wall clock with `--realtime`).
     Run(run::RunArgs),
-    /// Generate a scenario with N agents on a ring or path graph from the paper template.
+    /// Generate a scenario with N agents (radii, graph, leaders) from the paper template.
     Scenario(scenario_gen::ScenarioArgs),
     /// Render the paper's figures (PNG) from one run directory (or two, to compare variants).
     Plot(plot::PlotArgs),

@@ -1,0 +1,251 @@
+//! Communication graphs of generated scenarios: ring, path, k-nearest, complete, random-connected;
+//! leader weights b; edge weights normalised by the largest degree.
+
+use crate::rng::SplitMix64;
+use formation_config::scenario::Edge;
+
+/// The graph families of `formation scenario --graph`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GraphKind {
+    /// 1-2-...-N-1.
+    Ring,
+    /// 1-2-...-N (the paper's Fig. 4 for N = 5).
+    Path,
+    /// Every agent linked to the k agents whose formation slots are nearest (symmetrised).
+    KNearest,
+    /// Every pair.
+    Complete,
+    /// A random spanning tree plus ceil(N/2) random extra edges (deterministic for a seed).
+    RandomConnected,
+}
+
+impl GraphKind {
+    /// Parses `ring | path | k-nearest | complete | random-connected`.
+    pub fn parse(s: &str) -> Result<GraphKind, String> {
+        Ok(match s {
+            "ring" => GraphKind::Ring,
+            "path" => GraphKind::Path,
+            "k-nearest" => GraphKind::KNearest,
+            "complete" => GraphKind::Complete,
+            "random-connected" => GraphKind::RandomConnected,
+            other => {
+                return Err(format!(
+                    "--graph {other}: expected ring, path, k-nearest, complete or random-connected"
+                ))
+            }
+        })
+    }
+
+    /// The name as given on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            GraphKind::Ring => "ring",
+            GraphKind::Path => "path",
+            GraphKind::KNearest => "k-nearest",
+            GraphKind::Complete => "complete",
+            GraphKind::RandomConnected => "random-connected",
+        }
+    }
+}
+
+/// Edge list (0-based, a < b, each undirected edge once) of the graph on `n` agents whose formation
+/// slots sit on a ring in index order. `k` is used by k-nearest, `seed` by random-connected.
+pub fn edges(kind: GraphKind, n: usize, k: usize, seed: u64) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    let add = |a: usize, b: usize, out: &mut Vec<(usize, usize)>| {
+        let e = (a.min(b), a.max(b));
+        if a != b && !out.contains(&e) {
+            out.push(e);
+        }
+    };
+    match kind {
+        GraphKind::Path => (1..n).for_each(|i| add(i - 1, i, &mut out)),
+        GraphKind::Ring => {
+            (1..n).for_each(|i| add(i - 1, i, &mut out));
+            if n > 2 {
+                add(n - 1, 0, &mut out);
+            }
+        }
+        GraphKind::Complete => {
+            for a in 0..n {
+                for b in a + 1..n {
+                    add(a, b, &mut out);
+                }
+            }
+        }
+        GraphKind::KNearest => {
+            // Slot distance on the ring is monotone in the index distance min(|i-j|, n-|i-j|);
+            // ties are broken towards the next agent in index order (+1 before -1).
+            for i in 0..n {
+                let mut others: Vec<usize> = (0..n).filter(|&j| j != i).collect();
+                others.sort_by_key(|&j| {
+                    let fwd = (j + n - i) % n;
+                    let back = (i + n - j) % n;
+                    (fwd.min(back), usize::from(back < fwd))
+                });
+                for &j in others.iter().take(k) {
+                    add(i, j, &mut out);
+                }
+            }
+        }
+        GraphKind::RandomConnected => {
+            let mut rng = SplitMix64::new(seed);
+            let mut order: Vec<usize> = (0..n).collect();
+            for i in (1..n).rev() {
+                order.swap(i, rng.below(i + 1));
+            }
+            for i in 1..n {
+                let j = order[rng.below(i)];
+                add(order[i], j, &mut out);
+            }
+            let max_edges = n * (n - 1) / 2;
+            let extra = n.div_ceil(2).min(max_edges - out.len());
+            let target = out.len() + extra;
+            while out.len() < target {
+                let (a, b) = (rng.below(n), rng.below(n));
+                add(a, b, &mut out);
+            }
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+/// Edge weight of generated graphs: a = min(1, 2 / d_max), d_max the largest degree. The paper's
+/// path has d_max = 2 and unit weights; the normalisation keeps the largest row sum of the Laplacian
+/// at most the paper's 2, so that gains tuned on the paper's graph see the same bound on the
+/// spectrum of L + B (Gershgorin) on dense graphs.
+pub fn edge_weight(n: usize, edges: &[(usize, usize)]) -> f64 {
+    let mut deg = vec![0usize; n];
+    for &(a, b) in edges {
+        deg[a] += 1;
+        deg[b] += 1;
+    }
+    let d_max = deg.into_iter().max().unwrap_or(0).max(1);
+    (2.0 / d_max as f64).min(1.0)
+}
+
+/// The scenario edges (1-based) with the normalised weight.
+pub fn to_scenario_edges(n: usize, edges: &[(usize, usize)]) -> Vec<Edge> {
+    let w = edge_weight(n, edges);
+    edges
+        .iter()
+        .map(|&(a, b)| Edge {
+            a: a + 1,
+            b: b + 1,
+            weight: w,
+        })
+        .collect()
+}
+
+/// Default leader agents (1-based): the two ends of a path (b_1 = b_N = 1 as in Fig. 4), agent 1 and
+/// the one opposite it on the ring (N/2 + 1) for every other graph.
+pub fn default_leader_agents(kind: GraphKind, n: usize) -> Vec<usize> {
+    let other = if kind == GraphKind::Path {
+        n
+    } else {
+        n / 2 + 1
+    };
+    if other == 1 {
+        vec![1]
+    } else {
+        vec![1, other]
+    }
+}
+
+/// Parses `--leader-agents 1,5` (1-based ids, each within 1..=n, no repeats).
+pub fn parse_leader_agents(s: &str, n: usize) -> Result<Vec<usize>, String> {
+    let mut out = Vec::new();
+    for part in s.split(',') {
+        let id: usize = part.trim().parse().map_err(|_| {
+            format!("--leader-agents '{s}': '{part}' is not an agent id (1-based integers)")
+        })?;
+        if !(1..=n).contains(&id) {
+            return Err(format!(
+                "--leader-agents '{s}': agent {id} is outside 1..={n}"
+            ));
+        }
+        if out.contains(&id) {
+            return Err(format!("--leader-agents '{s}': agent {id} is listed twice"));
+        }
+        out.push(id);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn connected(n: usize, e: &[(usize, usize)]) -> bool {
+        let mut seen = vec![false; n];
+        let mut stack = vec![0];
+        seen[0] = true;
+        while let Some(i) = stack.pop() {
+            for &(a, b) in e {
+                let j = if a == i {
+                    b
+                } else if b == i {
+                    a
+                } else {
+                    continue;
+                };
+                if !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+        seen.into_iter().all(|s| s)
+    }
+
+    #[test]
+    fn graph_families_have_their_textbook_edge_counts() {
+        assert_eq!(edges(GraphKind::Path, 7, 0, 0).len(), 6);
+        assert_eq!(edges(GraphKind::Ring, 7, 0, 0).len(), 7);
+        assert_eq!(edges(GraphKind::Ring, 2, 0, 0), vec![(0, 1)]);
+        assert_eq!(edges(GraphKind::Complete, 7, 0, 0).len(), 21);
+        // k = 2 nearest on a ring is the ring; k = 4 adds the second neighbours.
+        assert_eq!(
+            edges(GraphKind::KNearest, 9, 2, 0),
+            edges(GraphKind::Ring, 9, 0, 0)
+        );
+        assert_eq!(edges(GraphKind::KNearest, 9, 4, 0).len(), 18);
+    }
+
+    #[test]
+    fn random_connected_graphs_are_connected_and_reproducible_for_a_seed() {
+        for n in [2, 3, 10, 50, 128] {
+            for seed in 0..5 {
+                let e = edges(GraphKind::RandomConnected, n, 0, seed);
+                assert!(connected(n, &e), "n = {n}, seed = {seed}");
+                assert_eq!(e, edges(GraphKind::RandomConnected, n, 0, seed));
+                let tree = n - 1;
+                assert_eq!(e.len(), (tree + n.div_ceil(2)).min(n * (n - 1) / 2));
+            }
+        }
+        assert_ne!(
+            edges(GraphKind::RandomConnected, 20, 0, 1),
+            edges(GraphKind::RandomConnected, 20, 0, 2)
+        );
+    }
+
+    #[test]
+    fn dense_graphs_get_weights_that_keep_the_largest_laplacian_row_sum_at_two() {
+        let e = edges(GraphKind::Complete, 50, 0, 0);
+        assert!((edge_weight(50, &e) * 49.0 - 2.0).abs() < 1e-12);
+        assert_eq!(edge_weight(5, &edges(GraphKind::Path, 5, 0, 0)), 1.0);
+        assert_eq!(edge_weight(20, &edges(GraphKind::Ring, 20, 0, 0)), 1.0);
+    }
+
+    #[test]
+    fn leader_agents_are_parsed_as_one_based_ids_and_bad_ids_are_refused() {
+        assert_eq!(parse_leader_agents("1,5", 5).unwrap(), vec![1, 5]);
+        assert!(parse_leader_agents("0", 5).is_err());
+        assert!(parse_leader_agents("6", 5).is_err());
+        assert!(parse_leader_agents("2,2", 5).is_err());
+        assert!(parse_leader_agents("x", 5).is_err());
+        assert_eq!(default_leader_agents(GraphKind::Path, 5), vec![1, 5]);
+        assert_eq!(default_leader_agents(GraphKind::Ring, 20), vec![1, 11]);
+    }
+}
