@@ -2,6 +2,7 @@
 //!
 //! * `sim`     — the whole closed loop in one process (fast; tests and sweeps).
 //! * `run`     — one OS process per quadrotor, plant and leader over iceoryx2 (the product).
+//! * `sweep`   — Monte Carlo or grid over scenario parameters on all cores (in-process runner).
 //! * `plot`    — the paper's figures from a run directory.
 //! * `check`   — what decides whether a gain set can work (graph spectrum, Theorem 1, bandwidths).
 //! * `ps`, `inspect`, `inject` — look at and act on a running `run` from another terminal.
@@ -22,6 +23,7 @@ mod rng;
 mod run;
 mod scenario_gen;
 mod sim;
+mod sweep;
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -40,6 +42,9 @@ enum Command {
     Run(run::RunArgs),
     /// Generate a scenario with N agents (radii, graph, leaders) from the paper template.
     Scenario(scenario_gen::ScenarioArgs),
+    /// Monte Carlo or grid over scenario parameters, in parallel with the in-process runner:
+    /// DIR/sweep.csv (one row per sample) and DIR/sweep.json (median / p95 / worst).
+    Sweep(sweep::SweepArgs),
     /// Render the paper's figures (PNG) from one run directory (or two, to compare variants).
     Plot(plot::PlotArgs),
     /// Print the graph spectrum, Theorem 1's matrix M and the loop bandwidths of a scenario.
@@ -69,6 +74,7 @@ fn main() -> ExitCode {
         Some(Command::Sim(a)) => sim::main(a),
         Some(Command::Run(a)) => run::main(a),
         Some(Command::Scenario(a)) => scenario_gen::main(a),
+        Some(Command::Sweep(a)) => sweep::main(a),
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),

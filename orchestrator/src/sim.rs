@@ -102,13 +102,24 @@ pub fn run_in_process(
     variant: Variant,
     out: &Path,
 ) -> std::io::Result<Summary> {
+    run_in_process_with(scenario, variant, out, true)
+}
+
+/// [`run_in_process`], writing `trajectory.csv` only when `trajectory` is set (`summary.json`
+/// always): `formation sweep` keeps only the summaries.
+pub fn run_in_process_with(
+    scenario: &Scenario,
+    variant: Variant,
+    out: &Path,
+    trajectory: bool,
+) -> std::io::Result<Summary> {
     let start = Instant::now();
     let n = scenario.n_agents();
     let mut plant = Plant::from_scenario(scenario);
     let mission = Mission::from_scenario(scenario);
     let mut agents: Vec<Agent> = (0..n).map(|i| Agent::new(scenario, i, variant)).collect();
     let neighbours: Vec<Vec<usize>> = agents.iter().map(|a| a.neighbour_ids().collect()).collect();
-    let mut recorder = Recorder::create(scenario, variant, "in-process", out)?;
+    let mut recorder = Recorder::create_with(scenario, variant, "in-process", out, trajectory)?;
     let mut reference = ReferenceFrame::default();
     let mut states = vec![VehicleState::default(); n];
     let mut shares = vec![NeighborState::default(); n];

@@ -33,8 +33,8 @@ pub struct ScenarioArgs {
     /// Seed of `--graph random-connected`.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Agents that receive the leader (b_i = 1), 1-based, e.g. `1,5`. Default: both ends of a
-    /// path, agents 1 and N/2 + 1 otherwise.
+    /// Agents that receive the leader (b_i = 1), 1-based, e.g. `1,5`. Default: the paper's share
+    /// (2 in 5) spread evenly, from end to end on a path (N = 5 path: 1,5).
     #[arg(long, value_name = "IDS")]
     pub leader_agents: Option<String>,
     /// Minimum distance between two formation slots s_min, m. Default: the spacing of the paper's
