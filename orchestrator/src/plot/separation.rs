@@ -18,10 +18,12 @@ pub fn min_distance_series(run: &Run) -> Vec<(f64, f64)> {
         .iter()
         .map(|a| [a.col("px"), a.col("py"), a.col("pz")])
         .collect();
+    let mut pos = Vec::with_capacity(cols.len());
     (0..len)
         .filter_map(|k| {
-            let pos = cols.iter().map(|c| [c[0][k], c[1][k], c[2][k]]);
-            closest_pair(pos).map(|(d, _, _)| (first.t()[k], d))
+            pos.clear();
+            pos.extend(cols.iter().map(|c| [c[0][k], c[1][k], c[2][k]]));
+            closest_pair(&pos).map(|(d, _, _)| (first.t()[k], d))
         })
         .collect()
 }

@@ -116,7 +116,7 @@ impl Metrics {
             grid: CoverageGrid::new(s.metrics.target_radius_m, s.metrics.sensor_fov_deg),
             coverage_sum: 0.0,
             coverage_count: 0,
-            separation: Separation::new(s.metrics.safety_distance_m),
+            separation: Separation::with_capacity(s.metrics.safety_distance_m, s.n_agents()),
             steps: 0,
             divergence: None,
             last_time: 0.0,

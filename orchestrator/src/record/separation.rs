@@ -24,21 +24,20 @@ impl Approach {
     }
 }
 
-/// Closest approach of the positions of one step: the pair (0-based, i < j) and the distance, or
+/// Closest approach of the positions of one step: the distance and the pair (0-based, i < j), or
 /// `None` for fewer than two positions. The first pair in (i, j) order wins a tie.
-pub fn closest_pair(
-    positions: impl Iterator<Item = [f64; 3]> + Clone,
-) -> Option<(f64, usize, usize)> {
-    let mut best: Option<(f64, usize, usize)> = None;
-    for (i, p) in positions.clone().enumerate() {
-        for (j, q) in positions.clone().enumerate().skip(i + 1) {
-            let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
-            if best.is_none_or(|b| d2 < b.0) {
-                best = Some((d2, i, j));
+pub fn closest_pair(p: &[[f64; 3]]) -> Option<(f64, usize, usize)> {
+    let mut best = (f64::INFINITY, 0, 0);
+    for (i, a) in p.iter().enumerate() {
+        for (j, b) in p.iter().enumerate().skip(i + 1) {
+            let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            if d2 < best.0 {
+                best = (d2, i, j);
             }
         }
     }
-    best.map(|(d2, i, j)| (d2.sqrt(), i, j))
+    (p.len() >= 2).then(|| (best.0.sqrt(), best.1, best.2))
 }
 
 /// Running separation statistics of a run.
@@ -54,8 +53,10 @@ pub struct Separation {
     pub enclose: Option<Approach>,
     /// Closest approach over the whole run.
     pub whole: Option<Approach>,
-    /// Closest distance of the latest step (for the CSV), m.
+    /// Closest distance of the latest step, m.
     pub last: Option<f64>,
+    /// Positions of the current step (allocated once).
+    scratch: Vec<[f64; 3]>,
 }
 
 impl Separation {
@@ -68,7 +69,15 @@ impl Separation {
             enclose: None,
             whole: None,
             last: None,
+            scratch: Vec::new(),
         }
+    }
+
+    /// Empty statistics for `n` quadrotors (the per-step buffer is allocated here, not per step).
+    pub fn with_capacity(safety_distance_m: f64, n: usize) -> Separation {
+        let mut s = Separation::new(safety_distance_m);
+        s.scratch.reserve(n);
+        s
     }
 
     /// Accumulates one step at time `t`.
@@ -77,9 +86,11 @@ impl Separation {
         t: f64,
         in_cover: bool,
         in_enclose: bool,
-        positions: impl Iterator<Item = [f64; 3]> + Clone,
+        positions: impl Iterator<Item = [f64; 3]>,
     ) {
-        let Some((d, i, j)) = closest_pair(positions) else {
+        self.scratch.clear();
+        self.scratch.extend(positions);
+        let Some((d, i, j)) = closest_pair(&self.scratch) else {
             return;
         };
         self.last = Some(d);
@@ -114,10 +125,10 @@ mod tests {
             [3.0, 4.0, 1.2],
             [10.0, 0.0, 0.0],
         ];
-        let (d, i, j) = closest_pair(p.iter().copied()).unwrap();
+        let (d, i, j) = closest_pair(&p).unwrap();
         assert!((d - 1.2).abs() < 1e-12);
         assert_eq!((i, j), (1, 2));
-        assert!(closest_pair([[1.0, 2.0, 3.0]].iter().copied()).is_none());
+        assert!(closest_pair(&[[1.0, 2.0, 3.0]]).is_none());
     }
 
     #[test]

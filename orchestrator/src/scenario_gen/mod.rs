@@ -155,17 +155,18 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
         .collect();
     place_starts(&mut s, START_OUTSIDE_M);
     let e = graphs::edges(opts.graph, n, opts.k, opts.seed);
-    s.graph.edges = graphs::to_scenario_edges(n, &e);
     let leaders = match &opts.leader_agents {
         Some(l) => l.clone(),
         None => graphs::default_leader_agents(opts.graph, n),
     };
+    let (a_w, b_w) = graphs::weights(n, &e, &leaders);
+    s.graph.edges = graphs::to_scenario_edges(&e, a_w);
     let mut b = vec![0.0; n];
     for &id in &leaders {
         if !(1..=n).contains(&id) {
             return Err(format!("--leader-agents: agent {id} is outside 1..={n}"));
         }
-        b[id - 1] = 1.0;
+        b[id - 1] = b_w;
     }
     s.graph.leader_weights = b;
     let g = opts.graph.name();
@@ -309,9 +310,12 @@ mod tests {
         let mut o = GenOptions::new(7, GraphKind::Ring);
         o.leader_agents = Some(vec![1, 5]);
         let s = generate(&o).unwrap();
-        assert_eq!(
-            s.graph.leader_weights,
-            vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]
-        );
+        // Pinned agents 1 and 5 sit between two neighbours: row sum 2 + 1 = 3 is scaled to
+        // graphs::MAX_ROW_SUM, so b = a = 0.9.
+        let expected = [0.9, 0.0, 0.0, 0.0, 0.9, 0.0, 0.0];
+        for (b, e) in s.graph.leader_weights.iter().zip(expected) {
+            assert!((b - e).abs() < 1e-12, "{:?}", s.graph.leader_weights);
+        }
+        assert!(s.graph.edges.iter().all(|e| (e.weight - 0.9).abs() < 1e-12));
     }
 }

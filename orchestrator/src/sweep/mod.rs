@@ -120,7 +120,10 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
     summary.print();
     println!("wrote {}/sweep.csv and sweep.json", out.display());
     if summary.invalid == outcomes.len() {
-        return Err("every sample's scenario was invalid (see sweep.csv, column error)".into());
+        return Err(format!(
+            "every sample's scenario was invalid (sweep.csv, column error); the first: {}",
+            summary.first_error.as_deref().unwrap_or("-")
+        ));
     }
     Ok(ExitCode::SUCCESS)
 }
