@@ -26,4 +26,4 @@ pub use scenario::Scenario;
 
 /// Largest number of quadrotors a run may have; fixes the size of the wire messages that carry
 /// per-agent arrays (the reference frame).
-pub const MAX_AGENTS: usize = 64;
+pub const MAX_AGENTS: usize = 128;

@@ -5,8 +5,9 @@
 //!   over iceoryx2), recorded by [`record`] into the same outputs.
 //! * [`role`]: `formation node <role>`, the role processes started from this same executable.
 //! * [`live`]: `ps`, `inspect`, `inject` on a running run.
-//! * [`plot`], [`check`], [`bench`], [`scenario_gen`]: figures, gain checks, IPC benchmarks,
-//!   generated scenarios.
+//! * [`plot`], [`check`], [`bench`], [`scenario_gen`], [`sweep`]: figures, gain checks, IPC
+//!   benchmarks, generated scenarios of any N, parameter sweeps.
+//! * [`rng`]: the seeded generator of generated graphs and sweeps.
 //! * [`cli`], [`cpus`]: shared command-line plumbing and CPU sets.
 
 pub mod bench;
@@ -17,9 +18,11 @@ pub mod cpus;
 pub mod live;
 pub mod plot;
 pub mod record;
+pub mod rng;
 pub mod role;
 pub mod run;
 pub mod scenario_gen;
 pub mod sim;
+pub mod sweep;
 
 pub use closed_loop::ClosedLoop;

@@ -2,6 +2,7 @@
 //!
 //! * `sim`     — the whole closed loop in one process (fast; tests and sweeps).
 //! * `run`     — one OS process per quadrotor, plant and leader over iceoryx2 (the product).
+//! * `sweep`   — Monte Carlo or grid over scenario parameters on all cores (in-process runner).
 //! * `plot`    — the paper's figures from a run directory.
 //! * `check`   — what decides whether a gain set can work (graph spectrum, Theorem 1, bandwidths).
 //! * `ps`, `inspect`, `inject` — look at and act on a running `run` from another terminal.
@@ -10,7 +11,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-use formation::{bench, check, live, plot, role, run, scenario_gen, sim};
+use formation::{bench, check, live, plot, role, run, scenario_gen, sim, sweep};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -27,8 +28,11 @@ enum Command {
     /// Run one OS process per quadrotor (plus plant and leader) over iceoryx2, in lockstep (or on
     /// the wall clock with `--realtime`).
     Run(run::RunArgs),
-    /// Generate a scenario with N agents on a ring or path graph from the paper template.
+    /// Generate a scenario with N agents (radii, graph, leaders) from the paper template.
     Scenario(scenario_gen::ScenarioArgs),
+    /// Monte Carlo or grid over scenario parameters, in parallel with the in-process runner:
+    /// DIR/sweep.csv (one row per sample) and DIR/sweep.json (median / p95 / worst).
+    Sweep(sweep::SweepArgs),
     /// Render the paper's figures (PNG) from one run directory (or two, to compare variants).
     Plot(plot::PlotArgs),
     /// Print the graph spectrum, Theorem 1's matrix M and the loop bandwidths of a scenario.
@@ -62,6 +66,7 @@ fn main() -> ExitCode {
         Some(Command::Sim(a)) => sim::main(a),
         Some(Command::Run(a)) => run::main(a),
         Some(Command::Scenario(a)) => scenario_gen::main(a),
+        Some(Command::Sweep(a)) => sweep::main(a),
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),

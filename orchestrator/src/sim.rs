@@ -96,9 +96,20 @@ pub fn run_in_process(
     variant: Variant,
     out: &Path,
 ) -> std::io::Result<Summary> {
+    run_in_process_with(scenario, variant, out, true)
+}
+
+/// [`run_in_process`], writing `trajectory.csv` only when `trajectory` is set (`summary.json`
+/// always): `formation sweep` keeps only the summaries.
+pub fn run_in_process_with(
+    scenario: &Scenario,
+    variant: Variant,
+    out: &Path,
+    trajectory: bool,
+) -> std::io::Result<Summary> {
     let start = Instant::now();
     let mut lp = ClosedLoop::new(scenario, variant);
-    let mut recorder = Recorder::create(scenario, variant, "in-process", out)?;
+    let mut recorder = Recorder::create_with(scenario, variant, "in-process", out, trajectory)?;
     let steps = scenario.n_steps();
     let mut done = 0;
     for k in 0..steps {

@@ -87,6 +87,11 @@ fn lockstep_run_is_byte_identical_to_in_process_sim() {
     let sim_text = std::fs::read_to_string(dir.join("sim/summary.json")).unwrap();
     let sim_summary: serde_json::Value = serde_json::from_str(&sim_text).unwrap();
     assert_eq!(sim_summary.get("timing"), None, "sim has no timing");
+    let closest = &sim_summary["separation"]["min_distance"]["whole"];
+    assert!(
+        closest["distance_m"].as_f64().is_some_and(|d| d > 0.0),
+        "{closest}"
+    );
     assert_eq!(
         summary_without_timing(&dir.join("lockstep")),
         summary_without_timing(&dir.join("sim"))

@@ -110,8 +110,8 @@ pub struct ReferenceFrame {
 
 impl ReferenceFrame {
     /// Copies `src` into `self` up to its `n_agents` valid entries (the rest of `self` is left as
-    /// it was: nobody reads past `n_agents`). A whole frame is ~4.6 kB for `MAX_AGENTS` entries,
-    /// the valid part of a 5-agent frame is under 0.5 kB.
+    /// it was: nobody reads past `n_agents`). A whole frame is ~9.3 kB for `MAX_AGENTS` (128)
+    /// entries, the valid part of a 5-agent frame is under 0.5 kB.
     pub fn copy_valid_from(&mut self, src: &ReferenceFrame) {
         let n = (src.n_agents as usize).min(MAX_AGENTS);
         self.step = src.step;

@@ -74,6 +74,18 @@ pub struct Metrics {
     /// A roll or pitch magnitude above this declares the run diverged (R_r is singular at pi/2), rad.
     /// Ours: 1.4.
     pub divergence_tilt_rad: f64,
+    /// Safety distance between two quadrotors, m: `summary.json` counts the steps at which the
+    /// closest two are nearer than this (`separation.steps_below_safety`). Paper: none (it models
+    /// no collisions and gives no vehicle size). Ours: 0.5; the default when absent.
+    #[serde(default = "default_safety_distance")]
+    pub safety_distance_m: f64,
+}
+
+/// Default of [`Metrics::safety_distance_m`], m.
+pub const DEFAULT_SAFETY_DISTANCE_M: f64 = 0.5;
+
+fn default_safety_distance() -> f64 {
+    DEFAULT_SAFETY_DISTANCE_M
 }
 
 /// Target, virtual leader and formation function.

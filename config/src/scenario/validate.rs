@@ -144,6 +144,11 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     }
     c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
     c.positive(
+        "metrics.safety_distance_m",
+        s.metrics.safety_distance_m,
+        PHYS,
+    );
+    c.positive(
         "metrics.divergence_position_m",
         s.metrics.divergence_position_m,
         SIM,

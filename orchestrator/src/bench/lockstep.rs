@@ -26,7 +26,10 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
     let mut cmd = Command::new(exe);
     cmd.arg("run");
     if n != 5 {
-        let scenario = crate::scenario_gen::generate(n, "path")?;
+        let scenario = crate::scenario_gen::generate(&crate::scenario_gen::GenOptions::new(
+            n,
+            crate::scenario_gen::graphs::GraphKind::Path,
+        ))?;
         let path = out.join("scenario-in.toml");
         let text = toml::to_string(&scenario).map_err(|e| format!("scenario: {e}"))?;
         std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;

@@ -10,6 +10,8 @@ pub struct Geometry {
     pub target_radius_m: f64,
     /// Half the sensor's angle of view, rad: footprint radius = P_i3 tan(this).
     pub sensor_half_angle_rad: f64,
+    /// Safety distance between two quadrotors, m.
+    pub safety_distance_m: f64,
     /// Phase changes (time, name): T1 (converge), T2 (spin), T3 (descend).
     pub phases: Vec<(f64, String)>,
     /// Where these values came from (printed to the user).
@@ -23,6 +25,7 @@ impl Geometry {
         Geometry {
             target_radius_m: s.metrics.target_radius_m,
             sensor_half_angle_rad: (s.metrics.sensor_fov_deg / 2.0).to_radians(),
+            safety_distance_m: s.metrics.safety_distance_m,
             phases: vec![
                 (f.t1_s, "T1".into()),
                 (f.t2_s, "T2".into()),

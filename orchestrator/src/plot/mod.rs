@@ -1,4 +1,4 @@
-//! `formation plot`: the paper's Figs. 5-14 as PNG files, from one run directory (or two, to compare
+//! `formation plot`: the paper's Figs. 5-14 and the separation figure as PNG files, from one run directory (or two, to compare
 //! variants in Fig. 6 and Fig. 9).
 //!
 //! Text is rendered by plotters' ab_glyph backend from a font embedded in the binary, so figures
@@ -13,6 +13,7 @@ mod errors;
 mod estimates;
 mod geometry;
 mod inputs;
+mod separation;
 mod style;
 #[cfg(test)]
 mod tests;
@@ -113,7 +114,7 @@ pub struct Figure<'a> {
     pub geometry: &'a Geometry,
 }
 
-/// Renders Figs. 5-14 of `run` into `out`.
+/// Renders Figs. 5-14 of `run` and the separation figure into `out`.
 pub fn render_all(
     run: &Run,
     compare: Option<&Run>,
@@ -164,6 +165,7 @@ pub fn render_all(
         ),
         ("fig13_gamma.png", (1400, 1100), estimates::gamma),
         ("fig14_delta.png", (1400, 1100), estimates::delta),
+        ("separation.png", (1400, 700), separation::separation),
     ];
     let mut written = Vec::with_capacity(list.len());
     for (name, size, render) in list {

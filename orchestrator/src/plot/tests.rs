@@ -18,6 +18,7 @@ const FIGURES: &[&str] = &[
     "fig12_disturbance_estimate.png",
     "fig13_gamma.png",
     "fig14_delta.png",
+    "separation.png",
 ];
 
 /// A fresh, empty directory under the system temp dir.

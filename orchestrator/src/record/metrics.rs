@@ -1,7 +1,8 @@
 //! Per-step metrics of `summary.json`: formation error per window, constraint violations and margins,
-//! torque saturation, coverage, and the divergence detector.
+//! torque saturation, coverage, separation, and the divergence detector.
 
 use super::coverage::CoverageGrid;
+use super::separation::Separation;
 use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use formation_config::Scenario;
 
@@ -78,6 +79,8 @@ pub struct Metrics {
     grid: CoverageGrid,
     coverage_sum: f64,
     coverage_count: u64,
+    /// Closest approach of two quadrotors.
+    pub separation: Separation,
     /// Steps recorded.
     pub steps: u64,
     /// The divergence, once detected.
@@ -113,6 +116,7 @@ impl Metrics {
             grid: CoverageGrid::new(s.metrics.target_radius_m, s.metrics.sensor_fov_deg),
             coverage_sum: 0.0,
             coverage_count: 0,
+            separation: Separation::with_capacity(s.metrics.safety_distance_m, s.n_agents()),
             steps: 0,
             divergence: None,
             last_time: 0.0,
@@ -182,6 +186,12 @@ impl Metrics {
                         });
             }
         }
+        self.separation.record(
+            t,
+            in_cover,
+            in_enclose,
+            truths.iter().map(|tr| tr.state.position),
+        );
         if in_cover {
             let pos = truths.iter().map(|tr| tr.state.position);
             self.coverage_sum += self.grid.covered_fraction([r.target[0], r.target[1]], pos);

@@ -7,6 +7,7 @@
 pub mod coverage;
 pub mod csv;
 pub mod metrics;
+pub mod separation;
 pub mod summary;
 
 pub use metrics::Divergence;
@@ -18,7 +19,7 @@ use std::path::{Path, PathBuf};
 
 /// Writes the outputs of one run.
 pub struct Recorder {
-    csv: csv::TrajectoryWriter,
+    csv: Option<csv::TrajectoryWriter>,
     metrics: metrics::Metrics,
     decimation: u64,
     out_dir: PathBuf,
@@ -37,9 +38,29 @@ impl Recorder {
         mode: &'static str,
         out_dir: &Path,
     ) -> std::io::Result<Recorder> {
+        Recorder::create_with(s, variant, mode, out_dir, true)
+    }
+
+    /// Creates `out_dir`, and `trajectory.csv` in it when `trajectory` is set (sweeps need only
+    /// `summary.json`).
+    pub fn create_with(
+        s: &Scenario,
+        variant: Variant,
+        mode: &'static str,
+        out_dir: &Path,
+        trajectory: bool,
+    ) -> std::io::Result<Recorder> {
         std::fs::create_dir_all(out_dir)?;
+        let csv = if trajectory {
+            Some(csv::TrajectoryWriter::create(
+                &out_dir.join("trajectory.csv"),
+                s,
+            )?)
+        } else {
+            None
+        };
         Ok(Recorder {
-            csv: csv::TrajectoryWriter::create(&out_dir.join("trajectory.csv"), s)?,
+            csv,
             metrics: metrics::Metrics::new(s),
             decimation: s.output_decimation(),
             out_dir: out_dir.to_path_buf(),
@@ -60,9 +81,10 @@ impl Recorder {
         commands: &[ControlCommand],
     ) -> std::io::Result<Option<Divergence>> {
         let div = self.metrics.record(step, reference, truths, commands);
-        if step.is_multiple_of(self.decimation) || div.is_some() {
-            self.csv
-                .write_step(reference, truths, commands, &self.metrics)?;
+        if let Some(csv) = &mut self.csv {
+            if step.is_multiple_of(self.decimation) || div.is_some() {
+                csv.write_step(reference, truths, commands, &self.metrics)?;
+            }
         }
         Ok(div)
     }
@@ -74,12 +96,17 @@ impl Recorder {
 
     /// Flushes the CSV written so far (used when a run is interrupted).
     pub fn flush(&mut self) -> std::io::Result<()> {
-        self.csv.flush()
+        match &mut self.csv {
+            Some(csv) => csv.flush(),
+            None => Ok(()),
+        }
     }
 
     /// Flushes the CSV and writes `summary.json`; returns the summary.
     pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
-        self.csv.close()?;
+        if let Some(csv) = self.csv.take() {
+            csv.close()?;
+        }
         let mut summary = summary::Summary::build(
             &self.metrics,
             &self.scenario,

@@ -1,6 +1,7 @@
 //! `summary.json`: the stable contract every runner writes (documented in README, "summary.json").
 
 use super::metrics::{Divergence, Metrics};
+use super::separation::Approach;
 use formation_config::Variant;
 use serde::Serialize;
 use std::path::Path;
@@ -14,6 +15,28 @@ pub struct PerWindow {
     pub enclose: Option<f64>,
     /// The whole run.
     pub whole: Option<f64>,
+}
+
+/// Closest approach per metric window.
+#[derive(Debug, Clone, Serialize)]
+pub struct ApproachPerWindow {
+    /// Covering window.
+    pub cover: Option<Approach>,
+    /// Enclosing window.
+    pub enclose: Option<Approach>,
+    /// The whole run.
+    pub whole: Option<Approach>,
+}
+
+/// Separation between the quadrotors (docs/formats.md).
+#[derive(Debug, Clone, Serialize)]
+pub struct SeparationSummary {
+    /// `metrics.safety_distance_m` of the scenario, m.
+    pub safety_distance_m: f64,
+    /// Steps at which the closest two quadrotors were nearer than the safety distance.
+    pub steps_below_safety: u64,
+    /// Closest approach (distance, time, pair) per window.
+    pub min_distance: ApproachPerWindow,
 }
 
 /// Metrics of one agent.
@@ -64,6 +87,8 @@ pub struct Summary {
     pub divergence: Option<Divergence>,
     /// Mean covered share of the target disk over the cover window.
     pub coverage_fraction: Option<f64>,
+    /// Closest approach of two quadrotors and steps below the safety distance.
+    pub separation: SeparationSummary,
     /// Per-agent metrics.
     pub agents: Vec<AgentSummary>,
     /// Timing statistics: realtime runs (latencies, jitter, deadline misses) and lockstep runs
@@ -105,6 +130,15 @@ impl Summary {
             diverged: m.divergence.is_some(),
             divergence: m.divergence.clone(),
             coverage_fraction: m.coverage_fraction(),
+            separation: SeparationSummary {
+                safety_distance_m: m.separation.safety_distance_m,
+                steps_below_safety: m.separation.steps_below_safety,
+                min_distance: ApproachPerWindow {
+                    cover: m.separation.cover,
+                    enclose: m.separation.enclose,
+                    whole: m.separation.whole,
+                },
+            },
             agents: m
                 .agents
                 .iter()
@@ -184,6 +218,17 @@ impl Summary {
                 f(a.min_rate_margin_rad_s),
                 100.0 * a.torque_saturation_fraction
             );
+        }
+        let sep = &self.separation;
+        match sep.min_distance.whole {
+            Some(a) => {
+                println!(
+                "separation: min {:.3} m (agents {} and {} at t = {:.3} s), {} steps below {} m",
+                a.distance_m, a.agents[0], a.agents[1], a.time_s, sep.steps_below_safety,
+                sep.safety_distance_m
+            )
+            }
+            None => println!("separation: - (fewer than two quadrotors)"),
         }
         if let Some(d) = &self.divergence {
             println!(

@@ -1,0 +1,177 @@
+//! Separation: the closest approach of any two quadrotors per metric window and over the whole run,
+//! and the number of steps at which it is below the scenario's safety distance.
+//!
+//! O(N²) per step on true positions (N = 100: 4950 distances per step).
+
+use serde::Serialize;
+
+/// The closest approach of two quadrotors.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Approach {
+    /// Distance between the two, m.
+    pub distance_m: f64,
+    /// Time of the (first) step at which it occurred, s.
+    pub time_s: f64,
+    /// The two agents (1-based, smaller id first).
+    pub agents: [usize; 2],
+}
+
+impl Approach {
+    fn keep_min(slot: &mut Option<Approach>, a: Approach) {
+        if slot.is_none_or(|s| a.distance_m < s.distance_m) {
+            *slot = Some(a);
+        }
+    }
+}
+
+/// Closest approach of the positions of one step: the distance and the pair (0-based, i < j), or
+/// `None` for fewer than two positions. The first pair in (i, j) order wins a tie.
+pub fn closest_pair(p: &[[f64; 3]]) -> Option<(f64, usize, usize)> {
+    let mut best = (f64::INFINITY, 0, 0);
+    for (i, a) in p.iter().enumerate() {
+        for (j, b) in p.iter().enumerate().skip(i + 1) {
+            let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            if d2 < best.0 {
+                best = (d2, i, j);
+            }
+        }
+    }
+    (p.len() >= 2).then(|| (best.0.sqrt(), best.1, best.2))
+}
+
+/// Running separation statistics of a run.
+#[derive(Debug, Clone)]
+pub struct Separation {
+    /// Safety distance, m.
+    pub safety_distance_m: f64,
+    /// Steps at which the closest two were nearer than the safety distance.
+    pub steps_below_safety: u64,
+    /// Closest approach in the cover window.
+    pub cover: Option<Approach>,
+    /// Closest approach in the enclose window.
+    pub enclose: Option<Approach>,
+    /// Closest approach over the whole run.
+    pub whole: Option<Approach>,
+    /// Closest distance of the latest step, m.
+    pub last: Option<f64>,
+    /// Positions of the current step (allocated once).
+    scratch: Vec<[f64; 3]>,
+}
+
+impl Separation {
+    /// Empty statistics.
+    pub fn new(safety_distance_m: f64) -> Separation {
+        Separation {
+            safety_distance_m,
+            steps_below_safety: 0,
+            cover: None,
+            enclose: None,
+            whole: None,
+            last: None,
+            scratch: Vec::new(),
+        }
+    }
+
+    /// Empty statistics for `n` quadrotors (the per-step buffer is allocated here, not per step).
+    pub fn with_capacity(safety_distance_m: f64, n: usize) -> Separation {
+        let mut s = Separation::new(safety_distance_m);
+        s.scratch.reserve(n);
+        s
+    }
+
+    /// Accumulates one step at time `t`.
+    pub fn record(
+        &mut self,
+        t: f64,
+        in_cover: bool,
+        in_enclose: bool,
+        positions: impl Iterator<Item = [f64; 3]>,
+    ) {
+        self.scratch.clear();
+        self.scratch.extend(positions);
+        let Some((d, i, j)) = closest_pair(&self.scratch) else {
+            return;
+        };
+        self.last = Some(d);
+        if d < self.safety_distance_m {
+            self.steps_below_safety += 1;
+        }
+        let a = Approach {
+            distance_m: d,
+            time_s: t,
+            agents: [i + 1, j + 1],
+        };
+        Approach::keep_min(&mut self.whole, a);
+        if in_cover {
+            Approach::keep_min(&mut self.cover, a);
+        }
+        if in_enclose {
+            Approach::keep_min(&mut self.enclose, a);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closest_pair_equals_the_hand_computed_distance() {
+        // 1 at the origin, 2 at (3, 4, 0): 5 m; 3 at (3, 4, 1.2): 1.2 m from 2; 4 far away.
+        let p = [
+            [0.0, 0.0, 0.0],
+            [3.0, 4.0, 0.0],
+            [3.0, 4.0, 1.2],
+            [10.0, 0.0, 0.0],
+        ];
+        let (d, i, j) = closest_pair(&p).unwrap();
+        assert!((d - 1.2).abs() < 1e-12);
+        assert_eq!((i, j), (1, 2));
+        assert!(closest_pair(&[[1.0, 2.0, 3.0]]).is_none());
+    }
+
+    #[test]
+    fn separation_keeps_the_first_closest_step_per_window_and_counts_unsafe_steps() {
+        let mut s = Separation::new(0.5);
+        // t = 0: 2 m apart (whole only); t = 1 (cover): 0.4 m; t = 2 (cover): 0.4 m again (later,
+        // not kept); t = 3 (enclose): 0.6 m between agents 2 and 3.
+        let steps: [(f64, bool, bool, [[f64; 3]; 3]); 4] = [
+            (
+                0.0,
+                false,
+                false,
+                [[0.0; 3], [2.0, 0.0, 0.0], [0.0, 5.0, 0.0]],
+            ),
+            (
+                1.0,
+                true,
+                false,
+                [[0.0; 3], [0.4, 0.0, 0.0], [0.0, 5.0, 0.0]],
+            ),
+            (
+                2.0,
+                true,
+                false,
+                [[0.0; 3], [0.0, 0.4, 0.0], [0.0, 5.0, 0.0]],
+            ),
+            (
+                3.0,
+                false,
+                true,
+                [[0.0; 3], [0.0, 4.4, 0.0], [0.0, 5.0, 0.0]],
+            ),
+        ];
+        for (t, c, e, p) in steps {
+            s.record(t, c, e, p.iter().copied());
+        }
+        assert_eq!(s.steps_below_safety, 2);
+        let w = s.whole.unwrap();
+        assert_eq!((w.time_s, w.agents), (1.0, [1, 2]));
+        assert!((w.distance_m - 0.4).abs() < 1e-12);
+        assert_eq!(s.cover.unwrap().time_s, 1.0);
+        let e = s.enclose.unwrap();
+        assert_eq!(e.agents, [2, 3]);
+        assert!((e.distance_m - 0.6).abs() < 1e-12);
+    }
+}

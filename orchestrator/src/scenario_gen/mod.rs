@@ -1,0 +1,321 @@
+//! `formation scenario`: a scenario with N agents generated from a template (the paper scenario by
+//! default) for scaling runs and sweeps.
+//!
+//! * [`radii`]: cover and enclose radii and the enclosing spin rate from N, the minimum neighbour
+//!   spacing and the coverage geometry (the formula is documented there and in docs/scaling.md).
+//! * [`graphs`]: ring, path, k-nearest, complete and random-connected graphs, leader weights.
+//!
+//! Agent specs (delays, faults, uncertainty, disturbance) are reused cyclically; each quadrotor
+//! starts [`START_OUTSIDE_M`] radially outside its cover slot at t = 0, as in the paper.
+
+pub mod graphs;
+pub mod radii;
+
+use crate::cli::EXIT_INVALID;
+use formation_config::scenario::validate::validate;
+use formation_config::scenario::Scenario;
+use graphs::GraphKind;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// Arguments of `formation scenario`.
+#[derive(clap::Args, Debug)]
+pub struct ScenarioArgs {
+    /// Number of quadrotors (2..=MAX_AGENTS, 128).
+    #[arg(long)]
+    pub n: usize,
+    /// Communication graph: ring, path, k-nearest, complete, random-connected.
+    #[arg(long, default_value = "path")]
+    pub graph: String,
+    /// Neighbours per agent of `--graph k-nearest` (before symmetrisation).
+    #[arg(long, default_value_t = 4)]
+    pub k: usize,
+    /// Seed of `--graph random-connected`.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Agents that receive the leader (b_i = 1), 1-based, e.g. `1,5`. Default: the paper's share
+    /// (2 in 5) spread evenly, from end to end on a path (N = 5 path: 1,5).
+    #[arg(long, value_name = "IDS")]
+    pub leader_agents: Option<String>,
+    /// Minimum distance between two formation slots s_min, m. Default: the spacing of the paper's
+    /// enclosing ring (2 R_e sin(pi/5) = 1.176 m), so that N = 5 gives the paper's radii.
+    #[arg(long, value_name = "M")]
+    pub min_spacing: Option<f64>,
+    /// Output file (default: standard output).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// How far outside its cover slot each quadrotor starts, m: the paper's quadrotors start on a
+/// 2.64 m circle around T_g(0) at their slots' phases, 0.64 m outside the 2.0 m cover ring.
+pub const START_OUTSIDE_M: f64 = 0.64;
+
+/// What to generate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GenOptions {
+    /// N.
+    pub n: usize,
+    /// Graph family.
+    pub graph: GraphKind,
+    /// k of k-nearest.
+    pub k: usize,
+    /// Seed of random-connected.
+    pub seed: u64,
+    /// Agents with b_i = 1 (1-based); `None`: [`graphs::default_leader_agents`].
+    pub leader_agents: Option<Vec<usize>>,
+    /// s_min, m; `None`: the template's enclosing spacing.
+    pub min_spacing_m: Option<f64>,
+}
+
+impl GenOptions {
+    /// N agents on `graph` with every other option at its default.
+    pub fn new(n: usize, graph: GraphKind) -> GenOptions {
+        GenOptions {
+            n,
+            graph,
+            k: 4,
+            seed: 1,
+            leader_agents: None,
+            min_spacing_m: None,
+        }
+    }
+}
+
+/// Radius-formula inputs of a template scenario for `n` agents.
+pub fn radii_inputs(
+    template: &Scenario,
+    n: usize,
+    min_spacing_m: Option<f64>,
+) -> radii::RadiiInputs {
+    let f = &template.mission.formation;
+    let n_tpl = template.n_agents().max(2);
+    radii::RadiiInputs {
+        n,
+        min_spacing_m: min_spacing_m
+            .unwrap_or_else(|| radii::ring_spacing(n_tpl, f.enclose_radius_m)),
+        target_radius_m: template.metrics.target_radius_m,
+        footprint_radius_m: template.mission.leader.cruise_altitude_m
+            * (template.metrics.sensor_fov_deg.to_radians() / 2.0).tan(),
+        template_cover_m: f.cover_radius_m,
+        template_enclose_m: f.enclose_radius_m,
+        template_spin_rad_s: f.spin_rate_rad_s,
+    }
+}
+
+/// Places every quadrotor `outside_m` radially outside its cover slot at t = 0 (slot phase
+/// phi_i = phi_0 + 2 pi (i - 1)/N around T_g(0)), on the ground.
+pub fn place_starts(s: &mut Scenario, outside_m: f64) {
+    let n = s.n_agents();
+    let f = &s.mission.formation;
+    let r = f.cover_radius_m + outside_m;
+    let phi0 = f.first_phase_rad;
+    let centre = [0.0, s.mission.target.path_radius_m]; // T_g(0)
+    for (i, a) in s.agents.iter_mut().enumerate() {
+        let phi = phi0 + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+        a.initial_position_m = [centre[0] + r * phi.cos(), centre[1] + r * phi.sin(), 0.0];
+    }
+}
+
+/// The paper scenario scaled to `opts`.
+pub fn generate(opts: &GenOptions) -> Result<Scenario, String> {
+    generate_from(&Scenario::paper(), opts)
+}
+
+/// `template` scaled to `opts`: N agents (specs reused cyclically), radii and spin rate of
+/// [`radii`], the graph of [`graphs`], starts [`START_OUTSIDE_M`] outside the cover slots.
+pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario, String> {
+    let n = opts.n;
+    if !(2..=formation_config::MAX_AGENTS).contains(&n) {
+        return Err(format!(
+            "--n {n}: expected 2..={}",
+            formation_config::MAX_AGENTS
+        ));
+    }
+    if let Some(s) = opts.min_spacing_m {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(format!(
+                "--min-spacing {s}: expected a positive distance in m"
+            ));
+        }
+    }
+    if opts.graph == GraphKind::KNearest && !(1..n).contains(&opts.k) {
+        return Err(format!(
+            "--k {}: expected 1..={} for N = {n}",
+            opts.k,
+            n - 1
+        ));
+    }
+    let mut s = template.clone();
+    let r = radii::radii(&radii_inputs(template, n, opts.min_spacing_m));
+    s.mission.formation.cover_radius_m = r.cover_m;
+    s.mission.formation.enclose_radius_m = r.enclose_m;
+    s.mission.formation.spin_rate_rad_s = r.spin_rad_s;
+    s.agents = (0..n)
+        .map(|i| template.agents[i % template.agents.len()].clone())
+        .collect();
+    place_starts(&mut s, START_OUTSIDE_M);
+    let e = graphs::edges(opts.graph, n, opts.k, opts.seed);
+    let leaders = match &opts.leader_agents {
+        Some(l) => l.clone(),
+        None => graphs::default_leader_agents(opts.graph, n),
+    };
+    let (a_w, b_w) = graphs::weights(n, &e, &leaders);
+    s.graph.edges = graphs::to_scenario_edges(&e, a_w);
+    let mut b = vec![0.0; n];
+    for &id in &leaders {
+        if !(1..=n).contains(&id) {
+            return Err(format!("--leader-agents: agent {id} is outside 1..={n}"));
+        }
+        b[id - 1] = b_w;
+    }
+    s.graph.leader_weights = b;
+    let g = opts.graph.name();
+    s.name = format!("gen{n}-{g}");
+    s.description = format!(
+        "Generated from '{}': {n} agents on a {g} graph (leaders {leaders:?}), cover radius {} m, \
+         enclose radius {} m, spin {:.4} rad/s, agent specs reused cyclically.",
+        template.name, r.cover_m, r.enclose_m, r.spin_rad_s
+    );
+    Ok(s)
+}
+
+fn options(args: &ScenarioArgs) -> Result<GenOptions, String> {
+    let graph = GraphKind::parse(&args.graph)?;
+    let leader_agents = args
+        .leader_agents
+        .as_deref()
+        .map(|l| graphs::parse_leader_agents(l, args.n))
+        .transpose()?;
+    Ok(GenOptions {
+        n: args.n,
+        graph,
+        k: args.k,
+        seed: args.seed,
+        leader_agents,
+        min_spacing_m: args.min_spacing,
+    })
+}
+
+/// Entry point of `formation scenario`.
+pub fn main(args: ScenarioArgs) -> ExitCode {
+    let s = match options(&args).and_then(|o| generate(&o)) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    if let Err(errs) = validate(&s) {
+        eprintln!("error: the generated scenario is invalid:");
+        for e in &errs.0 {
+            eprintln!("  {e}");
+        }
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let text = s.to_toml_string();
+    match &args.out {
+        Some(path) => match std::fs::write(path, text) {
+            Ok(()) => {
+                eprintln!("wrote {}", path.display());
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: cannot write {}: {e}", path.display());
+                ExitCode::from(1)
+            }
+        },
+        None => {
+            print!("{text}");
+            ExitCode::SUCCESS
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn slots(s: &Scenario, r: f64) -> Vec<[f64; 2]> {
+        let n = s.n_agents();
+        (0..n)
+            .map(|i| {
+                let phi = s.mission.formation.first_phase_rad
+                    + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+                [r * phi.cos(), r * phi.sin()]
+            })
+            .collect()
+    }
+
+    fn min_distance(p: &[[f64; 2]]) -> f64 {
+        let mut m = f64::INFINITY;
+        for i in 0..p.len() {
+            for j in i + 1..p.len() {
+                m = m.min((p[i][0] - p[j][0]).hypot(p[i][1] - p[j][1]));
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn generated_scenarios_of_every_graph_family_validate() {
+        for n in [2, 3, 5, 20, 50, 100, 128] {
+            for g in ["ring", "path", "k-nearest", "complete", "random-connected"] {
+                let mut o = GenOptions::new(n, GraphKind::parse(g).unwrap());
+                o.k = 4.min(n - 1);
+                let s = generate(&o).unwrap();
+                assert_eq!(s.n_agents(), n);
+                validate(&s).unwrap_or_else(|e| panic!("n = {n}, {g}: {e:?}"));
+            }
+        }
+        assert!(generate(&GenOptions::new(1, GraphKind::Path)).is_err());
+        assert!(generate(&GenOptions::new(129, GraphKind::Path)).is_err());
+        assert!(GraphKind::parse("star").is_err());
+    }
+
+    #[test]
+    fn five_agent_path_is_the_paper_scenario_up_to_rounding_of_the_starts() {
+        let g = generate(&GenOptions::new(5, GraphKind::Path)).unwrap();
+        let p = Scenario::paper();
+        assert_eq!(g.mission, p.mission);
+        assert_eq!(g.graph, p.graph);
+        for (a, b) in g.agents.iter().zip(&p.agents) {
+            for k in 0..3 {
+                assert!((a.initial_position_m[k] - b.initial_position_m[k]).abs() < 0.02);
+            }
+            assert_eq!(a.fault, b.fault);
+            assert_eq!(a.delay, b.delay);
+        }
+    }
+
+    #[test]
+    fn generated_twenty_ring_neighbours_are_at_least_the_minimum_spacing_apart_at_their_slots() {
+        let s = generate(&GenOptions::new(20, GraphKind::Ring)).unwrap();
+        let s_min = radii::ring_spacing(5, 1.0);
+        let f = &s.mission.formation;
+        for r in [f.cover_radius_m, f.enclose_radius_m] {
+            let d = min_distance(&slots(&s, r));
+            assert!(d >= s_min - 1e-3, "radius {r}: slots {d} m apart");
+        }
+        // Starts are farther apart still.
+        let starts: Vec<[f64; 2]> = s
+            .agents
+            .iter()
+            .map(|a| [a.initial_position_m[0], a.initial_position_m[1]])
+            .collect();
+        assert!(min_distance(&starts) >= s_min);
+    }
+
+    #[test]
+    fn leader_agents_option_sets_b_for_the_listed_one_based_ids_only() {
+        let mut o = GenOptions::new(7, GraphKind::Ring);
+        o.leader_agents = Some(vec![1, 5]);
+        let s = generate(&o).unwrap();
+        // Pinned agents 1 and 5 sit between two neighbours: row sum 2 + 1 = 3 is scaled to
+        // graphs::MAX_ROW_SUM, so b = a = 0.9.
+        let expected = [0.9, 0.0, 0.0, 0.0, 0.9, 0.0, 0.0];
+        for (b, e) in s.graph.leader_weights.iter().zip(expected) {
+            assert!((b - e).abs() < 1e-12, "{:?}", s.graph.leader_weights);
+        }
+        assert!(s.graph.edges.iter().all(|e| (e.weight - 0.9).abs() < 1e-12));
+    }
+}
