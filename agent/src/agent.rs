@@ -250,7 +250,7 @@ impl Agent {
         let a_c_dot = Vector3::from(self.attitude_filter.derivative());
         let a = Vector3::from(own.attitude);
         let w = Vector3::from(own.rate);
-        let out = self.attitude.step(&self.p, &a, &w, &a_c, &a_c_dot);
+        let out = self.attitude.step(&self.p, k, &a, &w, &a_c, &a_c_dot);
         self.attitude_filter.advance(att_raw, self.p.dt);
 
         let at = &self.attitude;
