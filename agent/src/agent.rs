@@ -225,7 +225,7 @@ impl Agent {
         } else {
             [0.0; 3]
         };
-        let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader);
+        let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader, self.p.leader_data);
         let u_p = limit(&g.position, self.p.gravity, u_raw);
         let saturated = u_p != u_raw;
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {

@@ -56,8 +56,9 @@ pub fn consensus_errors(
 
 /// Eq. (14) before the limits of D5: U_iP = -k_P e_iP - k_V e_iV - F-hat_iP + Delta_i0'' (+ P_d'' with
 /// our feedforward, D4; - k_L (V_i - P_d' - Delta_i0') - k_LP (P_i - P_d - Delta_i0) with our
-/// leader-relative terms, D11). The caller applies [`limit`] (and knows from the difference whether the
-/// limit is active).
+/// leader-relative terms, D11). Both leader terms need the leader's data: an agent without it
+/// (`leader_data` false: `leader_broadcast = "pinned"` and b_i = 0, D17) uses neither. The caller
+/// applies [`limit`] (and knows from the difference whether the limit is active).
 pub fn raw_law(
     g: &PositionGains,
     ep: [f64; 3],
@@ -65,14 +66,20 @@ pub fn raw_law(
     f_hat: [f64; 3],
     me: &Member,
     leader: &LeaderInfo,
+    leader_data: bool,
 ) -> [f64; 3] {
     let mut u = [0.0; 3];
     for k in 0..3 {
-        u[k] = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k]
-            - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k])
-            - g.leader_position_gain * (me.p[k] - leader.p[k] - me.off[k]);
-        if g.reference_acceleration_feedforward {
-            u[k] += leader.a[k];
+        let consensus = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k];
+        u[k] = consensus;
+        if leader_data {
+            // One expression, in the order of (14) + D11, so that `all` stays bit-identical.
+            u[k] = consensus
+                - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k])
+                - g.leader_position_gain * (me.p[k] - leader.p[k] - me.off[k]);
+            if g.reference_acceleration_feedforward {
+                u[k] += leader.a[k];
+            }
         }
     }
     u

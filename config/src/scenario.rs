@@ -171,6 +171,33 @@ pub struct Graph {
     pub edges: Vec<Edge>,
     /// Leader weights b_i (one per agent). Paper: b_1 = b_5 = 1, others 0.
     pub leader_weights: Vec<f64>,
+    /// Who receives the leader's data P_d, P_d', P_d'' (docs/deviations.md D17). `all` (default): every
+    /// agent, as Fig. 2 feeds P_d to every NTDPC, so the leader-relative terms (D11) and the feedforward
+    /// (D4) act everywhere. `pinned`: only agents with b_i > 0; the others drop D11 and D4 and reach the
+    /// leader through the graph alone.
+    #[serde(default)]
+    pub leader_broadcast: LeaderBroadcast,
+}
+
+/// Information structure of the leader's data (D17).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LeaderBroadcast {
+    /// Every agent receives P_d and its derivatives.
+    #[default]
+    All,
+    /// Only agents with b_i > 0 do.
+    Pinned,
+}
+
+impl LeaderBroadcast {
+    /// True when an agent with leader weight `b` receives the leader's data.
+    pub fn reaches(self, b: f64) -> bool {
+        match self {
+            LeaderBroadcast::All => true,
+            LeaderBroadcast::Pinned => b > 0.0,
+        }
+    }
 }
 
 /// Quadrotor parameters shared by all agents.
