@@ -8,7 +8,7 @@ use crate::command_filter::CommandFilter;
 use crate::conversion::thrust_and_attitude;
 use crate::delay::{delay_steps, StepHistory};
 use crate::params::AgentParams;
-use crate::position::{consensus_errors, limit, raw_law, LeaderInfo, Member};
+use crate::position::{clip_norm, consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
 use formation_config::scenario::{DelaySpec, Scenario};
 use formation_config::wire::{
@@ -230,10 +230,12 @@ impl Agent {
         let saturated = u_p != u_raw;
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
+            // The network learns from the same (shaped, D18) position error the law acts on.
+            let ep_nn = clip_norm(ep, pg.position_error_limit_m.unwrap_or(f64::INFINITY));
             let drive = [
-                pg.nn_k_p * ep[0] + pg.nn_k_v * ev[0],
-                pg.nn_k_p * ep[1] + pg.nn_k_v * ev[1],
-                pg.nn_k_p * ep[2] + pg.nn_k_v * ev[2],
+                pg.nn_k_p * ep_nn[0] + pg.nn_k_v * ev[0],
+                pg.nn_k_p * ep_nn[1] + pg.nn_k_v * ev[1],
+                pg.nn_k_p * ep_nn[2] + pg.nn_k_v * ev[2],
             ];
             self.nn
                 .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);

@@ -271,6 +271,13 @@ pub struct PositionGains {
     /// Leader-relative position gain k_LP: U_iP gets -k_LP (P_i - P_d - Delta_i0) on the delayed leader
     /// broadcast, 1/s². Paper: 0. Ours: see docs/deviations.md (D11).
     pub leader_position_gain: f64,
+    /// Largest norm of the position errors the law (14) acts on: e_iP and the leader-relative
+    /// P_i - P_d - Delta_i0 (D11) are scaled down to this norm before the gains k_P, k_LP apply, m
+    /// (reference shaping, docs/deviations.md D18). Paper: none (absent, the default). Ours: 1.0 —
+    /// k_P + k_LP times it stays below the 3 m/s² limit of D5, so a start several metres off the slots
+    /// is flown at the speed where k_V, k_L balance it instead of bang-bang on the limit (ringing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_error_limit_m: Option<f64>,
     /// Largest horizontal norm of U_iP, m/s². Paper: none (infinite). Ours: 3.0 (D5).
     pub max_horizontal_accel_m_s2: f64,
     /// Largest upward U_i3P, m/s². Paper: none. Ours: 4.0 (D5).

@@ -484,6 +484,9 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         );
     }
     check_fault_identification(s, &mut c);
+    if let Some(l) = ctl.position.position_error_limit_m {
+        c.positive("controller.position.position_error_limit_m", l, CTRL);
+    }
     let aux = &ctl.auxiliary;
     c.non_negative("controller.auxiliary.k1_e", aux.k1_e, CTRL);
     c.non_negative("controller.auxiliary.k2_e", aux.k2_e, CTRL);
