@@ -112,7 +112,7 @@ pub fn all(r: &Report) -> Vec<Verdict> {
         ),
     ));
     let info = &o.information;
-    let fmt_kv = |k: Option<f64>| k.map_or("none up to 1e3".to_string(), |k| format!("{k:.2}/s"));
+    let fmt_kv = |k: Option<f64>| k.map_or("more than 1e3/s".to_string(), |k| format!("{k:.2}/s"));
     v.push(Verdict::new(
         "outer.leader_information",
         if info.window_exists {
@@ -125,12 +125,13 @@ pub fn all(r: &Report) -> Vec<Verdict> {
             Level::Fail
         },
         format!(
-            "leader data reaches {} of {} agents ({:?}); least damping lambda_min(k_V (L+B) + k_L P) needs k_V >= {} against the uncertainty, the cascade (delay, filter 1, attitude loop; linear) keeps the fastest mode's margin positive up to k_V = {}{}",
+            "leader data reaches {} of {} agents ({:?}); least damping lambda_min(k_V (L+B) + k_L P) needs k_V >= {} against the uncertainty; the cascade (delay, filter 1, attitude loop; linear) keeps the fastest mode's margin positive {}{}",
             info.agents_with_leader_data.len(),
             r.graph.eigenvalues.len(),
             info.leader_broadcast,
             fmt_kv(info.k_v_needed),
-            fmt_kv(info.k_v_delay_limit),
+            info.k_v_delay_limit
+                .map_or("for no k_V (k_P alone is too fast)".to_string(), |k| format!("up to k_V = {k:.2}/s")),
             if info.window_exists { "" } else { ": no k_V of (14) can give both on this graph" }
         ),
     ));
