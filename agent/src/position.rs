@@ -70,11 +70,10 @@ pub fn raw_law(
 ) -> [f64; 3] {
     let limit = g.position_error_limit_m.unwrap_or(f64::INFINITY);
     let ep = clip_norm(ep, limit);
-    let mut leader_p = [0.0; 3];
-    for k in 0..3 {
-        leader_p[k] = me.p[k] - leader.p[k] - me.off[k];
-    }
-    let leader_p = clip_norm(leader_p, limit);
+    let leader_p = clip_norm(
+        std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
+        limit,
+    );
     let mut u = [0.0; 3];
     for k in 0..3 {
         let consensus = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k];

@@ -398,8 +398,8 @@ pub const MAX_PROBE_PERIOD_STEPS: usize = 64;
 /// the rate increment over one step). Near-constant commands do not excite Gamma and delta separately,
 /// so a known sinusoid d of one period P is added to U_iAC; Gamma is read from the part of y
 /// correlated with d (an instrumental-variable estimate: Gamma_id = <d y> / <d U>), delta from the
-/// period means (delta_id = <y> - Gamma_id <U>), and the adaptive laws get
-/// + k_c (Gamma_id - Gamma-hat) and + k_c (delta_id - delta-hat) while <d U> shows the probe arrived.
+/// period means (delta_id = <y> - Gamma_id <U>), and the adaptive laws get the terms
+/// k_c (Gamma_id - Gamma-hat) and k_c (delta_id - delta-hat) while <d U> shows the probe arrived.
 /// Every default is "off" (amplitude 0, k_c = 0).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
