@@ -8,7 +8,7 @@ use crate::command_filter::CommandFilter;
 use crate::conversion::thrust_and_attitude;
 use crate::delay::{delay_steps, StepHistory};
 use crate::params::AgentParams;
-use crate::position::{consensus_errors, limit, raw_law, LeaderInfo, Member};
+use crate::position::{clip_norm, consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
 use formation_config::protocol::wire::{
     ControlCommand, ControllerTelemetry, DelayInjection, NeighborState, ReferenceFrame,
@@ -225,15 +225,17 @@ impl Agent {
         } else {
             [0.0; 3]
         };
-        let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader);
+        let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader, self.p.leader_data);
         let u_p = limit(&g.position, self.p.gravity, u_raw);
         let saturated = u_p != u_raw;
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
+            // The network learns from the same (shaped, D18) position error the law acts on.
+            let ep_nn = clip_norm(ep, pg.position_error_limit_m.unwrap_or(f64::INFINITY));
             let drive = [
-                pg.nn_k_p * ep[0] + pg.nn_k_v * ev[0],
-                pg.nn_k_p * ep[1] + pg.nn_k_v * ev[1],
-                pg.nn_k_p * ep[2] + pg.nn_k_v * ev[2],
+                pg.nn_k_p * ep_nn[0] + pg.nn_k_v * ev[0],
+                pg.nn_k_p * ep_nn[1] + pg.nn_k_v * ev[1],
+                pg.nn_k_p * ep_nn[2] + pg.nn_k_v * ev[2],
             ];
             self.nn
                 .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
@@ -250,7 +252,7 @@ impl Agent {
         let a_c_dot = Vector3::from(self.attitude_filter.derivative());
         let a = Vector3::from(own.attitude);
         let w = Vector3::from(own.rate);
-        let out = self.attitude.step(&self.p, &a, &w, &a_c, &a_c_dot);
+        let out = self.attitude.step(&self.p, k, &a, &w, &a_c, &a_c_dot);
         self.attitude_filter.advance(att_raw, self.p.dt);
 
         let at = &self.attitude;

@@ -16,6 +16,7 @@
 
 use crate::blf::Barrier;
 use crate::command_filter::CommandFilter;
+use crate::fault_id::{FaultIdentifier, SATURATION_GUARD};
 use crate::params::AgentParams;
 use formation_config::Variant;
 use formation_plant::dynamics::rotational_drift;
@@ -38,6 +39,8 @@ pub struct AttitudeLoop {
     pub d_hat: f64,
     /// Delta F-hat_i (46).
     pub model_hat: Matrix3<f64>,
+    /// Probe and identification of Gamma, delta (D16).
+    pub identifier: FaultIdentifier,
     alpha_bar: f64,
 }
 
@@ -77,15 +80,17 @@ impl AttitudeLoop {
             delta_hat: Vector3::repeat(ad.delta_hat_initial),
             d_hat: ad.disturbance_hat_initial,
             model_hat: Matrix3::identity(),
+            identifier: FaultIdentifier::new(&p.gains.fault_identification, p.dt),
             alpha_bar: (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt(),
         }
     }
 
-    /// Computes U_iAC for the attitude `a`, rate `w`, filtered attitude command `a_c` and its derivative
-    /// `a_c_dot`, then advances every internal state by `dt`.
+    /// Computes U_iAC of step `step` for the attitude `a`, rate `w`, filtered attitude command `a_c` and
+    /// its derivative `a_c_dot`, then advances every internal state by `dt`.
     pub fn step(
         &mut self,
         p: &AgentParams,
+        step: u64,
         a: &Vector3<f64>,
         w: &Vector3<f64>,
         a_c: &Vector3<f64>,
@@ -138,7 +143,27 @@ impl AttitudeLoop {
                 - k2 * b2.sincos_term
         };
         let phi = -self.delta_hat + j.component_mul(&inner2);
-        let torque = phi.component_div(&self.gamma_hat); // (43)
+        // (43), plus the known probe of D16 (zero when identification is off).
+        let unit_probe = self.identifier.unit_probe(step);
+        let torque = phi.component_div(&self.gamma_hat) + self.identifier.probe(step);
+        let lo = Vector3::from(p.torque_min);
+        let hi = Vector3::from(p.torque_max);
+        let expected = self.gamma_hat.component_mul(&torque) + self.delta_hat;
+        let near_limit = (0..3).any(|k| {
+            let mid = 0.5 * (hi[k] + lo[k]);
+            (expected[k] - mid).abs() > SATURATION_GUARD * 0.5 * (hi[k] - lo[k])
+        });
+        self.identifier.observe(
+            w,
+            &torque,
+            unit_probe,
+            near_limit,
+            &j,
+            &Vector3::from(p.drag),
+            dt,
+        );
+        let id = self.identifier.identified();
+        let k_c = g.fault_identification.composite_rate;
 
         // ---- Adaptive laws (46)-(49), explicit Euler.
         let ad = &g.adaptive;
@@ -147,13 +172,24 @@ impl AttitudeLoop {
         self.model_hat += (ad.model_rate * nu2 * drift.transpose()
             - ad.model_leakage * (self.model_hat - Matrix3::identity()))
             * dt;
-        // (47): J^-T nu_2 with J diagonal.
-        self.delta_hat +=
-            (ad.delta_rate * j_inv.component_mul(&nu2) - ad.delta_leakage * self.delta_hat) * dt;
-        // (48), per channel, with projection onto [Gamma_min, Gamma_max].
+        // (47): J^-T nu_2 with J diagonal; + the composite term of D16 while the channel is excited.
+        let pull = |valid: bool, target: f64, now: f64| {
+            if valid {
+                k_c * (target - now)
+            } else {
+                0.0
+            }
+        };
+        let delta_pull = Vector3::from_fn(|k, _| pull(id.valid[k], id.delta[k], self.delta_hat[k]));
+        self.delta_hat += (ad.delta_rate * j_inv.component_mul(&nu2)
+            - ad.delta_leakage * self.delta_hat
+            + delta_pull)
+            * dt;
+        // (48), per channel, with projection onto [Gamma_min, Gamma_max]; + the composite term of D16.
         for k in 0..3 {
             let chi = ad.gamma_rate * nu2[k] * j_inv[k] * torque[k]
-                - ad.gamma_leakage * (self.gamma_hat[k] - ad.gamma_leakage_target);
+                - ad.gamma_leakage * (self.gamma_hat[k] - ad.gamma_leakage_target)
+                + pull(id.valid[k], id.gamma[k], self.gamma_hat[k]);
             let at_floor = self.gamma_hat[k] <= ad.gamma_min && chi < 0.0;
             let at_ceiling = self.gamma_hat[k] >= ad.gamma_max && chi > 0.0;
             if !(at_floor || at_ceiling) {
@@ -180,8 +216,6 @@ impl AttitudeLoop {
             coupling1,
             dt,
         );
-        let lo = Vector3::from(p.torque_min);
-        let hi = Vector3::from(p.torque_max);
         let expected = self.gamma_hat.component_mul(&torque) + self.delta_hat;
         let residual = expected.zip_zip_map(&lo, &hi, |x, l, h| x.clamp(l, h)) - expected;
         let d_u = j_inv.component_mul(&residual);

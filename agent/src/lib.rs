@@ -14,6 +14,7 @@ pub mod blf;
 pub mod command_filter;
 pub mod conversion;
 pub mod delay;
+pub mod fault_id;
 pub mod params;
 pub mod position;
 pub mod rbfnn;

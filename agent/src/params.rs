@@ -16,6 +16,9 @@ pub struct AgentParams {
     pub neighbours: Vec<(usize, f64)>,
     /// Leader weight b_i.
     pub leader_weight: f64,
+    /// This agent receives the leader's data (D17): `leader_broadcast = "all"`, or b_i > 0. Without it
+    /// the leader-relative terms (D11) and the feedforward (D4) are dropped.
+    pub leader_data: bool,
     /// Step dt, s.
     pub dt: f64,
     /// Delay bound tau_M, s.
@@ -49,6 +52,7 @@ impl AgentParams {
             variant,
             neighbours: topo.neighbours[id].clone(),
             leader_weight: topo.leader_weights[id],
+            leader_data: s.graph.leader_broadcast.reaches(topo.leader_weights[id]),
             dt: s.simulation.dt_s,
             max_delay: s.simulation.max_delay_s,
             gravity: s.simulation.gravity_m_s2,

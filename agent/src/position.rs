@@ -56,8 +56,9 @@ pub fn consensus_errors(
 
 /// Eq. (14) before the limits of D5: U_iP = -k_P e_iP - k_V e_iV - F-hat_iP + Delta_i0'' (+ P_d'' with
 /// our feedforward, D4; - k_L (V_i - P_d' - Delta_i0') - k_LP (P_i - P_d - Delta_i0) with our
-/// leader-relative terms, D11). The caller applies [`limit`] (and knows from the difference whether the
-/// limit is active).
+/// leader-relative terms, D11). Both leader terms need the leader's data: an agent without it
+/// (`leader_data` false: `leader_broadcast = "pinned"` and b_i = 0, D17) uses neither. The caller
+/// applies [`limit`] (and knows from the difference whether the limit is active).
 pub fn raw_law(
     g: &PositionGains,
     ep: [f64; 3],
@@ -65,17 +66,40 @@ pub fn raw_law(
     f_hat: [f64; 3],
     me: &Member,
     leader: &LeaderInfo,
+    leader_data: bool,
 ) -> [f64; 3] {
+    let limit = g.position_error_limit_m.unwrap_or(f64::INFINITY);
+    let ep = clip_norm(ep, limit);
+    let leader_p = clip_norm(
+        std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
+        limit,
+    );
     let mut u = [0.0; 3];
     for k in 0..3 {
-        u[k] = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k]
-            - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k])
-            - g.leader_position_gain * (me.p[k] - leader.p[k] - me.off[k]);
-        if g.reference_acceleration_feedforward {
-            u[k] += leader.a[k];
+        let consensus = -g.k_p * ep[k] - g.k_v * ev[k] - f_hat[k] + me.off_a[k];
+        u[k] = consensus;
+        if leader_data {
+            // One expression, in the order of (14) + D11, so that `all` stays bit-identical.
+            u[k] = consensus
+                - g.leader_velocity_damping * (me.v[k] - leader.v[k] - me.off_v[k])
+                - g.leader_position_gain * leader_p[k];
+            if g.reference_acceleration_feedforward {
+                u[k] += leader.a[k];
+            }
         }
     }
     u
+}
+
+/// `v` scaled down to the norm `limit` when longer (D18; an infinite limit returns `v` unchanged).
+pub fn clip_norm(v: [f64; 3], limit: f64) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if n > limit {
+        let s = limit / n;
+        [v[0] * s, v[1] * s, v[2] * s]
+    } else {
+        v
+    }
 }
 
 /// The acceleration and tilt limits of D5.
@@ -90,4 +114,51 @@ pub fn limit(g: &PositionGains, gravity: f64, mut u: [f64; 3]) -> [f64; 3] {
         u[1] *= s;
     }
     u
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clip_norm_shortens_long_errors_along_their_direction_and_keeps_short_ones() {
+        let c = clip_norm([3.0, 4.0, 0.0], 1.0);
+        assert!((c[0] - 0.6).abs() < 1e-12 && (c[1] - 0.8).abs() < 1e-12 && c[2] == 0.0);
+        assert_eq!(clip_norm([0.3, 0.4, 0.0], 1.0), [0.3, 0.4, 0.0]);
+        assert_eq!(
+            clip_norm([30.0, 40.0, 0.0], f64::INFINITY),
+            [30.0, 40.0, 0.0]
+        );
+    }
+
+    /// An agent without the leader's data (pinned broadcast, b_i = 0) ignores P_d entirely: the law does
+    /// not change when the leader's information does.
+    #[test]
+    fn without_leader_data_the_law_ignores_the_leader() {
+        let g = formation_config::Scenario::paper().controller.position;
+        let me = Member {
+            p: [1.0, 2.0, 3.0],
+            v: [0.1, 0.0, -0.2],
+            ..Member::default()
+        };
+        let a = LeaderInfo {
+            p: [0.0; 3],
+            v: [0.0; 3],
+            a: [0.0; 3],
+        };
+        let b = LeaderInfo {
+            p: [5.0, -3.0, 1.0],
+            v: [1.0, 1.0, 0.0],
+            a: [0.5, 0.0, 0.1],
+        };
+        let (ep, ev, f) = ([0.2, -0.1, 0.0], [0.0, 0.1, 0.0], [0.0; 3]);
+        assert_eq!(
+            raw_law(&g, ep, ev, f, &me, &a, false),
+            raw_law(&g, ep, ev, f, &me, &b, false)
+        );
+        assert_ne!(
+            raw_law(&g, ep, ev, f, &me, &a, true),
+            raw_law(&g, ep, ev, f, &me, &b, true)
+        );
+    }
 }

@@ -866,3 +866,60 @@ rejects!(
         s.controller.unconstrained.rate_gain = 0.0;
     }
 );
+
+// ---------------------------------------------------------------- fault identification (D16)
+
+rejects!(
+    probe_period_that_is_not_a_whole_number_of_steps_is_rejected,
+    "controller.fault_identification.probe_period_s",
+    CTRL,
+    |s| {
+        s.controller.fault_identification.probe_period_s = 0.0255;
+    }
+);
+
+rejects!(
+    probe_period_longer_than_the_identifier_buffer_is_rejected,
+    "controller.fault_identification.probe_period_s",
+    CTRL,
+    |s| {
+        s.controller.fault_identification.probe_period_s = 0.2;
+    }
+);
+
+rejects!(
+    probe_amplitude_beyond_a_quarter_of_the_torque_range_is_rejected,
+    "controller.fault_identification.probe_amplitude_nm[0]",
+    SAT,
+    |s| {
+        s.controller.fault_identification.probe_amplitude_nm[0] = 0.3;
+    }
+);
+
+rejects!(
+    excitation_ratio_above_one_is_rejected,
+    "controller.fault_identification.excitation_ratio",
+    CTRL,
+    |s| {
+        s.controller.fault_identification.excitation_ratio = 1.5;
+    }
+);
+
+#[test]
+fn scenario_without_fault_identification_section_parses_with_identification_off() {
+    let text = PAPER_TOML.replace(
+        "[controller.fault_identification]",
+        "[controller.unused_section]",
+    );
+    // Drop the whole section: its keys would otherwise land in the renamed table.
+    let start = text.find("[controller.unused_section]").unwrap();
+    let end = text[start..].find("[controller.auxiliary]").unwrap() + start;
+    let text = format!("{}{}", &text[..start], &text[end..]);
+    let s = Scenario::from_toml_str(&text).unwrap();
+    assert_eq!(
+        s.controller.fault_identification.probe_amplitude_nm,
+        [0.0; 3]
+    );
+    assert_eq!(s.controller.fault_identification.composite_rate, 0.0);
+    assert_eq!(validate(&s), Ok(()));
+}

@@ -220,6 +220,37 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
             .collect();
         vals.iter().sum::<f64>() / vals.len() as f64
     };
+    // The estimates identify the injected fault itself (D16): from 15 s after the injection on, every
+    // channel's mean Gamma-hat is within 10 % of 0.5 and delta-hat within 0.05 N m of the injected delta.
+    let text = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<&str>> = lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| f[col("agent")] == "2")
+        .filter(|f| f[col("step")].parse::<u64>().unwrap() >= fault_step + 15_000)
+        .collect();
+    assert!(!rows.is_empty(), "the run lasts 15 s past the injection");
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let mean = |name: &str| {
+            rows.iter()
+                .map(|f| f[col(name)].parse::<f64>().unwrap())
+                .sum::<f64>()
+                / rows.len() as f64
+        };
+        let g = mean(&format!("gamma_hat_{axis}"));
+        let d = mean(&format!("delta_hat_{axis}"));
+        let injected_delta = [0.15, 0.1, 0.5][k];
+        assert!(
+            (g - 0.5).abs() < 0.05,
+            "Gamma-hat_{axis} of agent 2: {g} for 0.5 injected"
+        );
+        assert!(
+            (d - injected_delta).abs() < 0.05,
+            "delta-hat_{axis} of agent 2: {d} for {injected_delta} injected"
+        );
+    }
     let injected = late_mean(&out.join("trajectory.csv"));
     let baseline = late_mean(&baseline_dir.join("trajectory.csv"));
     assert!(

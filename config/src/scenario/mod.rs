@@ -187,6 +187,33 @@ pub struct Graph {
     pub edges: Vec<Edge>,
     /// Leader weights b_i (one per agent). Paper: b_1 = b_5 = 1, others 0.
     pub leader_weights: Vec<f64>,
+    /// Who receives the leader's data P_d, P_d', P_d'' (docs/deviations.md D17). `all` (default): every
+    /// agent, as Fig. 2 feeds P_d to every NTDPC, so the leader-relative terms (D11) and the feedforward
+    /// (D4) act everywhere. `pinned`: only agents with b_i > 0; the others drop D11 and D4 and reach the
+    /// leader through the graph alone.
+    #[serde(default)]
+    pub leader_broadcast: LeaderBroadcast,
+}
+
+/// Information structure of the leader's data (D17).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LeaderBroadcast {
+    /// Every agent receives P_d and its derivatives.
+    #[default]
+    All,
+    /// Only agents with b_i > 0 do.
+    Pinned,
+}
+
+impl LeaderBroadcast {
+    /// True when an agent with leader weight `b` receives the leader's data.
+    pub fn reaches(self, b: f64) -> bool {
+        match self {
+            LeaderBroadcast::All => true,
+            LeaderBroadcast::Pinned => b > 0.0,
+        }
+    }
 }
 
 /// Quadrotor parameters shared by all agents.
@@ -225,6 +252,10 @@ pub struct Controller {
     pub adaptive: AdaptiveGains,
     /// Auxiliary systems (35), (50).
     pub auxiliary: AuxiliaryGains,
+    /// Identification of Gamma and delta from a probing signal (ours, docs/deviations.md D16). Absent:
+    /// off (the printed gradient laws (47)-(48) alone).
+    #[serde(default)]
+    pub fault_identification: FaultIdentificationSpec,
     /// Gains of the `unconstrained` comparison variant (stands in for the paper's [51]).
     pub unconstrained: UnconstrainedGains,
 }
@@ -256,6 +287,13 @@ pub struct PositionGains {
     /// Leader-relative position gain k_LP: U_iP gets -k_LP (P_i - P_d - Delta_i0) on the delayed leader
     /// broadcast, 1/s². Paper: 0. Ours: see docs/deviations.md (D11).
     pub leader_position_gain: f64,
+    /// Largest norm of the position errors the law (14) acts on: e_iP and the leader-relative
+    /// P_i - P_d - Delta_i0 (D11) are scaled down to this norm before the gains k_P, k_LP apply, m
+    /// (reference shaping, docs/deviations.md D18). Paper: none (absent, the default). Ours: 1.0 —
+    /// k_P + k_LP times it stays below the 3 m/s² limit of D5, so a start several metres off the slots
+    /// is flown at the speed where k_V, k_L balance it instead of bang-bang on the limit (ringing).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_error_limit_m: Option<f64>,
     /// Largest horizontal norm of U_iP, m/s². Paper: none (infinite). Ours: 3.0 (D5).
     pub max_horizontal_accel_m_s2: f64,
     /// Largest upward U_i3P, m/s². Paper: none. Ours: 4.0 (D5).
@@ -364,6 +402,48 @@ pub struct AdaptiveGains {
     pub delta_hat_initial: f64,
     /// Initial D-hat_iA, rad/s². Paper: not given. Ours: 0.
     pub disturbance_hat_initial: f64,
+}
+
+/// Largest probe period in steps (the identifier holds one period of samples in fixed-size buffers).
+pub const MAX_PROBE_PERIOD_STEPS: usize = 64;
+
+/// Identification of the actuator faults Gamma_ik, delta_ik of (4) from a probing signal, blended into
+/// the adaptive laws (47)-(48) as a composite term (ours; the paper has none): docs/deviations.md D16.
+///
+/// y_k = Gamma_k U_k + delta_k holds per channel for the torque y the vehicle received (measured from
+/// the rate increment over one step). Near-constant commands do not excite Gamma and delta separately,
+/// so a known sinusoid d of one period P is added to U_iAC; Gamma is read from the part of y
+/// correlated with d (an instrumental-variable estimate: Gamma_id = <d y> / <d U>), delta from the
+/// period means (delta_id = <y> - Gamma_id <U>), and the adaptive laws get the terms
+/// k_c (Gamma_id - Gamma-hat) and k_c (delta_id - delta-hat) while <d U> shows the probe arrived.
+/// Every default is "off" (amplitude 0, k_c = 0).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct FaultIdentificationSpec {
+    /// Probe amplitude a_k per channel, added to U_iAC as a_k sin(2 pi k_step / P), N m. Paper: none (0).
+    /// Ours: [0.02, 0.02, 0.04] — 5 % / 2 % of the torque ranges; at 40 Hz it moves the attitude by
+    /// ~1e-5 rad and the rate by ~3e-3 rad/s (well inside the 0.065 rad and 0.29 rad/s margins).
+    #[serde(default)]
+    pub probe_amplitude_nm: [f64; 3],
+    /// Probe period P, s; must be a whole number of steps, at most MAX_PROBE_PERIOD_STEPS. Ours: 0.025
+    /// (40 Hz, above the ~16 Hz rate loop, so the loop lets the probe through instead of cancelling it).
+    #[serde(default)]
+    pub probe_period_s: f64,
+    /// Averaging time T_Gamma of the correlations <d y>, <d U>, s. Ours: 1.0.
+    #[serde(default)]
+    pub gamma_averaging_s: f64,
+    /// Averaging time T_delta of the period means <y>, <U>, s. Ours: 0.5 (tracks the 0.27 rad/s
+    /// oscillation of delta in (64) with < 0.01 N m lag).
+    #[serde(default)]
+    pub delta_averaging_s: f64,
+    /// Composite rate k_c pulling Gamma-hat and delta-hat towards the identified values, 1/s.
+    /// Paper: none (0). Ours: 2.0.
+    #[serde(default)]
+    pub composite_rate: f64,
+    /// Excitation condition: the composite term acts only while <d U> >= rho a_k² / 2 (the probe's own
+    /// power, a²/2), dimensionless. Ours: 0.5.
+    #[serde(default)]
+    pub excitation_ratio: f64,
 }
 
 /// Auxiliary systems (35), (50).

@@ -7,7 +7,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use crate::scenario::graph::Topology;
-use crate::scenario::{AgentSpec, Scenario};
+use crate::scenario::{AgentSpec, Scenario, MAX_PROBE_PERIOD_STEPS};
 use crate::MAX_AGENTS;
 
 /// One reason a scenario is rejected.
@@ -488,6 +488,10 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
             ),
         );
     }
+    check_fault_identification(s, &mut c);
+    if let Some(l) = ctl.position.position_error_limit_m {
+        c.positive("controller.position.position_error_limit_m", l, CTRL);
+    }
     let aux = &ctl.auxiliary;
     c.non_negative("controller.auxiliary.k1_e", aux.k1_e, CTRL);
     c.non_negative("controller.auxiliary.k2_e", aux.k2_e, CTRL);
@@ -516,6 +520,67 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         Ok(())
     } else {
         Err(ValidationErrors(c.0))
+    }
+}
+
+/// D16: the probe must fit the torque range and the identifier's one-period buffer.
+fn check_fault_identification(s: &Scenario, c: &mut Collector) {
+    let id = &s.controller.fault_identification;
+    let v = &s.vehicle;
+    let active = id.probe_amplitude_nm.iter().any(|a| *a != 0.0);
+    for k in 0..3 {
+        let half_range = 0.5 * (v.torque_max_nm[k] - v.torque_min_nm[k]);
+        let a = id.probe_amplitude_nm[k];
+        if !(a >= 0.0 && a <= 0.25 * half_range) {
+            c.push(
+                format!("controller.fault_identification.probe_amplitude_nm[{k}]"),
+                SAT,
+                format!(
+                    "{a} N m must lie in [0, a quarter of the half torque range = {}]",
+                    0.25 * half_range
+                ),
+            );
+        }
+    }
+    if !active {
+        return;
+    }
+    let dt = s.simulation.dt_s;
+    let steps = id.probe_period_s / dt;
+    if !(steps >= 4.0
+        && steps <= MAX_PROBE_PERIOD_STEPS as f64
+        && (steps - steps.round()).abs() < 1e-6)
+    {
+        c.push(
+            "controller.fault_identification.probe_period_s",
+            CTRL,
+            format!(
+                "{} s must be a whole number of steps (dt = {dt} s) between 4 and {MAX_PROBE_PERIOD_STEPS}",
+                id.probe_period_s
+            ),
+        );
+    }
+    c.positive(
+        "controller.fault_identification.gamma_averaging_s",
+        id.gamma_averaging_s,
+        CTRL,
+    );
+    c.positive(
+        "controller.fault_identification.delta_averaging_s",
+        id.delta_averaging_s,
+        CTRL,
+    );
+    c.non_negative(
+        "controller.fault_identification.composite_rate",
+        id.composite_rate,
+        CTRL,
+    );
+    if !(id.excitation_ratio > 0.0 && id.excitation_ratio <= 1.0) {
+        c.push(
+            "controller.fault_identification.excitation_ratio",
+            CTRL,
+            format!("{} must lie in (0, 1]", id.excitation_ratio),
+        );
     }
 }
 

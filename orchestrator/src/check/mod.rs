@@ -27,7 +27,9 @@
 //!   `natural_frequency_rad_s`, `damping_ratio`}], `fastest_mode_rad_s`, `slowest_decay_rate`,
 //!   `slowest_damping_rate`, `slowest_stiffness`, `delay_phase_deg`, `delay_only`
 //!   {`crossover_rad_s`, `phase_margin_deg`}, `uncertainty` {...}, `quadratic_break_even_speed_m_s`,
-//!   `rbfnn` {`forgetting_rate`, `static_p_gain_bound`, `static_d_gain_bound`}.
+//!   `rbfnn` {`forgetting_rate`, `static_p_gain_bound`, `static_d_gain_bound`}, `information`
+//!   [`pinned::InformationStructure`] {`leader_broadcast`, `agents_with_leader_data`,
+//!   `slowest_damping_rate`, `slowest_stiffness`, `k_v_needed`, `k_v_delay_limit`, `window_exists`}.
 //! * `filters`: {`attitude`, `rate`}: [`freq::FilterPoles`] — `natural_frequency_rad_s`, `damping`,
 //!   `poles`, `complex`, `slowest_rad_s`.
 //! * `cascade_model`: the linear model behind the margins of `inner` (text).
@@ -41,6 +43,7 @@ pub mod barrier;
 pub mod freq;
 pub mod inner;
 pub mod outer;
+pub mod pinned;
 mod render;
 pub mod spectrum;
 pub mod theorem1;
@@ -90,6 +93,8 @@ pub struct OuterReport {
     pub quadratic_break_even_speed_m_s: Option<f64>,
     /// The RBFNN's forgetting rate and equivalent gains.
     pub rbfnn: outer::RbfnnRole,
+    /// Who receives the leader's data and what that leaves to the slowest collective motion (D17).
+    pub information: pinned::InformationStructure,
 }
 
 /// Poles of both command filters.
@@ -154,12 +159,57 @@ pub fn report(s: &Scenario) -> Report {
     let (kp_fast, kv_fast) = (pos.k_p + k_lp / lmax, pos.k_v + k_l / lmax);
     let fastest = outer::fastest_root(&modes);
     let uncertainty = outer::uncertainty_slopes(&s.agents);
-    let slowest_damping = graph.lambda_min * pos.k_v + k_l;
+    // The k_V window of the information structure, with the fastest mode's margin from the same linear
+    // cascade as `inner` (delay, command filter 1, attitude loop).
+    let (fa, fr) = (
+        &s.controller.attitude_command_filter,
+        &s.controller.rate_command_filter,
+    );
+    let k_att =
+        inner::blf_attitude_gain(s.controller.attitude.k1_alpha, s.controller.attitude.eps1_c);
+    let cascade_margin = |k_v: f64| {
+        freq::phase_margin(|w| {
+            inner::outer_loop_cascade(
+                lmax,
+                (pos.k_p + k_lp / lmax, k_v + k_l / lmax, tau),
+                inner::Filter {
+                    w: fa.natural_frequency_rad_s,
+                    xi: fa.damping,
+                },
+                inner::Filter {
+                    w: fr.natural_frequency_rad_s,
+                    xi: fr.damping,
+                },
+                k_att,
+                w,
+            )
+        })
+    };
+    let information = pinned::analyse(
+        &Topology::from_scenario(s),
+        s.graph.leader_broadcast,
+        (pos.k_p, pos.k_v, k_lp, k_l),
+        &cascade_margin,
+        uncertainty.worst_velocity_gain,
+    );
+    // Under `pinned` only some agents add k_L, k_LP: the least damping and stiffness come from the
+    // matrices k_V (L+B) + k_L P, k_P (L+B) + k_LP P (under `all` they equal the per-mode values).
+    let pinned = s.graph.leader_broadcast == formation_config::scenario::LeaderBroadcast::Pinned;
+    let slowest_damping = if pinned {
+        information.slowest_damping_rate
+    } else {
+        graph.lambda_min * pos.k_v + k_l
+    };
+    let slowest_stiffness = if pinned {
+        information.slowest_stiffness
+    } else {
+        graph.lambda_min * pos.k_p + k_lp
+    };
     let outer = OuterReport {
         fastest_mode_rad_s: fastest,
         slowest_decay_rate: outer::slowest_decay(&modes),
         slowest_damping_rate: slowest_damping,
-        slowest_stiffness: graph.lambda_min * pos.k_p + k_lp,
+        slowest_stiffness,
         delay_phase_deg: (tau * fastest).to_degrees(),
         delay_only: freq::phase_margin(|w| {
             inner::outer_loop_delay_only(graph.lambda_max, kp_fast, kv_fast, tau, w)
@@ -174,6 +224,7 @@ pub fn report(s: &Scenario) -> Report {
             pos.nn_leakage,
             s.controller.rbfnn.neurons_per_axis,
         ),
+        information,
         modes,
     };
     let (fa, fr) = (

@@ -100,7 +100,7 @@ pub fn all(r: &Report) -> Vec<Verdict> {
         "outer.slowest_mode_damping",
         if o.slowest_damping_rate > u.worst_velocity_gain { Level::Ok } else { Level::Warn },
         format!(
-            "lambda_min k_V + k_L = {:.3}/s vs uncertainty negative damping up to {:.3}/s (agent {} axis {}){}",
+            "least damping lambda_min(k_V (L+B) + k_L P) = {:.3}/s vs uncertainty negative damping up to {:.3}/s (agent {} axis {}){}",
             o.slowest_damping_rate,
             u.worst_velocity_gain,
             u.worst_velocity_at[0],
@@ -111,11 +111,35 @@ pub fn all(r: &Report) -> Vec<Verdict> {
             }
         ),
     ));
+    let info = &o.information;
+    let fmt_kv = |k: Option<f64>| k.map_or("more than 1e3/s".to_string(), |k| format!("{k:.2}/s"));
+    v.push(Verdict::new(
+        "outer.leader_information",
+        if info.window_exists {
+            if o.slowest_damping_rate > u.worst_velocity_gain {
+                Level::Ok
+            } else {
+                Level::Warn
+            }
+        } else {
+            Level::Fail
+        },
+        format!(
+            "leader data reaches {} of {} agents ({:?}); least damping lambda_min(k_V (L+B) + k_L P) needs k_V >= {} against the uncertainty; the cascade (delay, filter 1, attitude loop; linear) keeps the fastest mode's margin positive {}{}",
+            info.agents_with_leader_data.len(),
+            r.graph.eigenvalues.len(),
+            info.leader_broadcast,
+            fmt_kv(info.k_v_needed),
+            info.k_v_delay_limit
+                .map_or("for no k_V (k_P alone is too fast)".to_string(), |k| format!("up to k_V = {k:.2}/s")),
+            if info.window_exists { "" } else { ": no k_V of (14) can give both on this graph" }
+        ),
+    ));
     v.push(Verdict::new(
         "outer.slowest_mode_stiffness",
         if o.slowest_stiffness > u.worst_position_gain { Level::Ok } else { Level::Warn },
         format!(
-            "lambda_min k_P + k_LP = {:.3}/s^2 vs uncertainty negative stiffness up to {:.3}/s^2 (agent {} axis {})",
+            "least stiffness lambda_min(k_P (L+B) + k_LP P) = {:.3}/s^2 vs uncertainty negative stiffness up to {:.3}/s^2 (agent {} axis {})",
             o.slowest_stiffness, u.worst_position_gain, u.worst_position_at[0], u.worst_position_at[1]
         ),
     ));
