@@ -16,6 +16,7 @@ mod check;
 mod cli;
 mod cpus;
 mod live;
+mod out_lock;
 mod plot;
 pub mod record;
 mod run;

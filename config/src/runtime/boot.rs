@@ -3,6 +3,7 @@
 use super::args::ChildArgs;
 use super::messages::Hello;
 use super::ports::{publisher, RunNode};
+use super::members::{LeaveOnDrop, Membership};
 use super::process::Lifeline;
 use crate::{ipc, Scenario, Variant};
 
@@ -19,6 +20,10 @@ pub struct Boot {
     pub lifeline: Lifeline,
     /// Its iceoryx2 node under the run prefix.
     pub node: RunNode,
+    /// Its membership of the run, left after the node is dropped (declared after it): the last
+    /// process of a run whose orchestrator is gone removes the run's iceoryx2 files
+    /// ([`super::members`]).
+    pub membership: LeaveOnDrop,
 }
 
 /// Parses the command line, names the process `fm-<role>[-<agent>]`, starts its log
@@ -55,6 +60,14 @@ pub fn boot(role: &str) -> Result<Boot, String> {
             ));
         }
     }
+    let membership = match Membership::join(&args.run_dir, &args.prefix) {
+        Ok(m) => Some(m),
+        Err(e) => {
+            tracing::warn!("{e}: this process will not clean up after a dead orchestrator");
+            None
+        }
+    };
+    let membership = LeaveOnDrop(membership);
     let node = ipc::node(&args.prefix, &name).map_err(|e| e.to_string())?;
     Ok(Boot {
         args,
@@ -62,6 +75,7 @@ pub fn boot(role: &str) -> Result<Boot, String> {
         variant,
         lifeline,
         node,
+        membership,
     })
 }
 

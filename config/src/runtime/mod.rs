@@ -14,7 +14,9 @@
 pub mod args;
 pub mod boot;
 pub mod clock;
+pub mod files;
 pub mod logging;
+pub mod members;
 pub mod messages;
 pub mod ports;
 pub mod process;

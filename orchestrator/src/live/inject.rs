@@ -90,6 +90,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
     };
     let run = registry::find(run_id)?;
+    super::check_access(&run, "inject into")?;
     let s = super::run_scenario(&run)?;
     validate::agent(agent, run.n_agents)?;
     let at_step = match at {
