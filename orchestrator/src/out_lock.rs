@@ -68,7 +68,9 @@ pub fn acquire(out: &Path, run_id: Option<&str>, command: &str) -> Result<OutLoc
         }
         file.set_len(0)
             .and_then(|_| file.rewind())
-            .and_then(|_| file.write_all(holder_text(std::process::id(), run_id, command).as_bytes()))
+            .and_then(|_| {
+                file.write_all(holder_text(std::process::id(), run_id, command).as_bytes())
+            })
             .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         return Ok(OutLock { file, path });
     }

@@ -390,7 +390,7 @@ fn ps_json_lists_no_runs_and_forgets_dead_ones() {
     let stale = runs.join("dead.json");
     std::fs::write(
         &stale,
-        r#"{"id":"dead","prefix":"fmdead_","out_dir":"/nonexistent","scenario":"paper",
+        r#"{"format":"formation-run-record/1","id":"dead","prefix":"fmdead_","out_dir":"/nonexistent","scenario":"paper",
             "variant":"proposed","n_agents":1,"steps":1,"dt_s":0.001,
             "orchestrator_start_ticks":1,"started_unix_s":0.0,
             "processes":[{"role":"orchestrator","agent":null,"pid":4194300}],

@@ -1,9 +1,9 @@
 //! Start-up of a role process: arguments, process name, scenario, node, and the final hello.
 
 use super::args::ChildArgs;
+use super::members::{LeaveOnDrop, Membership};
 use super::messages::Hello;
 use super::ports::{publisher, RunNode};
-use super::members::{LeaveOnDrop, Membership};
 use super::process::Lifeline;
 use crate::{ipc, Scenario, Variant};
 

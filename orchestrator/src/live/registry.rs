@@ -82,8 +82,8 @@ impl RunRecord {
     /// zombie, started at the recorded time (not a reused pid) and belongs to the record's owner.
     pub fn is_live(&self) -> bool {
         let pid = self.orchestrator_pid();
-        let same_owner = std::fs::metadata(format!("/proc/{pid}"))
-            .is_ok_and(|m| m.uid() == self.owner_uid);
+        let same_owner =
+            std::fs::metadata(format!("/proc/{pid}")).is_ok_and(|m| m.uid() == self.owner_uid);
         same_owner
             && procstat::read(pid)
                 .is_some_and(|s| s.alive() && s.start_ticks == self.orchestrator_start_ticks)
@@ -202,7 +202,9 @@ fn write_atomically(path: &Path, rec: &RunRecord) -> std::io::Result<()> {
 fn is_run_id(id: &str) -> bool {
     !id.is_empty()
         && id.len() <= 24
-        && id.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+        && id
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
 }
 
 /// What a file of the runs folder is.
@@ -420,7 +422,10 @@ mod tests {
         assert_eq!(check_dir(&d), Ok(()));
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o777)).unwrap();
         let e = check_dir(&d).unwrap_err();
-        assert!(e.contains(&d.display().to_string()) && e.contains("world-writable"), "{e}");
+        assert!(
+            e.contains(&d.display().to_string()) && e.contains("world-writable"),
+            "{e}"
+        );
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o770)).unwrap();
         assert!(check_dir(&d).unwrap_err().contains("group-writable"));
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
