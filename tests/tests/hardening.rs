@@ -9,7 +9,7 @@
 //! another uid, as in CI's container); they say so and pass vacuously otherwise.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, temp_dir};
+use formation_tests::{bin, formation_in as formation, temp_dir};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -30,16 +30,6 @@ fn chown(path: &Path, uid: u32) {
     let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
     // SAFETY: lchown on a valid C string path.
     assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
-}
-
-/// `formation <args>` with the given runs directory, never building anything.
-fn formation(runs: &Path, args: &[&str]) -> Output {
-    Command::new(bin("formation"))
-        .env("FORMATION_RUNS_DIR", runs)
-        .env_remove("CARGO")
-        .args(args)
-        .output()
-        .expect("formation starts")
 }
 
 fn stderr(o: &Output) -> String {
@@ -78,16 +68,16 @@ fn start_long_run(runs: &Path, out: &Path) -> RunningRun {
 
 /// The run id on the start line of a run.
 fn run_id(run: &RunningRun) -> String {
+    field_after(run, "formation run: id ")
+}
+
+/// What follows `needle` on the first stderr line holding it, up to a comma.
+fn field_after(run: &RunningRun, needle: &str) -> String {
     let line = run
-        .wait_for_line("formation run: id ", TIMEOUT)
-        .expect("start line");
-    line.split("id ")
-        .nth(1)
-        .unwrap()
-        .split(',')
-        .next()
-        .unwrap()
-        .to_string()
+        .wait_for_line(needle, TIMEOUT)
+        .unwrap_or_else(|| panic!("no '{needle}': {}", run.stderr()));
+    let rest = line.split(needle).nth(1).unwrap();
+    rest.split(',').next().unwrap().to_string()
 }
 
 /// Start time after boot of `pid`, clock ticks (`/proc/<pid>/stat` field 22).
@@ -292,18 +282,7 @@ fn runs_started_at_the_same_moment_put_their_plants_on_different_cpus() {
     let set = ["--set", "simulation.duration_s=600"];
     let a = RunningRun::start_with_env(&set, &dir.join("a"), &env);
     let b = RunningRun::start_with_env(&set, &dir.join("b"), &env);
-    let plant_cpu = |r: &RunningRun| {
-        let line = r
-            .wait_for_line("plant cpu ", TIMEOUT)
-            .unwrap_or_else(|| panic!("no placement: {}", r.stderr()));
-        line.split("plant cpu ")
-            .nth(1)
-            .unwrap()
-            .split(',')
-            .next()
-            .unwrap()
-            .to_string()
-    };
+    let plant_cpu = |r: &RunningRun| field_after(r, "plant cpu ");
     let (ca, cb) = (plant_cpu(&a), plant_cpu(&b));
     assert_ne!(ca, cb, "both plants on CPU {ca}");
     drop((a, b));
@@ -334,15 +313,7 @@ fn a_dead_child_is_named_on_stderr_as_soon_as_it_is_found_before_the_run_stops()
     let runs = runs_dir(&dir);
     let mut run = start_long_run(&runs, &dir.join("out"));
     std::thread::sleep(Duration::from_millis(500));
-    let victim = run
-        .role_processes()
-        .into_iter()
-        .find(|pid| {
-            std::fs::read(format!("/proc/{pid}/cmdline"))
-                .map(|c| String::from_utf8_lossy(&c).contains("--agent\u{0}2\u{0}"))
-                .unwrap_or(false)
-        })
-        .expect("agent 3 (--agent 2) is running");
+    let victim = run.agent_pid(2).expect("agent 3 (--agent 2) is running");
     let t0 = Instant::now();
     // SAFETY: kill with a pid of the run.
     unsafe {
@@ -461,8 +432,7 @@ fn the_wall_time_counts_the_steps_not_the_build_of_the_role_binaries() {
     // The progress line's factor is the same measure.
     let progress: f64 = e
         .lines()
-        .filter(|l| l.contains("x real time"))
-        .next_back()
+        .rfind(|l| l.contains("x real time"))
         .and_then(|l| l.split_whitespace().rev().nth(2))
         .and_then(|x| x.trim_end_matches('x').parse().ok())
         .unwrap_or_else(|| panic!("no progress line: {e}"));

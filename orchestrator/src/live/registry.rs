@@ -211,7 +211,7 @@ fn is_run_id(id: &str) -> bool {
 #[derive(Debug)]
 enum Entry {
     /// A record of ours (or, owned by another user, a record of theirs) whose run is live.
-    Live(RunRecord),
+    Live(Box<RunRecord>),
     /// A record or temporary record this program wrote, of a run that is over: safe to delete.
     Stale,
     /// Anything else: never touched.
@@ -252,7 +252,7 @@ fn classify(path: &Path) -> Entry {
     }
     rec.owner_uid = m.uid();
     match (rec.is_live(), tmp, rec.is_foreign()) {
-        (true, false, _) => Entry::Live(rec),
+        (true, false, _) => Entry::Live(Box::new(rec)),
         (true, true, _) | (false, _, true) => Entry::Foreign,
         (false, _, false) => Entry::Stale,
     }
@@ -271,7 +271,7 @@ pub fn list() -> Result<Vec<RunRecord>, String> {
     for e in entries.flatten() {
         let path = e.path();
         match classify(&path) {
-            Entry::Live(r) => runs.push(r),
+            Entry::Live(r) => runs.push(*r),
             Entry::Stale => {
                 let _ = std::fs::remove_file(&path);
             }
