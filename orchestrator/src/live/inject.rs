@@ -181,7 +181,12 @@ fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, Stri
     let start = Instant::now();
     while start.elapsed() < CONFIRM {
         if let Ok(text) = std::fs::read_to_string(&events) {
-            if let Some(line) = text.lines().find(|l| l.contains(&needle)) {
+            // Only a whole line: the orchestrator may be writing it right now.
+            if let Some(line) = text
+                .split_inclusive('\n')
+                .filter_map(|l| l.strip_suffix('\n'))
+                .find(|l| l.contains(&needle))
+            {
                 if line.contains("\"event\":\"rejected\"") {
                     return Err(format!("the run rejected the injection: {line}"));
                 }
