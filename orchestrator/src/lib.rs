@@ -16,6 +16,7 @@ pub mod cli;
 pub mod closed_loop;
 pub mod cpus;
 pub mod live;
+pub mod out_lock;
 pub mod plot;
 pub mod record;
 pub mod rng;

@@ -33,6 +33,14 @@ pub fn main(args: SimArgs) -> ExitCode {
         .common
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}", scenario.name, variant.name())));
+    // Held until the outputs are complete: a second run into the same folder is refused.
+    let _out_lock = match crate::out_lock::acquire(&out, None, "formation sim") {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
     if let Err(e) = write_resolved_scenario(&scenario, &out) {
         eprintln!("error: cannot write {}/scenario.toml: {e}", out.display());
         return ExitCode::from(1);

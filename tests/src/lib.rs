@@ -32,4 +32,15 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// Runs `formation <args>` to its end with the runs directory `runs` (`FORMATION_RUNS_DIR`), never
+/// building anything (no `CARGO` in its environment).
+pub fn formation_in(runs: &std::path::Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(bin("formation"))
+        .env("FORMATION_RUNS_DIR", runs)
+        .env_remove("CARGO")
+        .args(args)
+        .output()
+        .expect("formation starts")
+}
+
 pub mod run;

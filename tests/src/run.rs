@@ -115,6 +115,15 @@ impl RunningRun {
         }
     }
 
+    /// Pid of the agent process started with `--agent index` (0-based), if it is alive.
+    pub fn agent_pid(&self, index: usize) -> Option<u32> {
+        let needle = format!("--agent\u{0}{index}\u{0}");
+        self.role_processes().into_iter().find(|pid| {
+            std::fs::read(format!("/proc/{pid}/cmdline"))
+                .is_ok_and(|c| String::from_utf8_lossy(&c).contains(&needle))
+        })
+    }
+
     /// Role processes of this run still alive (by their `--run-dir`).
     pub fn role_processes(&self) -> Vec<u32> {
         processes_mentioning(&self.out)

@@ -7,10 +7,10 @@
 //! users never interfere; `RunningRun` kills the whole run on drop, even when an assertion fails.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, temp_dir};
+use formation_tests::temp_dir;
 use serde_json::Value;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 use std::time::{Duration, Instant};
 
 /// Generous bound for anything to happen; reaching it means a hang.
@@ -18,12 +18,7 @@ const TIMEOUT: Duration = Duration::from_secs(180);
 
 /// Runs `formation <args>` with the given runs directory.
 fn formation(runs: &Path, args: &[&str]) -> Output {
-    Command::new(bin("formation"))
-        .env("FORMATION_RUNS_DIR", runs)
-        .env_remove("CARGO")
-        .args(args)
-        .output()
-        .expect("formation starts")
+    formation_tests::formation_in(runs, args)
 }
 
 fn stdout(o: &Output) -> String {
@@ -421,7 +416,7 @@ fn ps_json_lists_no_runs_and_forgets_dead_ones() {
     let stale = runs.join("dead.json");
     std::fs::write(
         &stale,
-        r#"{"id":"dead","prefix":"fmdead_","out_dir":"/nonexistent","scenario":"paper",
+        r#"{"format":"formation-run-record/1","id":"dead","prefix":"fmdead_","out_dir":"/nonexistent","scenario":"paper",
             "variant":"proposed","n_agents":1,"steps":1,"dt_s":0.001,
             "orchestrator_start_ticks":1,"started_unix_s":0.0,
             "processes":[{"role":"orchestrator","agent":null,"pid":4194300}],

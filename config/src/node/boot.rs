@@ -2,6 +2,7 @@
 
 use super::args::ChildArgs;
 use super::error::{NodeError, PortError};
+use super::members::{LeaveOnDrop, Membership};
 use super::ports::{publisher, RunNode};
 use super::process::Lifeline;
 use crate::node::ipc;
@@ -22,6 +23,10 @@ pub struct Boot {
     pub lifeline: Lifeline,
     /// Its iceoryx2 node under the run prefix.
     pub node: RunNode,
+    /// Its membership of the run, left after the node is dropped (declared after it): the last
+    /// process of a run whose orchestrator is gone removes the run's iceoryx2 files
+    /// ([`super::members`]).
+    pub membership: LeaveOnDrop,
 }
 
 /// Names the process `fm-<role>[-<agent>]`, starts its log
@@ -59,6 +64,14 @@ pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
             )));
         }
     }
+    let membership = match Membership::join(&args.run_dir, &args.prefix) {
+        Ok(m) => Some(m),
+        Err(e) => {
+            tracing::warn!("{e}: this process will not clean up after a dead orchestrator");
+            None
+        }
+    };
+    let membership = LeaveOnDrop(membership);
     let node = ipc::node(&args.prefix, &name)?;
     Ok(Boot {
         args,
@@ -66,6 +79,7 @@ pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
         variant,
         lifeline,
         node,
+        membership,
     })
 }
 

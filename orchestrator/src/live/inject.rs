@@ -91,6 +91,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
     };
     let run = registry::find(run_id)?;
+    super::check_access(&run, "inject into")?;
     let s = super::run_scenario(&run)?;
     validate::agent(agent, run.n_agents)?;
     let at_step = match at {
@@ -181,7 +182,12 @@ fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, Stri
     let start = Instant::now();
     while start.elapsed() < CONFIRM {
         if let Ok(text) = std::fs::read_to_string(&events) {
-            if let Some(line) = text.lines().find(|l| l.contains(&needle)) {
+            // Only a whole line: the orchestrator may be writing it right now.
+            if let Some(line) = text
+                .split_inclusive('\n')
+                .filter_map(|l| l.strip_suffix('\n'))
+                .find(|l| l.contains(&needle))
+            {
                 if line.contains("\"event\":\"rejected\"") {
                     return Err(format!("the run rejected the injection: {line}"));
                 }

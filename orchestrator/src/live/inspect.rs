@@ -125,7 +125,9 @@ pub fn main(args: InspectArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    if let Err(e) = super::validate::agent(args.agent, run.n_agents) {
+    if let Err(e) = super::check_access(&run, "inspect")
+        .and_then(|()| super::validate::agent(args.agent, run.n_agents))
+    {
         eprintln!("error: {e}");
         return ExitCode::from(EXIT_INVALID);
     }

@@ -25,6 +25,40 @@ pub fn run_scenario(run: &registry::RunRecord) -> Result<Scenario, String> {
     Scenario::from_toml_str(&text).map_err(|e| format!("cannot parse {}: {e}", path.display()))
 }
 
+/// Whether this user may open the run's iceoryx2 files: the run must be this user's (its record is
+/// owned by the user) and its files under the prefix too; otherwise a clear permission error that
+/// names the owner (`inspect` and `inject` exit 2 with it).
+pub fn check_access(run: &registry::RunRecord, what: &str) -> Result<(), String> {
+    if run.is_foreign() {
+        return Err(run.permission_error(what));
+    }
+    let me = formation_config::node::files::current_uid();
+    for path in ipc::residue(&run.prefix).unwrap_or_default() {
+        use std::os::unix::fs::MetadataExt;
+        match std::fs::symlink_metadata(&path) {
+            Ok(m) if m.uid() != me => {
+                return Err(format!(
+                    "permission denied: {} of run {} belongs to {}, not to {}; only the run's \
+                     owner can {what} it",
+                    path.display(),
+                    run.id,
+                    formation_config::node::files::user_label(m.uid()),
+                    formation_config::node::files::user_label(me)
+                ));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+                return Err(format!(
+                    "permission denied on {} of run {}: {e}",
+                    path.display(),
+                    run.id
+                ));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// A node of this client process under the run's prefix.
 pub fn client_node(run: &registry::RunRecord, role: &str) -> Result<RunNode, String> {
     ipc::node(&run.prefix, &format!("fm-{role}-{}", std::process::id())).map_err(|e| e.to_string())

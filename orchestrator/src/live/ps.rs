@@ -50,7 +50,13 @@ fn process_json(run: &RunRecord, before: &[Option<ProcStat>], window_s: f64) -> 
 
 /// Entry point of `formation ps`.
 pub fn main(args: PsArgs) -> ExitCode {
-    let runs = registry::list();
+    let runs = match registry::list() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(crate::cli::EXIT_INVALID);
+        }
+    };
     let before: Vec<Vec<Option<ProcStat>>> = runs
         .iter()
         .map(|r| r.processes.iter().map(|p| procstat::read(p.pid)).collect())

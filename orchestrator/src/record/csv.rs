@@ -7,6 +7,11 @@ use formation_config::Scenario;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
+use std::sync::mpsc::RecvTimeoutError;
+use std::time::{Duration, Instant};
+
+/// Longest time written rows stay in the writer's buffer.
+pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
 
 /// Column names, in order.
 pub const COLUMNS: &[&str] = &[
@@ -115,12 +120,31 @@ impl TrajectoryWriter {
             .name("csv-writer".into())
             .spawn(move || -> std::io::Result<()> {
                 formation_config::node::sched::background_thread();
-                for msg in rx {
-                    match msg {
-                        Msg::Step(r) => rows.write_rows(&r)?,
-                        Msg::Flush(reply) => {
-                            let _ = reply.send(rows.flush());
+                // Rows reach the file at least every FLUSH_EVERY, so a killed run leaves a
+                // readable prefix (whole lines: the buffer is written out between rows).
+                let mut flushed = Instant::now();
+                let mut pending = false;
+                loop {
+                    let wait = if pending {
+                        FLUSH_EVERY.saturating_sub(flushed.elapsed())
+                    } else {
+                        Duration::from_secs(3600)
+                    };
+                    match rx.recv_timeout(wait) {
+                        Ok(Msg::Step(r)) => {
+                            rows.write_rows(&r)?;
+                            pending = true;
                         }
+                        Ok(Msg::Flush(reply)) => {
+                            let _ = reply.send(rows.flush());
+                            (flushed, pending) = (Instant::now(), false);
+                        }
+                        Err(RecvTimeoutError::Timeout) => {}
+                        Err(RecvTimeoutError::Disconnected) => break,
+                    }
+                    if pending && flushed.elapsed() >= FLUSH_EVERY {
+                        rows.flush()?;
+                        (flushed, pending) = (Instant::now(), false);
                     }
                 }
                 rows.flush()

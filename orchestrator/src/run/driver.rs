@@ -25,6 +25,9 @@ pub enum Outcome {
     Interrupted,
     /// A role process died or the protocol broke: the message.
     Failed(String),
+    /// A role process exited or died: the line naming it, printed on stderr when it was detected
+    /// (and in the log through `Debug`).
+    Died(#[allow(dead_code)] String),
 }
 
 /// The orchestrator's ports.
@@ -93,7 +96,12 @@ fn watch(children: &mut [RoleProcess], interrupted: &AtomicBool) -> Option<Outco
     if interrupted.load(Ordering::SeqCst) {
         return Some(Outcome::Interrupted);
     }
-    spawn::check(children).map(|d| Outcome::Failed(format!("{d}; stopping the run")))
+    spawn::check(children).map(|d| {
+        // Said at once, before the other processes are stopped (which takes up to STOP_GRACE).
+        let line = format!("{d}; stopping the run");
+        eprintln!("error: {line}");
+        Outcome::Died(line)
+    })
 }
 
 /// Waits until plant, leader and the N agents have created their ports.

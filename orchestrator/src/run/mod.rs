@@ -22,6 +22,7 @@ use crate::record::Recorder;
 use driver::Outcome;
 use formation_config::node::args::ChildArgs;
 use formation_config::node::ipc;
+use formation_config::node::members::Membership;
 use formation_config::protocol::messages::Role;
 use formation_config::protocol::services as names;
 use formation_config::{Scenario, Variant};
@@ -106,11 +107,17 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(cli::EXIT_INVALID);
         }
     };
-    let others = crate::live::registry::list()
-        .iter()
-        .filter(|r| r.is_live())
-        .count();
-    let placement = placement::Placement::resolve(&pin, args.realtime, &allowed, others);
+    // The runs folder must be this user's alone (exit 2 otherwise); records of runs that are over
+    // are reaped on the way.
+    let runs_dir = match crate::live::registry::checked_runs_dir(true)
+        .and_then(|d| crate::live::registry::list().map(|_| d))
+    {
+        Ok(d) => d.unwrap_or_else(crate::live::registry::runs_dir),
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
     let mode = Mode {
         realtime: args.realtime,
         wait: args.wait,
@@ -134,6 +141,34 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
     let run_id = new_run_id();
     let prefix = names::run_prefix(&run_id);
+    // Held until the outputs are complete: a second run into the same folder is refused.
+    let out_lock = match crate::out_lock::acquire(&out, Some(&run_id), "formation run") {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
+    // The rotation of an automatic layout, claimed atomically (see placement::claim_slot).
+    let rotating = matches!(pin, placement::PinRequest::Auto) && !args.realtime;
+    let slot = if rotating {
+        placement::claim_slot(&runs_dir).unwrap_or_else(|e| {
+            eprintln!("warning: {e}; the layout is not rotated");
+            placement::Slot::none()
+        })
+    } else {
+        placement::Slot::none()
+    };
+    let placement = placement::Placement::resolve(&pin, args.realtime, &allowed, slot.index);
+    // Held until the run's iceoryx2 files are removed below; if this process dies, the last role
+    // process to exit removes them (formation_config::node::members).
+    let membership = match Membership::create(&out, &prefix) {
+        Ok(m) => Some(m),
+        Err(e) => {
+            eprintln!("warning: {e}: a killed run would leave its iceoryx2 files behind");
+            None
+        }
+    };
     let result = run(
         &scenario,
         variant,
@@ -147,6 +182,9 @@ pub fn main(args: RunArgs) -> ExitCode {
     if let Err(e) = cleanup::remove(&prefix) {
         eprintln!("warning: {e}");
     }
+    drop(membership);
+    drop(slot);
+    drop(out_lock);
     match result {
         Ok((Outcome::Completed, summary)) => {
             summary.print_table();
@@ -171,6 +209,8 @@ pub fn main(args: RunArgs) -> ExitCode {
             );
             ExitCode::from(EXIT_INTERRUPTED)
         }
+        // Named on stderr when it was detected.
+        Ok((Outcome::Died(_), _)) => ExitCode::from(1),
         Ok((Outcome::Failed(e), _)) | Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(1)
@@ -215,7 +255,6 @@ fn run(
     prefix: &str,
     interrupted: &AtomicBool,
 ) -> Result<(Outcome, crate::record::Summary), String> {
-    let start = Instant::now();
     if !mode.realtime {
         // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
         // under SCHED_BATCH: a woken process waits for the running one to block instead of
@@ -310,6 +349,8 @@ fn run(
         });
     }
     let registration = Registration::create(RunRecord {
+        format: String::new(),
+        owner_uid: 0,
         id: run_id.to_string(),
         prefix: prefix.to_string(),
         out_dir: run_dir.clone(),
@@ -334,18 +375,26 @@ fn run(
         registration,
     };
     let mut step_timing = step_timing::StepTiming::default();
+    // The wall time of the run is that of its steps: from every role process ready (after any
+    // build of the role binaries and the start-up) to the last step recorded.
+    let mut wall = Duration::ZERO;
     let (outcome, recorded) = match driver::wait_for_hellos(&ports, n, &mut children.0, interrupted)
     {
-        Ok(()) => driver::drive(
-            &ports,
-            &mut live,
-            &formation_leader::Mission::from_scenario(scenario),
-            &mut recorder,
-            scenario,
-            &mut children.0,
-            interrupted,
-            &mut step_timing,
-        ),
+        Ok(()) => {
+            let start = Instant::now();
+            let result = driver::drive(
+                &ports,
+                &mut live,
+                &formation_leader::Mission::from_scenario(scenario),
+                &mut recorder,
+                scenario,
+                &mut children.0,
+                interrupted,
+                &mut step_timing,
+            );
+            wall = start.elapsed();
+            result
+        }
         Err(o) => (o, 0),
     };
     tracing::info!(recorded, outcome = ?outcome, "run ending");
@@ -364,7 +413,7 @@ fn run(
         recorder.set_timing(t);
     }
     let summary = recorder
-        .finish(recorded, start.elapsed().as_secs_f64())
+        .finish(recorded, wall.as_secs_f64())
         .map_err(|e| format!("cannot write {}/summary.json: {e}", out.display()))?;
     Ok((outcome, summary))
 }

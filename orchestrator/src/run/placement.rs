@@ -10,6 +10,50 @@
 //! With at least N + 1 CPUs every process of the step gets a CPU of its own.
 
 use crate::cpus;
+use formation_config::node::files::{self, Lock};
+use std::path::Path;
+
+/// Most concurrent runs told apart by [`claim_slot`] (beyond, the layout rotates from slot 0).
+const MAX_SLOTS: usize = 256;
+
+/// A rotation slot held for the run's lifetime: an exclusive `flock` on
+/// `<runs dir>/cpu-slot-<k>.lock`, released by the kernel when the run ends or dies.
+#[derive(Debug)]
+pub struct Slot {
+    /// Slot number: the automatic layout of the run is rotated by it.
+    pub index: usize,
+    _file: Option<std::fs::File>,
+}
+
+impl Slot {
+    /// No slot (the layout is not rotated).
+    pub fn none() -> Slot {
+        Slot {
+            index: 0,
+            _file: None,
+        }
+    }
+}
+
+/// Claims the lowest free slot in `dir`. Two runs starting at the same moment get different slots
+/// (each `flock` succeeds for one process only), so their plants go to different CPUs; a slot of a
+/// run that ended is free again.
+pub fn claim_slot(dir: &Path) -> Result<Slot, String> {
+    for index in 0..MAX_SLOTS {
+        let path = dir.join(format!("cpu-slot-{index}.lock"));
+        let file = files::open_lock_file(&path, true)
+            .map_err(|e| format!("cannot claim a CPU slot: {e}"))?;
+        if files::try_lock(&file, Lock::Exclusive)
+            .map_err(|e| format!("cannot lock {}: {e}", path.display()))?
+        {
+            return Ok(Slot {
+                index,
+                _file: Some(file),
+            });
+        }
+    }
+    Ok(Slot::none())
+}
 
 /// What `--pin` asked for.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,7 +90,7 @@ pub struct Placement {
 
 impl Placement {
     /// The placement for `request`: `None` when nothing is pinned. `allowed` is this process's
-    /// affinity; `others` the number of other live runs on the machine, which rotates an automatic
+    /// affinity; `others` the run's [`Slot`] (0 when it runs alone), which rotates an automatic
     /// layout so that concurrent runs do not stack their plants on the same CPU.
     pub fn resolve(
         request: &PinRequest,
@@ -114,6 +158,34 @@ mod tests {
         let first = Placement::resolve(&PinRequest::Auto, false, &[0, 1], 0).unwrap();
         let second = Placement::resolve(&PinRequest::Auto, false, &[0, 1], 1).unwrap();
         assert_ne!(first.plant(), second.plant());
+    }
+
+    #[test]
+    fn runs_claiming_slots_at_the_same_moment_all_get_different_ones() {
+        let dir = std::env::temp_dir().join(format!("fm-slots-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let k = 6;
+        let barrier = std::sync::Arc::new(std::sync::Barrier::new(k));
+        let handles: Vec<_> = (0..k)
+            .map(|_| {
+                let (dir, barrier) = (dir.clone(), barrier.clone());
+                std::thread::spawn(move || {
+                    barrier.wait();
+                    claim_slot(&dir).unwrap()
+                })
+            })
+            .collect();
+        let mut slots: Vec<Slot> = handles.into_iter().map(|h| h.join().unwrap()).collect();
+        let mut got: Vec<usize> = slots.iter().map(|s| s.index).collect();
+        got.sort_unstable();
+        assert_eq!(got, (0..k).collect::<Vec<_>>());
+        // A released slot is claimed again.
+        let freed = slots.iter().position(|s| s.index == 2).unwrap();
+        drop(slots.swap_remove(freed));
+        assert_eq!(claim_slot(&dir).unwrap().index, 2);
+        drop(slots);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

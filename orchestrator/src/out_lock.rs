@@ -1,0 +1,125 @@
+//! The output-folder lock: `formation run` and `formation sim` hold an advisory lock (`flock`) on
+//! `DIR/.formation.lock` for as long as they write into `DIR`, so a second run into the same folder
+//! is refused at once (exit 2) instead of mixing its rows into the first one's CSV. The file holds
+//! who has it (pid, run id, command); it is created with mode 0600 without following a symbolic
+//! link, and removed by its holder at the end.
+
+use formation_config::node::files::{self, Lock};
+use std::fs::File;
+use std::io::{Read, Seek, Write};
+use std::path::{Path, PathBuf};
+
+/// Name of the lock file in the output folder.
+pub const LOCK_NAME: &str = ".formation.lock";
+
+/// A held output-folder lock; released (and its file removed) on drop.
+#[derive(Debug)]
+pub struct OutLock {
+    file: File,
+    path: PathBuf,
+}
+
+/// Who holds the lock, as written in the file: `run <id> (pid <pid>, formation <command>)`.
+fn holder_text(pid: u32, run_id: Option<&str>, command: &str) -> String {
+    format!(
+        "pid {pid}\nrun {}\ncommand {command}\n",
+        run_id.unwrap_or("-")
+    )
+}
+
+/// One line naming the holder from the file's text.
+fn describe_holder(text: &str) -> String {
+    let field = |key: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(key).map(|v| v.trim().to_string()))
+            .filter(|v| !v.is_empty() && v != "-")
+    };
+    let command = field("command ").unwrap_or_else(|| "formation".into());
+    match (field("run "), field("pid ")) {
+        (Some(id), Some(pid)) => format!("`{command}` (run {id}, pid {pid})"),
+        (None, Some(pid)) => format!("`{command}` (pid {pid})"),
+        _ => format!("`{command}` (still starting)"),
+    }
+}
+
+/// Takes the lock of `out` (creating the folder), or says which run holds it.
+pub fn acquire(out: &Path, run_id: Option<&str>, command: &str) -> Result<OutLock, String> {
+    std::fs::create_dir_all(out)
+        .map_err(|e| format!("cannot create the output folder {}: {e}", out.display()))?;
+    let path = out.join(LOCK_NAME);
+    // The holder removes the file at its end: a file opened just before that is no longer the one
+    // at the path once locked, so open again.
+    for _ in 0..16 {
+        let mut file = files::open_lock_file(&path, true)
+            .map_err(|e| format!("cannot lock the output folder {}: {e}", out.display()))?;
+        let locked = files::try_lock(&file, Lock::Exclusive)
+            .map_err(|e| format!("cannot lock {}: {e}", path.display()))?;
+        if !locked {
+            let mut text = String::new();
+            let _ = file.read_to_string(&mut text);
+            return Err(format!(
+                "the output folder {} is in use by {}: choose another --out or wait for it to end",
+                out.display(),
+                describe_holder(&text)
+            ));
+        }
+        if !files::is_at(&file, &path) {
+            continue;
+        }
+        file.set_len(0)
+            .and_then(|_| file.rewind())
+            .and_then(|_| {
+                file.write_all(holder_text(std::process::id(), run_id, command).as_bytes())
+            })
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        return Ok(OutLock { file, path });
+    }
+    Err(format!(
+        "cannot lock the output folder {}: its lock file keeps changing",
+        out.display()
+    ))
+}
+
+impl Drop for OutLock {
+    fn drop(&mut self) {
+        // Removed while still locked; whoever opened it meanwhile opens it again (see `acquire`).
+        if files::is_at(&self.file, &self.path) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+        files::unlock(&self.file);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_second_holder_is_refused_naming_the_first_and_the_lock_frees_at_drop() {
+        let d = std::env::temp_dir().join(format!("fm-outlock-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        let first = acquire(&d, Some("abc123"), "formation run").unwrap();
+        let e = acquire(&d, None, "formation sim").unwrap_err();
+        assert!(e.contains("run abc123"), "{e}");
+        assert!(e.contains(&format!("pid {}", std::process::id())), "{e}");
+        assert!(e.contains(&d.display().to_string()), "{e}");
+        drop(first);
+        assert!(!d.join(LOCK_NAME).exists());
+        let again = acquire(&d, None, "formation sim").unwrap();
+        drop(again);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn a_symbolic_link_at_the_lock_name_is_refused_and_not_followed() {
+        let d = std::env::temp_dir().join(format!("fm-outlock-link-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        let victim = d.join("victim");
+        std::fs::write(&victim, "precious").unwrap();
+        std::os::unix::fs::symlink(&victim, d.join(LOCK_NAME)).unwrap();
+        assert!(acquire(&d, None, "formation sim").is_err());
+        assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}
