@@ -13,7 +13,7 @@ use std::process::ExitCode;
 #[derive(clap::Args, Debug)]
 pub struct ScenarioArgs {
     /// Number of quadrotors (2..=64).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub n: usize,
     /// Communication graph: `ring` or `path`.
     #[arg(long, default_value = "path")]

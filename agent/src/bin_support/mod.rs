@@ -80,7 +80,7 @@ pub fn run() -> Result<(), String> {
                 }
             }
             if let Some(why) = b.lifeline.must_stop() {
-                return Err(format!("agent {i} stopping at step {k}: {why}"));
+                return Err(format!("agent {} stopping at step {k}: {why}", i + 1));
             }
             while let Some(d) = ports.delays.receive().map_err(|e| format!("{e:?}"))? {
                 delays.observe(&d);

@@ -103,7 +103,7 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), St
             }
         }
         if let Some(why) = b.lifeline.must_stop() {
-            return Err(format!("agent {i} stopping: {why}"));
+            return Err(format!("agent {} stopping: {why}", i + 1));
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
@@ -117,5 +117,5 @@ fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), String> {
     r.histograms
         .insert("controller_step".into(), m.compute.clone());
     r.counters.insert("skipped_states".into(), m.skipped);
-    r.write(&b.args.run_dir, &format!("agent-{i}"))
+    r.write(&b.args.run_dir, &format!("agent-{}", i + 1))
 }

@@ -21,12 +21,13 @@ pub struct Boot {
     pub node: RunNode,
 }
 
-/// Parses the command line, names the process `fm-<role>[-<agent>]`, starts its log
-/// (`<run dir>/logs/<role>[-<agent>].log`), loads the scenario and creates the node.
+/// Parses the command line, names the process and its node `fm-<role>[-<agent id>]`, starts its
+/// log (`<run dir>/logs/<role>[-<agent id>].log`), loads the scenario and creates the node. Agent ids
+/// are 1-based wherever a person reads them (`--agent` itself is the 0-based index of the wire).
 pub fn boot(role: &str) -> Result<Boot, String> {
     let args = ChildArgs::parse(std::env::args_os().skip(1))?;
     let name = match args.agent {
-        Some(i) => format!("fm-{role}-{i}"),
+        Some(i) => format!("fm-{role}-{}", i + 1),
         None => format!("fm-{role}"),
     };
     let lifeline = Lifeline::install(&name);
@@ -50,7 +51,8 @@ pub fn boot(role: &str) -> Result<Boot, String> {
     if let Some(i) = args.agent {
         if i >= scenario.n_agents() {
             return Err(format!(
-                "agent {i} does not exist (N = {})",
+                "agent {} (--agent {i}) does not exist (N = {})",
+                i + 1,
                 scenario.n_agents()
             ));
         }
