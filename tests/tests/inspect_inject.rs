@@ -385,6 +385,8 @@ fn rejected_injections_exit_2_and_change_nothing() {
     // Nothing reached the run: no event was recorded.
     let events = std::fs::read_to_string(run.out.join("events.jsonl")).unwrap_or_default();
     assert!(events.trim().is_empty(), "events.jsonl: {events}");
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
