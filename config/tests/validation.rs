@@ -2,7 +2,8 @@
 //! the error names the offending field and the right assumption.
 
 use formation_config::scenario::validate::{
-    validate, ValidationError, A1, A2, A4, A5, CTRL, FINITE, INDEX, PHYS, SAT, SIM,
+    validate, ValidationError, A1, A2, A4, A5, CTRL, D11, EQ15, EQ35_50, EQ46_49, FINITE, INDEX,
+    MISSION, PHYS, SAT, SIM,
 };
 use formation_config::scenario::{Edge, PAPER_TOML};
 use formation_config::{Scenario, MAX_AGENTS};
@@ -81,6 +82,27 @@ fn every_error_is_reported_not_just_the_first() {
     let errs = errors(&s);
     assert!(errs.iter().any(|e| e.field == "vehicle.mass_kg"));
     assert!(errs.iter().any(|e| e.field == "agents[2].delay"));
+}
+
+#[test]
+fn error_display_of_an_agents_field_also_names_the_1_based_agent_id() {
+    let mut s = Scenario::paper();
+    s.agents[2].delay.base_s = 0.045;
+    let errs = errors(&s);
+    let e = errs
+        .iter()
+        .find(|e| e.field == "agents[2].delay")
+        .expect("the delay of agents[2] is rejected");
+    assert_eq!(e.agent_id(), Some(3));
+    let text = e.to_string();
+    assert!(text.starts_with("agents[2].delay (agent 3): "), "{text}");
+    let other = ValidationError {
+        field: "controller.position.k_p".into(),
+        assumption: CTRL,
+        message: "m".into(),
+    };
+    assert_eq!(other.agent_id(), None);
+    assert!(!other.to_string().contains("(agent"));
 }
 
 #[test]
@@ -643,17 +665,17 @@ rejects!(
     }
 );
 rejects!(
-    negative_rbfnn_learning_rate_is_rejected,
+    negative_rbfnn_learning_rate_is_rejected_naming_eq_15,
     "controller.position.nn_learning_rate",
-    CTRL,
+    EQ15,
     |s| {
         s.controller.position.nn_learning_rate = -1.0;
     }
 );
 rejects!(
-    negative_rbfnn_leakage_is_rejected,
+    negative_rbfnn_leakage_is_rejected_naming_eq_15,
     "controller.position.nn_leakage",
-    CTRL,
+    EQ15,
     |s| {
         s.controller.position.nn_leakage = -0.001;
     }
@@ -819,25 +841,25 @@ rejects!(
     }
 );
 rejects!(
-    negative_adaptive_rate_is_rejected,
+    negative_adaptive_rate_is_rejected_naming_eq_46_49,
     "controller.adaptive.delta_rate",
-    CTRL,
+    EQ46_49,
     |s| {
         s.controller.adaptive.delta_rate = -0.31;
     }
 );
 rejects!(
-    negative_adaptive_leakage_is_rejected,
+    negative_adaptive_leakage_is_rejected_naming_eq_46_49,
     "controller.adaptive.gamma_leakage",
-    CTRL,
+    EQ46_49,
     |s| {
         s.controller.adaptive.gamma_leakage = -0.85;
     }
 );
 rejects!(
-    negative_auxiliary_gain_is_rejected,
+    negative_auxiliary_gain_is_rejected_naming_eq_50,
     "controller.auxiliary.k2_e",
-    CTRL,
+    EQ35_50,
     |s| {
         s.controller.auxiliary.k2_e = -2.0;
     }
@@ -921,5 +943,126 @@ fn scenario_without_fault_identification_section_parses_with_identification_off(
         [0.0; 3]
     );
     assert_eq!(s.controller.fault_identification.composite_rate, 0.0);
+}
+
+// ---------------------------------------------------------------- signs of the remaining gains
+
+rejects!(
+    duration_shorter_than_one_step_is_rejected_as_a_run_without_steps,
+    "simulation.duration_s",
+    SIM,
+    |s| {
+        s.simulation.duration_s = 0.0004; // dt = 0.001: round(0.4) = 0 steps
+    }
+);
+#[test]
+fn duration_of_exactly_one_step_is_accepted() {
+    let mut s = Scenario::paper();
+    s.simulation.duration_s = s.simulation.dt_s;
+    assert!(!errors(&s)
+        .iter()
+        .any(|e| e.field == "simulation.duration_s"));
+}
+rejects!(
+    negative_rbfnn_position_weight_k_p_is_rejected_naming_eq_15,
+    "controller.position.nn_k_p",
+    "eq. (15)",
+    |s| {
+        s.controller.position.nn_k_p = -5.0;
+    }
+);
+rejects!(
+    negative_rbfnn_velocity_weight_k_v_is_rejected_naming_eq_15,
+    "controller.position.nn_k_v",
+    "eq. (15)",
+    |s| {
+        s.controller.position.nn_k_v = -1e308;
+    }
+);
+rejects!(
+    negative_leader_velocity_damping_is_rejected_naming_d11,
+    "controller.position.leader_velocity_damping",
+    D11,
+    |s| {
+        s.controller.position.leader_velocity_damping = -1.6;
+    }
+);
+rejects!(
+    negative_leader_position_gain_is_rejected_naming_d11,
+    "controller.position.leader_position_gain",
+    D11,
+    |s| {
+        s.controller.position.leader_position_gain = -1.0;
+    }
+);
+rejects!(
+    negative_initial_disturbance_bound_estimate_is_rejected_naming_eq_49,
+    "controller.adaptive.disturbance_hat_initial",
+    "eq. (49)",
+    |s| {
+        s.controller.adaptive.disturbance_hat_initial = -0.1;
+    }
+);
+rejects!(
+    auxiliary_gain_k1_e_of_one_is_rejected_naming_eq_35,
+    "controller.auxiliary.k1_e",
+    "K_iE > 1",
+    |s| {
+        s.controller.auxiliary.k1_e = 1.0;
+    }
+);
+rejects!(
+    non_positive_auxiliary_gamma1_e_is_rejected_naming_eq_35,
+    "controller.auxiliary.gamma1_e",
+    EQ35_50,
+    |s| {
+        s.controller.auxiliary.gamma1_e = 0.0;
+    }
+);
+rejects!(
+    negative_auxiliary_gamma2_e_is_rejected_naming_eq_50,
+    "controller.auxiliary.gamma2_e",
+    EQ35_50,
+    |s| {
+        s.controller.auxiliary.gamma2_e = -0.2;
+    }
+);
+rejects!(
+    non_positive_leader_convergence_rate_is_rejected_naming_section_4,
+    "mission.leader.convergence_rate",
+    MISSION,
+    |s| {
+        s.mission.leader.convergence_rate = -2.0;
+    }
+);
+rejects!(
+    non_positive_leader_climb_rate_is_rejected_naming_section_4,
+    "mission.leader.climb_rate",
+    MISSION,
+    |s| {
+        s.mission.leader.climb_rate = 0.0;
+    }
+);
+rejects!(
+    negative_formation_radius_is_rejected_naming_section_4,
+    "mission.formation.cover_radius_m",
+    MISSION,
+    |s| {
+        s.mission.formation.cover_radius_m = -2.0;
+    }
+);
+rejects!(
+    negative_spin_onset_sharpness_is_rejected_naming_section_4,
+    "mission.formation.spin_onset_sharpness",
+    MISSION,
+    |s| {
+        s.mission.formation.spin_onset_sharpness = -1.0;
+    }
+);
+#[test]
+fn zero_rbfnn_gains_switch_the_update_off_and_are_accepted() {
+    let mut s = Scenario::paper();
+    s.controller.position.nn_k_p = 0.0;
+    s.controller.position.nn_k_v = 0.0;
     assert_eq!(validate(&s), Ok(()));
 }

@@ -1,48 +1,226 @@
-//! Shared command-line plumbing: loading and validating scenarios with exit code 2 on bad input.
+//! Shared command-line plumbing: exit codes, defaults parsed by clap, whole-number arguments, the
+//! `--set path=value` overrides, and loading and validating scenarios (exit code 2 on bad input).
+//!
+//! Every exit code of every subcommand is listed in docs/cli.md.
 
 use formation_config::scenario::validate::validate;
 use formation_config::Scenario;
 use std::process::ExitCode;
 
-/// Exit code for invalid input (bad scenario, bad arguments).
+/// Exit code for invalid input (bad scenario, bad arguments); clap's own usage errors use it too.
 pub const EXIT_INVALID: u8 = 2;
+/// Exit code when the command ran to its end and wrote its outputs, but its result is a failure:
+/// `check` found a FAIL verdict, `sim`/`run` diverged.
+pub const EXIT_RESULT_FAILED: u8 = 3;
+/// Exit code after Ctrl-C (128 + SIGINT).
+pub const EXIT_INTERRUPTED: u8 = 130;
 
-/// Applies `--set path=value` overrides (TOML paths such as `controller.position.k_p` or
-/// `agents[2].delay.base_s`; values in TOML syntax) to a scenario.
+/// The arguments of subcommand `name` with every default applied by clap, exactly as if the
+/// subcommand had been given with no argument (bare `formation` is `formation run`).
+pub fn defaults<T: clap::Args + clap::FromArgMatches>(name: &'static str) -> T {
+    let command = T::augment_args(clap::Command::new(name));
+    let matches = command
+        .try_get_matches_from([name])
+        .unwrap_or_else(|e| e.exit());
+    T::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
+/// Value parser of a whole-number argument (counts, ids, microseconds). Negative values reach it
+/// (the argument sets `allow_negative_numbers`) so that the error names the argument and says what
+/// is wrong instead of clap's `unexpected argument '-3'`.
+pub fn whole_number<T: TryFrom<u64>>(text: &str) -> Result<T, String> {
+    let expected = "expected a whole number >= 0";
+    match text.trim().parse::<i128>() {
+        Ok(v) if v < 0 => Err(format!("{v} is negative: {expected}")),
+        Ok(v) => u64::try_from(v)
+            .ok()
+            .and_then(|v| T::try_from(v).ok())
+            .ok_or_else(|| format!("{v} is too large")),
+        Err(_) => Err(format!("'{text}' is not a whole number: {expected}")),
+    }
+}
+
+/// Which elements of an array a `--set` path segment selects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Index {
+    /// `[k]`, 0-based (TOML arrays).
+    At(usize),
+    /// `[*]`: every element.
+    Every,
+}
+
+/// One segment of a `--set` path: a key, optionally indexed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Segment {
+    /// The key (`[A-Za-z_][A-Za-z0-9_]*`).
+    pub key: String,
+    /// The index, if any.
+    pub index: Option<Index>,
+}
+
+/// A parsed `--set path=value`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Override {
+    /// The path, e.g. `agents[*].delay.base_s`.
+    pub path: Vec<Segment>,
+    /// The value (one TOML value).
+    pub value: toml::Value,
+}
+
+/// What a `--set` path looks like.
+const PATH_GRAMMAR: &str =
+    "key(.key)* where a key is [A-Za-z_][A-Za-z0-9_]* optionally followed by \
+                            one index [k] (0-based) or [*] (every element)";
+
+/// Parses one `--set` argument. It must be `path=value` exactly (spaces may surround the `=`): the
+/// path follows [`PATH_GRAMMAR`], the value is one TOML value with nothing after it, on one line.
+pub fn parse_override(set: &str) -> Result<Override, String> {
+    let fail = |why: String| format!("--set {set:?}: {why}");
+    if set.contains(['\n', '\r']) {
+        return Err(fail(
+            "contains a line break; give one path=value per --set".into(),
+        ));
+    }
+    let (path, value) = set
+        .split_once('=')
+        .ok_or_else(|| fail("expected path=value".into()))?;
+    // Spaces may surround the `=` (as in TOML), nowhere else in the path.
+    let path = parse_path(path.trim_end_matches([' ', '\t']))
+        .map_err(|why| fail(format!("{why}; expected {PATH_GRAMMAR}")))?;
+    let text = value.trim_matches([' ', '\t']);
+    if text.is_empty() {
+        return Err(fail("the value is missing".into()));
+    }
+    let value = serde::Deserialize::deserialize(toml::de::ValueDeserializer::new(text)).map_err(
+        |e: toml::de::Error| {
+            fail(format!(
+                "the value '{text}' is not one TOML value: {}",
+                e.message()
+            ))
+        },
+    )?;
+    Ok(Override { path, value })
+}
+
+fn parse_path(path: &str) -> Result<Vec<Segment>, String> {
+    if path.is_empty() {
+        return Err("the path is empty".into());
+    }
+    path.split('.').map(parse_segment).collect()
+}
+
+fn parse_segment(part: &str) -> Result<Segment, String> {
+    let key_len = part
+        .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+        .unwrap_or(part.len());
+    let (key, rest) = part.split_at(key_len);
+    if key.is_empty() || key.starts_with(|c: char| c.is_ascii_digit()) {
+        return Err(format!("'{part}' does not start with a key"));
+    }
+    let index = if rest.is_empty() {
+        None
+    } else {
+        let inner = rest
+            .strip_prefix('[')
+            .and_then(|r| r.strip_suffix(']'))
+            .filter(|inner| !inner.contains(['[', ']']))
+            .ok_or_else(|| format!("'{part}': '{rest}' is not one index [k] or [*]"))?;
+        if inner == "*" {
+            Some(Index::Every)
+        } else if !inner.is_empty() && inner.bytes().all(|b| b.is_ascii_digit()) {
+            Some(Index::At(inner.parse().map_err(|_| {
+                format!("'{part}': index {inner} is too large")
+            })?))
+        } else {
+            return Err(format!(
+                "'{part}': index '{inner}' is not a whole number >= 0 or *"
+            ));
+        }
+    };
+    Ok(Segment {
+        key: key.to_string(),
+        index,
+    })
+}
+
+/// How a message names element `k` of the array at `path`: `agents[k]` also says which agent it
+/// is (agent ids are 1-based everywhere else).
+fn element(path: &str, k: usize) -> String {
+    if path == "agents" {
+        format!("agents[{k}] (agent {})", k + 1)
+    } else {
+        format!("{path}[{k}]")
+    }
+}
+
+/// Sets `value` at `path` below `node`; `done` names `node` in messages ("" at the root).
+fn set_at(
+    node: &mut toml::Value,
+    path: &[Segment],
+    value: &toml::Value,
+    done: &str,
+) -> Result<(), String> {
+    let Some((seg, rest)) = path.split_first() else {
+        *node = value.clone();
+        return Ok(());
+    };
+    let parent = if done.is_empty() {
+        "the scenario"
+    } else {
+        done
+    };
+    let here = if done.is_empty() {
+        seg.key.clone()
+    } else {
+        format!("{done}.{}", seg.key)
+    };
+    let child = node
+        .as_table_mut()
+        .ok_or_else(|| format!("{parent} is not a table, it has no field '{}'", seg.key))?
+        .get_mut(&seg.key)
+        .ok_or_else(|| format!("{parent} has no field '{}'", seg.key))?;
+    let Some(index) = seg.index else {
+        return set_at(child, rest, value, &here);
+    };
+    let items = child
+        .as_array_mut()
+        .ok_or_else(|| format!("{here} is not an array"))?;
+    let len = items.len();
+    match index {
+        Index::At(k) => {
+            let item = items.get_mut(k).ok_or_else(|| {
+                let what = if here == "agents" {
+                    format!("the scenario has {len} agents: agents[0] .. agents[{}] (0-based, agents 1 .. {len})", len.saturating_sub(1))
+                } else {
+                    format!("{here} has {len} elements (0-based)")
+                };
+                format!("{} does not exist: {what}", element(&here, k))
+            })?;
+            set_at(item, rest, value, &element(&here, k))
+        }
+        Index::Every => {
+            if len == 0 {
+                return Err(format!("{here}[*]: {here} is empty"));
+            }
+            for (k, item) in items.iter_mut().enumerate() {
+                set_at(item, rest, value, &element(&here, k))?;
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Applies `--set path=value` overrides (TOML paths such as `controller.position.k_p`,
+/// `agents[2].delay.base_s` (0-based: agent 3) or `agents[*].delay.base_s` (every agent); values
+/// in TOML syntax) to a scenario. Anything but `path=value` exactly is rejected, naming it.
 pub fn apply_overrides(s: Scenario, sets: &[String]) -> Result<Scenario, String> {
     if sets.is_empty() {
         return Ok(s);
     }
     let mut root = toml::Value::try_from(&s).map_err(|e| e.to_string())?;
     for set in sets {
-        let (path, value) = set
-            .split_once('=')
-            .ok_or_else(|| format!("--set '{set}': expected path=value"))?;
-        let parsed: toml::Table = toml::from_str(&format!("v = {}", value.trim()))
-            .map_err(|e| format!("--set '{set}': bad value: {e}"))?;
-        let new_value = parsed["v"].clone();
-        let mut node = &mut root;
-        for part in path.trim().split('.') {
-            let (key, index) = match part.split_once('[') {
-                Some((k, rest)) => {
-                    let idx: usize = rest
-                        .trim_end_matches(']')
-                        .parse()
-                        .map_err(|_| format!("--set '{set}': bad index in '{part}'"))?;
-                    (k, Some(idx))
-                }
-                None => (part, None),
-            };
-            node = node
-                .get_mut(key)
-                .ok_or_else(|| format!("--set '{set}': no field '{key}'"))?;
-            if let Some(idx) = index {
-                node = node
-                    .get_mut(idx)
-                    .ok_or_else(|| format!("--set '{set}': index {idx} out of range"))?;
-            }
-        }
-        *node = new_value;
+        let o = parse_override(set)?;
+        set_at(&mut root, &o.path, &o.value, "").map_err(|e| format!("--set {set:?}: {e}"))?;
     }
     root.try_into()
         .map_err(|e: toml::de::Error| format!("--set: {e}"))
@@ -84,7 +262,7 @@ pub fn parse_variant(name: &str) -> Result<formation_config::Variant, ExitCode> 
 }
 
 /// What every runner (`sim`, `run`) takes: scenario, variant, output directory and overrides.
-#[derive(clap::Args, Debug, Default, Clone)]
+#[derive(clap::Args, Debug, Clone)]
 pub struct RunnerArgs {
     /// Scenario: `paper` (default), `paper-exact`, or a TOML file.
     pub scenario: Option<String>,
@@ -94,7 +272,9 @@ pub struct RunnerArgs {
     /// Output directory (default: out/<scenario>-<variant>[-<mode>]).
     #[arg(long)]
     pub out: Option<std::path::PathBuf>,
-    /// Override a scenario parameter, e.g. `--set controller.position.k_p=1.5` (repeatable).
+    /// Override a scenario parameter, e.g. `--set controller.position.k_p=1.5`,
+    /// `--set 'agents[2].delay.base_s=0.04'` (0-based index: agent 3) or
+    /// `--set 'agents[*].delay.base_s=0.04'` (every agent); repeatable.
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
 }
@@ -103,11 +283,133 @@ impl RunnerArgs {
     /// The validated scenario (after the overrides) and the variant; exit code 2 with clear errors.
     pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {
         let scenario = load_with_overrides(self.scenario.as_deref(), &self.sets)?;
-        let name = if self.variant.is_empty() {
-            "proposed"
-        } else {
-            &self.variant
-        };
-        Ok((scenario, parse_variant(name)?))
+        Ok((scenario, parse_variant(&self.variant)?))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn set(s: Scenario, sets: &[&str]) -> Result<Scenario, String> {
+        apply_overrides(s, &sets.iter().map(|x| x.to_string()).collect::<Vec<_>>())
+    }
+
+    fn rejected(arg: &str) -> String {
+        let e = set(Scenario::paper(), &[arg]).expect_err(arg);
+        assert!(e.contains(&format!("{arg:?}")), "names the argument: {e}");
+        e
+    }
+
+    #[test]
+    fn set_changes_a_nested_field_and_one_agent_by_its_0_based_index() {
+        let s = set(
+            Scenario::paper(),
+            &["controller.position.k_p=1.5", "agents[2].delay.base_s=0.02"],
+        )
+        .unwrap();
+        assert_eq!(s.controller.position.k_p, 1.5);
+        assert_eq!(s.agents[2].delay.base_s, 0.02);
+        assert_ne!(s.agents[1].delay.base_s, 0.02);
+        let s = set(Scenario::paper(), &["vehicle.inertia_kg_m2[1] = 0.03"]).unwrap();
+        assert_eq!(s.vehicle.inertia_kg_m2[1], 0.03);
+    }
+
+    #[test]
+    fn set_with_a_star_index_changes_every_agent() {
+        let s = set(Scenario::paper(), &["agents[*].delay.base_s=0.01"]).unwrap();
+        assert_eq!(s.n_agents(), 5);
+        assert!(s.agents.iter().all(|a| a.delay.base_s == 0.01));
+        let s = set(Scenario::paper(), &["agents[*].fault.gamma_final[0]=0.9"]).unwrap();
+        assert!(s.agents.iter().all(|a| a.fault.gamma_final[0] == 0.9));
+    }
+
+    #[test]
+    fn set_rejects_a_malformed_path_naming_the_argument() {
+        for arg in [
+            "agents[0.delay.base_s=0.1",
+            "agents[0]]]].delay.base_s=0.1",
+            "agents[0]]]]=0.1",
+            "agents[0][1].delay.base_s=0.1",
+            "agents[-1].delay.base_s=0.1",
+            "agents[1x].delay.base_s=0.1",
+            "agents[].delay.base_s=0.1",
+            "agents.[0].delay.base_s=0.1",
+            "controller..position.k_p=1",
+            ".controller.position.k_p=1",
+            "controller.position.k_p.=1",
+            " controller.position.k_p=1",
+            "controller.position.k p=1",
+            "=1",
+            "controller.position.k_p",
+        ] {
+            rejected(arg);
+        }
+    }
+
+    #[test]
+    fn set_rejects_a_value_that_is_not_exactly_one_toml_value() {
+        for arg in [
+            "controller.position.k_p=1.5\nsimulation.duration_s=1",
+            "controller.position.k_p=1.5\r",
+            "controller.position.k_p=1.5 2",
+            "controller.position.k_p=1.5]",
+            "controller.position.k_p=1.5 # comment",
+            "controller.position.k_p=1.5, 2",
+            "controller.position.k_p=",
+            "controller.position.k_p=  ",
+            "controller.position.k_p=abc",
+        ] {
+            rejected(arg);
+        }
+        // One value, surrounded by spaces, is fine; so are arrays and strings.
+        let s = set(
+            Scenario::paper(),
+            &[
+                "controller.position.k_p= 1.5 ",
+                "metrics.cover_window_s=[10.0, 30.0]",
+                "name=\"x\"",
+            ],
+        )
+        .unwrap();
+        assert_eq!(s.controller.position.k_p, 1.5);
+        assert_eq!(s.metrics.cover_window_s, [10.0, 30.0]);
+        assert_eq!(s.name, "x");
+    }
+
+    #[test]
+    fn set_names_a_missing_field_and_an_agent_out_of_range_with_its_1_based_id() {
+        let e = rejected("controller.position.kp=1");
+        assert!(e.contains("controller.position has no field 'kp'"), "{e}");
+        let e = rejected("agents[7].delay.base_s=0.1");
+        assert!(e.contains("agents[7] (agent 8) does not exist"), "{e}");
+        assert!(e.contains("5 agents"), "{e}");
+        let e = rejected("agents[2].delay.bse_s=0.1");
+        assert!(
+            e.contains("agents[2] (agent 3).delay has no field 'bse_s'"),
+            "{e}"
+        );
+        let e = rejected("controller.position[0].k_p=1");
+        assert!(e.contains("controller.position is not an array"), "{e}");
+    }
+
+    #[test]
+    fn whole_numbers_reject_negative_values_saying_so() {
+        assert_eq!(whole_number::<usize>("3"), Ok(3));
+        let e = whole_number::<usize>("-3").unwrap_err();
+        assert!(e.contains("-3 is negative"), "{e}");
+        assert!(whole_number::<u32>("1.5").is_err());
+        assert!(whole_number::<u32>("99999999999")
+            .unwrap_err()
+            .contains("too large"));
+    }
+
+    #[test]
+    fn defaults_are_the_ones_clap_applies_to_an_empty_command_line() {
+        let a: crate::run::RunArgs = defaults("run");
+        assert_eq!(a.pin, "auto");
+        assert_eq!(a.common.variant, "proposed");
+        assert_eq!(a.spin_us, 20);
+        assert!(a.common.scenario.is_none() && a.common.sets.is_empty());
     }
 }

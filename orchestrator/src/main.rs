@@ -11,7 +11,7 @@
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 
-use formation::{bench, check, live, plot, role, run, scenario_gen, sim, sweep};
+use formation::{bench, check, cli, live, plot, role, run, scenario_gen, sim, sweep};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -75,6 +75,66 @@ fn main() -> ExitCode {
         Some(Command::Inject(a)) => live::inject::main(a),
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
         Some(Command::Node(a)) => role::main(a),
-        None => run::main(run::RunArgs::default()),
+        // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
+        None => run::main(cli::defaults::<run::RunArgs>("run")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    fn parse(args: &[&str]) -> Result<Cli, clap::Error> {
+        Cli::try_parse_from(std::iter::once("formation").chain(args.iter().copied()))
+    }
+
+    #[test]
+    fn the_command_line_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn negative_numbers_are_values_of_the_arguments_that_take_numbers() {
+        let cli = parse(&[
+            "inject",
+            "fault",
+            "--agent",
+            "2",
+            "--gamma",
+            "0.5,0.5,0.5",
+            "--delta",
+            "-0.1,0,-0.2",
+            "--at",
+            "-1",
+        ])
+        .expect("parses");
+        let Some(Command::Inject(a)) = cli.command else {
+            panic!("inject")
+        };
+        let live::inject::InjectWhat::Fault(f) = a.what else {
+            panic!("fault")
+        };
+        assert_eq!(f.delta, vec![-0.1, 0.0, -0.2]);
+        assert_eq!(f.at, Some(-1.0));
+        let cli = parse(&["bench", "--seconds", "-1"]).expect("parses");
+        let Some(Command::Bench(b)) = cli.command else {
+            panic!("bench")
+        };
+        assert_eq!(b.seconds, -1.0);
+    }
+
+    #[test]
+    fn a_negative_count_is_refused_by_its_argument_saying_it_is_negative() {
+        for args in [
+            &["scenario", "--n", "-3"][..],
+            &["bench", "--rounds", "-1"],
+            &["inspect", "--agent", "-1"],
+            &["sim", "--repeat", "-2"],
+        ] {
+            let e = parse(args).expect_err("a negative count").to_string();
+            assert!(e.contains("is negative"), "{args:?}: {e}");
+            assert!(!e.contains("unexpected argument"), "{args:?}: {e}");
+        }
     }
 }

@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 /// Arguments of `formation sim`.
-#[derive(clap::Args, Debug, Default)]
+#[derive(clap::Args, Debug)]
 pub struct SimArgs {
     /// Scenario, variant, output directory, overrides.
     #[command(flatten)]
@@ -19,7 +19,7 @@ pub struct SimArgs {
     pub quiet: bool,
     /// Speed report: run K times and print the median, fastest and slowest real-time factor
     /// (sim_time / wall_time of the whole run, outputs included). The outputs of the last run are kept.
-    #[arg(long, value_name = "K", default_value_t = 1)]
+    #[arg(long, value_name = "K", default_value_t = 1, value_parser = crate::cli::whole_number::<u32>, allow_negative_numbers = true)]
     pub repeat: u32,
 }
 
@@ -75,17 +75,29 @@ pub fn main(args: SimArgs) -> ExitCode {
                 summary.print_table();
                 println!("wrote {}/trajectory.csv and summary.json", out.display());
             }
-            if let Some(d) = &summary.divergence {
-                eprintln!(
-                    "diverged: t = {:.3} s, agent {}: {} (outputs up to that step are written)",
-                    d.time_s, d.agent, d.cause
-                );
-            }
-            ExitCode::SUCCESS
+            exit_code(&summary)
         }
         Err(e) => {
             eprintln!("error: cannot write outputs to {}: {e}", out.display());
             ExitCode::from(1)
+        }
+    }
+}
+
+/// Exit code of a runner (`sim`, `run`) that ran to its end and wrote its outputs: 0, or
+/// [`cli::EXIT_RESULT_FAILED`] (3) when the run diverged, with the divergence named on stderr.
+pub fn exit_code(summary: &Summary) -> ExitCode {
+    match &summary.divergence {
+        None => ExitCode::SUCCESS,
+        Some(d) => {
+            eprintln!(
+                "diverged: t = {:.3} s, agent {}: {} (outputs up to that step are written; exit code {})",
+                d.time_s,
+                d.agent,
+                d.cause,
+                cli::EXIT_RESULT_FAILED
+            );
+            ExitCode::from(cli::EXIT_RESULT_FAILED)
         }
     }
 }

@@ -1,9 +1,35 @@
-//! End to end: the real `formation` binary rejects an invalid scenario with exit code 2 and an error
-//! naming the field and the assumption, never with a panic.
+//! End to end: the real `formation` binary rejects an invalid scenario or argument with exit code 2
+//! and an error naming the field and the assumption, never with a panic; a command that ran but whose
+//! result is a failure (a FAIL verdict, a divergence) exits 3 with its outputs written; bare
+//! `formation` is `formation run` with its defaults.
 
 use formation_config::Scenario;
 use formation_tests::{bin, temp_dir};
-use std::process::Command;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// Runs `formation <args...>` (never building anything, in the system temporary directory, with
+/// its own runs directory under `dir`).
+fn formation(dir: &Path, args: &[&str]) -> Output {
+    Command::new(bin("formation"))
+        .args(args)
+        .env("FORMATION_RUNS_DIR", dir.join("runs"))
+        .env_remove("CARGO")
+        .current_dir(dir)
+        .output()
+        .expect("formation starts")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json is written");
+    serde_json::from_str(&text).expect("summary.json parses")
+}
 
 /// Writes `s` to `<tmp>/<file>` and runs `formation <args...> <that file>`.
 fn run_with_scenario(s: &Scenario, file: &str, args: &[&str]) -> std::process::Output {
@@ -68,15 +94,15 @@ fn check_with_an_unknown_field_exits_2_naming_it() {
 }
 
 #[test]
-fn check_of_the_embedded_paper_exact_scenario_prints_json_with_verdicts() {
+fn check_of_the_embedded_paper_exact_scenario_prints_json_with_verdicts_and_exits_3_on_a_fail() {
     let out = Command::new(bin("formation"))
         .args(["check", "paper-exact", "--json"])
         .output()
         .expect("formation starts");
     assert_eq!(
         out.status.code(),
-        Some(0),
-        "stderr: {}",
+        Some(3),
+        "a FAIL verdict exits 3; stderr: {}",
         String::from_utf8_lossy(&out.stderr)
     );
     let v: serde_json::Value =
@@ -84,4 +110,272 @@ fn check_of_the_embedded_paper_exact_scenario_prints_json_with_verdicts() {
     assert_eq!(v["scenario"], "paper-exact");
     assert_eq!(v["theorem1"]["search"]["positive_definite"], false);
     assert!(!v["verdicts"].as_array().expect("verdicts array").is_empty());
+    assert_eq!(v["worst"], "FAIL");
+}
+
+#[test]
+fn bare_formation_starts_the_default_lockstep_run_exactly_like_formation_run() {
+    let dir = temp_dir("bare");
+    let mut child = Command::new(bin("formation"))
+        .env("FORMATION_RUNS_DIR", dir.join("runs"))
+        .env_remove("CARGO")
+        .current_dir(&dir)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("formation starts");
+    let out = dir.join("out/paper-proposed-lockstep");
+    // Kills the run whatever happens below.
+    struct Guard(std::process::Child, std::path::PathBuf);
+    impl Drop for Guard {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+            for pid in formation_tests::run::processes_mentioning(&self.1) {
+                // SAFETY: kill with a pid just read from /proc; at worst it has exited.
+                unsafe {
+                    libc::kill(pid as i32, libc::SIGKILL);
+                }
+            }
+        }
+    }
+    // Drain stderr on a thread for the whole run (a closed pipe would kill it with SIGPIPE).
+    let stderr = BufReader::new(child.stderr.take().expect("stderr is piped"));
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in stderr.lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let mut guard = Guard(child, out.clone());
+    let mut seen = Vec::new();
+    while let Ok(line) = rx.recv_timeout(Duration::from_secs(60)) {
+        seen.push(line.clone());
+        if line.starts_with("formation run: id") || line.starts_with("error") {
+            break;
+        }
+    }
+    let text = seen.join("\n");
+    assert!(!text.contains("error"), "bare formation failed: {text}");
+    assert!(
+        text.contains("5 agents, 60000 steps"),
+        "the paper scenario with its defaults: {text}"
+    );
+    assert!(text.contains("plant cpu"), "pinned as `--pin auto`: {text}");
+    // Stop it as Ctrl-C would: exit code 130 and the default output directory of `run`.
+    // SAFETY: signal to our own child.
+    unsafe {
+        libc::kill(guard.0.id() as i32, libc::SIGINT);
+    }
+    let start = Instant::now();
+    let status = loop {
+        if let Some(st) = guard.0.try_wait().expect("can wait") {
+            break st;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no exit after SIGINT"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(status.code(), Some(130));
+    assert!(out.join("trajectory.csv").is_file(), "{}", out.display());
+    assert!(out.join("scenario.toml").is_file());
+    drop(guard);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sim_that_diverges_exits_3_with_its_outputs_written() {
+    let dir = temp_dir("sim-diverges");
+    let out = dir.join("out");
+    let o = formation(
+        &dir,
+        &["sim", "paper-exact", "--out", out.to_str().unwrap()],
+    );
+    assert_eq!(o.status.code(), Some(3), "stderr: {}", stderr(&o));
+    assert!(stderr(&o).contains("diverged: t = "), "{}", stderr(&o));
+    assert_eq!(summary(&out)["diverged"], true);
+    assert!(out.join("trajectory.csv").is_file());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn run_that_diverges_exits_3_with_its_outputs_written() {
+    let dir = temp_dir("run-diverges");
+    let out = dir.join("out");
+    let o = formation(
+        &dir,
+        &["run", "paper-exact", "--out", out.to_str().unwrap()],
+    );
+    assert_eq!(o.status.code(), Some(3), "stderr: {}", stderr(&o));
+    let v = summary(&out);
+    assert_eq!(v["diverged"], true);
+    assert_eq!(v["mode"], "lockstep");
+    assert!(out.join("trajectory.csv").is_file());
+    // Child logs name agents by their 1-based ids, as the file names do.
+    let log = std::fs::read_to_string(out.join("logs/agent-1.log")).expect("agent 1 logs");
+    assert!(log.contains("fm-agent-1 starting"), "{log}");
+    assert!(!log.contains("fm-agent-0"), "{log}");
+    let log5 = std::fs::read_to_string(out.join("logs/agent-5.log")).expect("agent 5 logs");
+    assert!(log5.contains("fm-agent-5 starting"), "{log5}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sim_with_a_duration_shorter_than_one_step_exits_2_naming_the_duration() {
+    let dir = temp_dir("zero-steps");
+    let o = formation(
+        &dir,
+        &["sim", "--set", "simulation.duration_s=0.0004", "--out", "o"],
+    );
+    assert_eq!(o.status.code(), Some(2), "stderr: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains("simulation.duration_s"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.join("o/summary.json").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn sim_with_a_negative_rbfnn_gain_exits_2_naming_the_field_and_eq_15() {
+    let dir = temp_dir("negative-gain");
+    let o = formation(
+        &dir,
+        &[
+            "sim",
+            "--set",
+            "controller.position.nn_k_p=-5",
+            "--out",
+            "o",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "stderr: {}", stderr(&o));
+    assert!(
+        stderr(&o).contains("controller.position.nn_k_p") && stderr(&o).contains("eq. (15)"),
+        "{}",
+        stderr(&o)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Every row of `trajectory.csv` holding a value that is not a finite number.
+fn non_finite_rows(csv: &Path) -> Vec<String> {
+    std::fs::read_to_string(csv)
+        .expect("trajectory.csv is written")
+        .lines()
+        .skip(1)
+        .filter(|l| {
+            l.split(',')
+                .any(|v| v == "NaN" || v == "inf" || v == "-inf")
+        })
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn a_non_finite_output_is_a_divergence_at_the_step_it_appears() {
+    for set in [
+        "controller.attitude.attitude_margin_rad=1e308", // C_i1² overflows: blf1 = NaN
+        "controller.position.nn_k_v=1e308",              // the RBFNN weights overflow
+    ] {
+        let dir = temp_dir("non-finite");
+        let out = dir.join("out");
+        let o = formation(&dir, &["sim", "--set", set, "--out", out.to_str().unwrap()]);
+        assert_eq!(o.status.code(), Some(3), "{set}: stderr: {}", stderr(&o));
+        let v = summary(&out);
+        assert_eq!(v["diverged"], true, "{set}");
+        let cause = v["divergence"]["cause"].as_str().expect("a cause");
+        assert!(cause.contains("not finite"), "{set}: {cause}");
+        // Non-finite values appear only in the rows of the step the run diverged at (its last).
+        let t = v["divergence"]["time_s"].as_f64().expect("a time");
+        let rows = non_finite_rows(&out.join("trajectory.csv"));
+        assert!(!rows.is_empty(), "{set}: the diverging step is written");
+        for row in rows {
+            let row_t: f64 = row.split(',').nth(1).unwrap().parse().unwrap();
+            assert_eq!(
+                row_t, t,
+                "{set}: non-finite value before the divergence: {row}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+#[test]
+fn set_that_is_not_exactly_path_equals_value_exits_2_naming_it() {
+    let dir = temp_dir("set-strict");
+    for arg in [
+        "agents[0.delay.base_s=0.1",
+        "agents[0]]]].delay.base_s=0.1",
+        "controller.position.k_p=1.5\nsimulation.duration_s=1",
+    ] {
+        let o = formation(&dir, &["check", "--set", arg]);
+        assert_eq!(o.status.code(), Some(2), "{arg:?}: stderr: {}", stderr(&o));
+        assert!(
+            stderr(&o).contains(&format!("--set {arg:?}")),
+            "{arg:?} is named: {}",
+            stderr(&o)
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn set_for_every_agent_and_validation_errors_name_the_1_based_agent_id() {
+    let dir = temp_dir("set-every");
+    let o = formation(&dir, &["check", "--set", "agents[*].delay.base_s=0.046"]);
+    assert_eq!(o.status.code(), Some(2), "stderr: {}", stderr(&o));
+    let err = stderr(&o);
+    // 0.046 + amplitude > tau_M = 0.05 for every agent (amplitudes 0.005 .. 0.015).
+    for k in 0..5 {
+        assert!(
+            err.contains(&format!("agents[{k}].delay (agent {}):", k + 1)),
+            "agents[{k}] named with its id: {err}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn negative_numbers_reach_validation_which_names_the_argument() {
+    let dir = temp_dir("negative-args");
+    let inject = [
+        "inject",
+        "fault",
+        "--agent",
+        "1",
+        "--gamma",
+        "0.5,0.5,0.5",
+        "--delta",
+    ];
+    let cases: [(Vec<&str>, &str); 6] = [
+        // Valid values: refused only because no run is running.
+        (
+            [&inject[..], &["-0.1,0,0", "--run", "nosuch"]].concat(),
+            "nosuch",
+        ),
+        ([&inject[..], &["0,0,0", "--at", "-1"]].concat(), "--at -1"),
+        (
+            vec![
+                "inject", "delay", "--agent", "1", "--tau", "0.01", "--at", "-0.5",
+            ],
+            "--at -0.5",
+        ),
+        (vec!["bench", "--seconds", "-1"], "--seconds"),
+        (vec!["scenario", "--n", "-3"], "--n"),
+        (vec!["bench", "--n", "-2"], "--n"),
+    ];
+    for (args, named) in cases {
+        let o = formation(&dir, &args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
+        assert!(err.contains(named), "{args:?} names {named}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

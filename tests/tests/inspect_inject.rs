@@ -7,10 +7,10 @@
 //! users never interfere; `RunningRun` kills the whole run on drop, even when an assertion fails.
 
 use formation_tests::run::RunningRun;
-use formation_tests::temp_dir;
+use formation_tests::{bin, temp_dir};
 use serde_json::Value;
-use std::path::Path;
-use std::process::Output;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 /// Generous bound for anything to happen; reaching it means a hang.
@@ -307,9 +307,10 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     assert_eq!(ps_json(&runs)["runs"], serde_json::json!([]));
 }
 
-#[test]
-fn rejected_injections_exit_2_and_change_nothing() {
-    let dir = temp_dir("inspect-reject");
+/// Starts a run of 600 s (killed when the test ends) with its own runs directory, and waits until
+/// `ps` lists its 5 agents; returns the test's directory, the runs directory and the run.
+fn start_long_run(tag: &str) -> (PathBuf, PathBuf, RunningRun) {
+    let dir = temp_dir(tag);
     let runs = dir.join("runs");
     let run = RunningRun::start_with_env(
         &["--set", "simulation.duration_s=600"],
@@ -317,6 +318,12 @@ fn rejected_injections_exit_2_and_change_nothing() {
         &[("FORMATION_RUNS_DIR", &runs)],
     );
     wait_listed(&runs, &run, 5);
+    (dir, runs, run)
+}
+
+#[test]
+fn rejected_injections_exit_2_and_change_nothing() {
+    let (dir, runs, run) = start_long_run("inspect-reject");
     let cases: [(&[&str], &str); 6] = [
         (
             &[
@@ -404,6 +411,8 @@ fn rejected_injections_exit_2_and_change_nothing() {
     // Nothing reached the run: no event was recorded.
     let events = std::fs::read_to_string(run.out.join("events.jsonl")).unwrap_or_default();
     assert!(events.trim().is_empty(), "events.jsonl: {events}");
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -433,4 +442,61 @@ fn ps_json_lists_no_runs_and_forgets_dead_ones() {
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         assert!(stderr(&o).contains("no run is running"), "{}", stderr(&o));
     }
+}
+
+#[test]
+fn inspect_follow_into_a_pipe_prints_samples_without_escape_sequences() {
+    let (dir, runs, run) = start_long_run("inspect-follow-pipe");
+    let mut follow = Command::new(bin("formation"))
+        .env("FORMATION_RUNS_DIR", &runs)
+        .env_remove("CARGO")
+        .env_remove("NO_COLOR")
+        .args(["inspect", "--agent", "1", "--follow"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("formation inspect starts");
+    let mut stdout = follow.stdout.take().expect("stdout is piped");
+    let bytes = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let sink = bytes.clone();
+    let reader = std::thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = std::io::Read::read(&mut stdout, &mut buf) {
+            if n == 0 {
+                break;
+            }
+            sink.lock().unwrap().extend_from_slice(&buf[..n]);
+        }
+    });
+    let samples = |b: &[u8]| {
+        String::from_utf8_lossy(b)
+            .matches("controller step")
+            .count()
+    };
+    let start = Instant::now();
+    while samples(&bytes.lock().unwrap()) < 2 {
+        if start.elapsed() > TIMEOUT {
+            let _ = follow.kill();
+            panic!("fewer than two samples from inspect --follow");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Ctrl-C ends --follow normally.
+    // SAFETY: signal to our own child.
+    unsafe {
+        libc::kill(follow.id() as i32, libc::SIGINT);
+    }
+    let status = follow.wait().expect("inspect exits");
+    reader.join().expect("reader thread");
+    let bytes = bytes.lock().unwrap();
+    assert!(status.success(), "inspect --follow: {status:?}");
+    assert!(
+        !bytes.contains(&0x1b),
+        "an escape sequence went into the pipe: {:?}",
+        String::from_utf8_lossy(&bytes)
+    );
+    // One block per sample, separated by a blank line.
+    assert!(String::from_utf8_lossy(&bytes).contains("\n\nrun "));
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -177,7 +177,7 @@ fn iox2_cli_in_the_run_config_dir_lists_the_live_runs_nodes_and_services_and_not
     let mut expected: Vec<String> = ["fm-orchestrator", "fm-plant", "fm-leader"]
         .map(String::from)
         .to_vec();
-    expected.extend((1..=5).map(|i| format!("fm-agent-{i}")));
+    expected.extend((1..=5).map(|id| format!("fm-agent-{id}")));
     let names: BTreeSet<&str> = listed.iter().map(|(n, _, _)| n.as_str()).collect();
     assert_eq!(
         names,

@@ -5,7 +5,9 @@ use formation_tests::{bin, temp_dir};
 use serde_json::Value;
 use std::process::Command;
 
-fn sim(args: &[&str], tag: &str) -> Value {
+/// Runs `formation sim <args>`, expecting exit code 0 (completed) or 3 (diverged, outputs written)
+/// as `diverges` says; returns summary.json.
+fn sim_expecting(args: &[&str], tag: &str, diverges: bool) -> Value {
     let out = temp_dir(tag);
     let o = Command::new(bin("formation"))
         .arg("sim")
@@ -15,9 +17,10 @@ fn sim(args: &[&str], tag: &str) -> Value {
         .output()
         .expect("formation runs");
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        o.status.success(),
-        "formation sim {args:?} failed: {stderr}"
+    assert_eq!(
+        o.status.code(),
+        Some(if diverges { 3 } else { 0 }),
+        "formation sim {args:?}: {stderr}"
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
     let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json written");
@@ -26,6 +29,10 @@ fn sim(args: &[&str], tag: &str) -> Value {
     assert!(!csv.contains("NaN"), "NaN in trajectory.csv");
     let _ = std::fs::remove_dir_all(&out);
     v
+}
+
+fn sim(args: &[&str], tag: &str) -> Value {
+    sim_expecting(args, tag, false)
 }
 
 fn worst(v: &Value, key: &str, window: &str) -> f64 {
@@ -88,7 +95,7 @@ fn removing_the_rbfnn_makes_the_worst_covering_error_at_least_one_and_a_half_tim
 
 #[test]
 fn paper_exact_gains_diverge_and_the_summary_names_time_agent_and_cause() {
-    let v = sim(&["paper-exact"], "exact");
+    let v = sim_expecting(&["paper-exact"], "exact", true);
     assert_eq!(
         v["diverged"], true,
         "the printed gains are known not to close the loop"

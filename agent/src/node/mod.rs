@@ -85,7 +85,8 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
             }
             if let Some(why) = b.lifeline.must_stop() {
                 return Err(NodeError::Stopped(format!(
-                    "agent {i} stopping at step {k}: {why}"
+                    "agent {} stopping at step {k}: {why}",
+                    i + 1
                 )));
             }
             while let Some(d) = ports.delays.receive()? {

@@ -104,7 +104,10 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), No
             }
         }
         if let Some(why) = b.lifeline.must_stop() {
-            return Err(NodeError::Stopped(format!("agent {i} stopping: {why}")));
+            return Err(NodeError::Stopped(format!(
+                "agent {} stopping: {why}",
+                i + 1
+            )));
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
@@ -118,5 +121,5 @@ fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), NodeError> {
     r.histograms
         .insert("controller_step".into(), m.compute.clone());
     r.counters.insert("skipped_states".into(), m.skipped);
-    r.write(&b.args.run_dir, &format!("agent-{i}"))
+    r.write(&b.args.run_dir, &format!("agent-{}", i + 1))
 }

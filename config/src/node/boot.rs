@@ -29,8 +29,9 @@ pub struct Boot {
     pub membership: LeaveOnDrop,
 }
 
-/// Names the process `fm-<role>[-<agent>]`, starts its log
-/// (`<run dir>/logs/<role>[-<agent>].log`), loads the scenario and creates the node.
+/// Names the process and its node `fm-<role>[-<agent id>]`, starts its log
+/// (`<run dir>/logs/<role>[-<agent id>].log`), loads the scenario and creates the node. Agent ids
+/// are 1-based wherever a person reads them (`--agent` itself is the 0-based index of the wire).
 pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
     let name = role.process_name(args.agent);
     let lifeline = Lifeline::install(&name);
@@ -58,7 +59,7 @@ pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
     if let Some(i) = args.agent {
         if i >= scenario.n_agents() {
             return Err(NodeError::Scenario(format!(
-                "agent {} does not exist (N = {})",
+                "agent {} (--agent {i}) does not exist (N = {})",
                 i + 1,
                 scenario.n_agents()
             )));

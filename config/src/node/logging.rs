@@ -18,6 +18,12 @@ pub fn log_file_name(role: &str, agent: Option<usize>) -> String {
     }
 }
 
+/// Whether the console log may use colour: stderr is a terminal and `NO_COLOR` is unset or empty
+/// (https://no-color.org).
+fn colour_on_stderr() -> bool {
+    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+}
+
 /// Installs the global subscriber: a file layer writing to `<run_dir>/logs/<name>` (created if
 /// needed) and, if `console`, a compact layer on stderr. Returns an error text (logging then stays
 /// off or console-only) when the file cannot be created; never panics.
@@ -44,7 +50,7 @@ pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), NodeEr
             .compact()
             .without_time()
             .with_target(false)
-            .with_ansi(std::io::stderr().is_terminal())
+            .with_ansi(colour_on_stderr())
             .with_writer(std::io::stderr)
             .with_filter(filter())
     });

@@ -21,9 +21,26 @@ pub struct ValidationError {
     pub message: String,
 }
 
+impl ValidationError {
+    /// The 1-based agent id of a field under `agents[k]` (TOML indices are 0-based).
+    pub fn agent_id(&self) -> Option<usize> {
+        let rest = self.field.strip_prefix("agents[")?;
+        let (k, _) = rest.split_once(']')?;
+        k.parse::<usize>().ok().map(|k| k + 1)
+    }
+}
+
 impl std::fmt::Display for ValidationError {
+    /// `field: message (assumption)`; a field under `agents[k]` is followed by `(agent k+1)`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}: {} ({})", self.field, self.message, self.assumption)
+        match self.agent_id() {
+            Some(id) => write!(
+                f,
+                "{} (agent {id}): {} ({})",
+                self.field, self.message, self.assumption
+            ),
+            None => write!(f, "{}: {} ({})", self.field, self.message, self.assumption),
+        }
     }
 }
 
@@ -65,6 +82,20 @@ pub const INDEX: &str = "agent and neighbour indices must be in range 1..=N";
 pub const SIM: &str = "simulation settings must be positive and consistent";
 /// Controller settings.
 pub const CTRL: &str = "controller gains must be positive where the paper requires it";
+/// The RBFNN update law (15).
+pub const EQ15: &str =
+    "eq. (15): K_P, K_V, K_W and kappa_ik are positive design constants (0 switches a term off)";
+/// The leader-relative terms of the position law (docs/deviations.md, D11).
+pub const D11: &str =
+    "D11: k_L and k_LP add damping and stiffness to every consensus mode, so they cannot be negative";
+/// The adaptive laws (46)-(49).
+pub const EQ46_49: &str =
+    "eq. (46)-(49): adaptation rates and leakages are non-negative design constants";
+/// The auxiliary systems (35), (50).
+pub const EQ35_50: &str = "eq. (35), (50): K_iE > 1 and gamma_iE > 0";
+/// The mission of Section 4.
+pub const MISSION: &str =
+    "Section 4: the leader's convergence terms (1 - e^{-r t}) converge only for r > 0; sharpness and radii are >= 0";
 
 struct Collector(Vec<ValidationError>);
 
@@ -105,6 +136,16 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     let sim = &s.simulation;
     c.positive("simulation.dt_s", sim.dt_s, SIM);
     c.positive("simulation.duration_s", sim.duration_s, SIM);
+    if sim.dt_s > 0.0 && sim.duration_s > 0.0 && sim.duration_s < sim.dt_s {
+        c.push(
+            "simulation.duration_s",
+            SIM,
+            format!(
+                "{} s is shorter than one step dt = {} s: the run would have no step",
+                sim.duration_s, sim.dt_s
+            ),
+        );
+    }
     c.positive("simulation.output_rate_hz", sim.output_rate_hz, SIM);
     c.positive("simulation.gravity_m_s2", sim.gravity_m_s2, PHYS);
     c.positive("simulation.max_delay_s", sim.max_delay_s, A2);
@@ -164,6 +205,32 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
             PHYS,
             format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg),
         );
+    }
+    // Mission.
+    let (leader, formation) = (&s.mission.leader, &s.mission.formation);
+    c.positive(
+        "mission.leader.convergence_rate",
+        leader.convergence_rate,
+        MISSION,
+    );
+    c.positive("mission.leader.climb_rate", leader.climb_rate, MISSION);
+    for (name, val) in [
+        ("mission.leader.descent_sharpness", leader.descent_sharpness),
+        ("mission.formation.cover_radius_m", formation.cover_radius_m),
+        (
+            "mission.formation.enclose_radius_m",
+            formation.enclose_radius_m,
+        ),
+        (
+            "mission.formation.radius_sharpness",
+            formation.radius_sharpness,
+        ),
+        (
+            "mission.formation.spin_onset_sharpness",
+            formation.spin_onset_sharpness,
+        ),
+    ] {
+        c.non_negative(name, val, MISSION);
     }
     // Vehicle.
     let v = &s.vehicle;
@@ -292,15 +359,26 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         ctl.position.k_v,
         "Theorem 1: k_V > 0",
     );
+    for (name, val) in [
+        ("controller.position.nn_k_p", ctl.position.nn_k_p),
+        ("controller.position.nn_k_v", ctl.position.nn_k_v),
+        ("controller.position.nn_leakage", ctl.position.nn_leakage),
+        (
+            "controller.position.nn_learning_rate",
+            ctl.position.nn_learning_rate,
+        ),
+    ] {
+        c.non_negative(name, val, EQ15);
+    }
     c.non_negative(
-        "controller.position.nn_learning_rate",
-        ctl.position.nn_learning_rate,
-        CTRL,
+        "controller.position.leader_velocity_damping",
+        ctl.position.leader_velocity_damping,
+        D11,
     );
     c.non_negative(
-        "controller.position.nn_leakage",
-        ctl.position.nn_leakage,
-        CTRL,
+        "controller.position.leader_position_gain",
+        ctl.position.leader_position_gain,
+        D11,
     );
     c.positive(
         "controller.position.max_horizontal_accel_m_s2",
@@ -476,8 +554,13 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
             ad.disturbance_leakage,
         ),
     ] {
-        c.non_negative(name, val, CTRL);
+        c.non_negative(name, val, EQ46_49);
     }
+    c.non_negative(
+        "controller.adaptive.disturbance_hat_initial",
+        ad.disturbance_hat_initial,
+        "eq. (49): D-hat_iA estimates a bound on ||D_iA||, so it starts >= 0",
+    );
     if !(ad.gamma_hat_initial >= ad.gamma_min && ad.gamma_hat_initial <= ad.gamma_max) {
         c.push(
             "controller.adaptive.gamma_hat_initial",
@@ -493,8 +576,16 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         c.positive("controller.position.position_error_limit_m", l, CTRL);
     }
     let aux = &ctl.auxiliary;
-    c.non_negative("controller.auxiliary.k1_e", aux.k1_e, CTRL);
-    c.non_negative("controller.auxiliary.k2_e", aux.k2_e, CTRL);
+    for (name, val) in [
+        ("controller.auxiliary.k1_e", aux.k1_e),
+        ("controller.auxiliary.k2_e", aux.k2_e),
+    ] {
+        if !(val > 1.0) {
+            c.push(name, EQ35_50, format!("must be > 1, got {val}"));
+        }
+    }
+    c.positive("controller.auxiliary.gamma1_e", aux.gamma1_e, EQ35_50);
+    c.positive("controller.auxiliary.gamma2_e", aux.gamma2_e, EQ35_50);
     c.positive("controller.auxiliary.e1_threshold", aux.e1_threshold, CTRL);
     c.positive("controller.auxiliary.e2_threshold", aux.e2_threshold, CTRL);
     c.positive(

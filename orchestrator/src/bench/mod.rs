@@ -43,23 +43,23 @@ pub const MAX_ROUNDS: usize = 20;
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
     /// Agent processes of the fan-out cases.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub n: usize,
     /// Message size, bytes (16..=60000), both directions, every transport. Default: the sizes of
     /// the lockstep's per-step messages, the state sent to an agent (`VehicleState`) and the
     /// command it answers with (`ControlCommand`), so the fan-out is comparable with the lockstep
     /// row.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub payload: Option<usize>,
     /// Measured time per case, s (a warm-up of 10 %, at most 0.25 s, is discarded first).
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = 1.5, allow_negative_numbers = true)]
     pub seconds: f64,
     /// Pin processes round-robin to these CPUs (e.g. `0,1` or `0-1`); the plant gets the first.
     /// Without it processes are not pinned (except in the `/one-core` cases).
     #[arg(long)]
     pub cpu: Option<String>,
     /// Spin budget of the spin-then-block strategy, µs.
-    #[arg(long, default_value_t = 50)]
+    #[arg(long, default_value_t = 50, value_parser = crate::cli::whole_number::<u64>, allow_negative_numbers = true)]
     pub spin_us: u64,
     /// Only these transports (comma-separated: iox2-event, iox2-waitset, iox2-poll, uds-dgram, udp).
     #[arg(long)]
@@ -72,7 +72,7 @@ pub struct BenchArgs {
     /// round 2, ... The table shows each case's median round, and each lockstep / fan-out ratio is
     /// the median of the ratios taken within each round, so that slow and fast phases of a shared
     /// machine cancel out (1..=20).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub rounds: usize,
     /// Print `{"results": [...]}` on stdout instead of the table.
     #[arg(long)]

@@ -11,7 +11,8 @@
 //!   [`freq`]: the linear-systems helpers both use.
 //! * [`barrier`]: roll/pitch authority after the worst faults vs what the attitude command demands.
 //!
-//! Exit code: 0 when the report was produced (whatever the verdicts), 2 on an invalid scenario.
+//! Exit code: 0 when the report was printed and no verdict is FAIL (WARN included), 3 when one is
+//! FAIL (the report is printed all the same), 2 on an invalid scenario (docs/cli.md).
 //!
 //! # JSON fields (`--json`; stable names, units in the names or in the item docs)
 //! * `scenario`: scenario name.
@@ -308,7 +309,16 @@ pub fn main(args: CheckArgs) -> ExitCode {
     } else {
         print!("{}", render::text(&r));
     }
-    ExitCode::SUCCESS
+    exit_code(r.worst)
+}
+
+/// Exit code of a report that was printed: 0 unless a verdict is FAIL, then
+/// [`crate::cli::EXIT_RESULT_FAILED`] (3). WARN verdicts do not fail the command.
+pub fn exit_code(worst: Level) -> ExitCode {
+    match worst {
+        Level::Fail => ExitCode::from(crate::cli::EXIT_RESULT_FAILED),
+        Level::Ok | Level::Warn => ExitCode::SUCCESS,
+    }
 }
 
 #[cfg(test)]

@@ -34,14 +34,14 @@ pub enum InjectWhat {
 #[derive(clap::Args, Debug)]
 pub struct FaultArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// Gamma per axis, e.g. 0.5,0.5,0.5.
     #[arg(
         long,
         value_delimiter = ',',
         required = true,
-        allow_negative_numbers = true
+        allow_hyphen_values = true
     )]
     pub gamma: Vec<f64>,
     /// delta per axis in N m, e.g. 0,0,0.
@@ -49,11 +49,11 @@ pub struct FaultArgs {
         long,
         value_delimiter = ',',
         required = true,
-        allow_negative_numbers = true
+        allow_hyphen_values = true
     )]
     pub delta: Vec<f64>,
     /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub at: Option<f64>,
     /// Run id (see `formation ps`); may be omitted when exactly one run is running.
     #[arg(long)]
@@ -64,13 +64,13 @@ pub struct FaultArgs {
 #[derive(clap::Args, Debug)]
 pub struct DelayArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// tau(t) in s: a constant (0.03) or base+amp*sin(w*t) (0.02+0.01*sin(0.5*t)).
     #[arg(long, allow_hyphen_values = true)]
     pub tau: String,
     /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub at: Option<f64>,
     /// Run id (see `formation ps`); may be omitted when exactly one run is running.
     #[arg(long)]
@@ -90,6 +90,10 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         InjectWhat::Fault(a) => (a.run.as_deref(), a.agent, a.at),
         InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
     };
+    if let Some(t) = at {
+        // What can be checked without the run is checked before looking for it.
+        validate::at_sign(t)?;
+    }
     let run = registry::find(run_id)?;
     super::check_access(&run, "inject into")?;
     let s = super::run_scenario(&run)?;

@@ -16,12 +16,14 @@ use std::time::{Duration, Instant};
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
     /// Agent id, 1-based (1..=N) as in the CSV, the figures and the paper.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// Run id (see `formation ps`); may be omitted when exactly one run is running.
     #[arg(long)]
     pub run: Option<String>,
-    /// Keep refreshing until Ctrl-C (or the end of the run).
+    /// Keep refreshing until Ctrl-C (or the end of the run): in place on a terminal, else (a pipe,
+    /// a file, or `NO_COLOR` set) one block per sample, separated by a blank line, without escape
+    /// sequences.
     #[arg(long)]
     pub follow: bool,
     /// One JSON object per sample.
@@ -69,6 +71,15 @@ fn norm(v: [f64; 3]) -> f64 {
 fn v3(v: [f64; 3]) -> String {
     format!("[{:+.4}, {:+.4}, {:+.4}]", v[0], v[1], v[2])
 }
+
+/// Whether `--follow` may redraw in place with escape sequences (clear screen, cursor home): only
+/// when stdout is a terminal and `NO_COLOR` is unset or empty (https://no-color.org).
+pub fn redraw_in_place(stdout_is_terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    stdout_is_terminal && no_color.is_none_or(|v| v.is_empty())
+}
+
+/// Clears the terminal and moves the cursor home.
+const CLEAR_SCREEN: &str = "\x1b[H\x1b[2J";
 
 /// The sample as a readable block.
 pub fn to_text(run: &str, n: usize, s: &AgentTelemetry) -> String {
@@ -153,14 +164,20 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
     let start = Instant::now();
     let mut last_step = None;
     let mut out = std::io::stdout();
+    let in_place = redraw_in_place(
+        std::io::IsTerminal::is_terminal(&out),
+        std::env::var_os("NO_COLOR").as_deref(),
+    );
     loop {
         if let Some(s) = newest(&sub)? {
             if last_step != Some(s.step) {
                 last_step = Some(s.step);
                 let text = if args.json {
                     format!("{}\n", to_json(&run.id, &s))
+                } else if args.follow && in_place {
+                    format!("{CLEAR_SCREEN}{}", to_text(&run.id, run.n_agents, &s))
                 } else if args.follow {
-                    format!("\x1b[H\x1b[2J{}", to_text(&run.id, run.n_agents, &s))
+                    format!("{}\n", to_text(&run.id, run.n_agents, &s))
                 } else {
                     to_text(&run.id, run.n_agents, &s)
                 };
@@ -195,5 +212,26 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
         } else {
             Duration::from_millis(20)
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::ffi::OsStr;
+
+    #[test]
+    fn follow_redraws_in_place_only_on_a_terminal_without_no_color() {
+        assert!(redraw_in_place(true, None));
+        assert!(redraw_in_place(true, Some(OsStr::new(""))));
+        assert!(!redraw_in_place(true, Some(OsStr::new("1"))));
+        assert!(!redraw_in_place(false, None));
+        assert!(!redraw_in_place(false, Some(OsStr::new("1"))));
+    }
+
+    #[test]
+    fn the_text_block_has_no_escape_sequence() {
+        let text = to_text("r", 5, &AgentTelemetry::default());
+        assert!(!text.contains('\x1b'), "{text}");
     }
 }

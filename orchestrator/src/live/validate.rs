@@ -64,6 +64,14 @@ pub fn delay(s: &Scenario, d: &DelayProfile) -> Result<(), String> {
     Ok(())
 }
 
+/// `--at T` must be a time (finite, not negative), whatever the run.
+pub fn at_sign(t: f64) -> Result<(), String> {
+    if !(t.is_finite() && t >= 0.0) {
+        return Err(format!("--at {t}: must be a simulation time >= 0 s"));
+    }
+    Ok(())
+}
+
 /// `--at T` must lie within the run.
 pub fn at(s: &Scenario, t: f64) -> Result<(), String> {
     if !(t.is_finite() && t >= 0.0 && t <= s.simulation.duration_s) {

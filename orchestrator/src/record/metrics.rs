@@ -177,13 +177,16 @@ impl Metrics {
                 a.saturated_steps += 1;
             }
             if self.divergence.is_none() && first.is_none() {
-                first =
-                    divergence_cause(tr, cmd, e, self.divergence_position, self.divergence_tilt)
-                        .map(|cause| Divergence {
-                            time_s: t,
-                            agent: i + 1,
-                            cause,
-                        });
+                first = non_finite_output(r, i, tr, cmd, e, self.margin)
+                    .map(|name| format!("{name} is not finite"))
+                    .or_else(|| {
+                        divergence_cause(tr, e, self.divergence_position, self.divergence_tilt)
+                    })
+                    .map(|cause| Divergence {
+                        time_s: t,
+                        agent: i + 1,
+                        cause,
+                    });
             }
         }
         self.separation.record(
@@ -208,28 +211,79 @@ fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-/// The first quantity of one agent that left its bounds, if any.
-fn divergence_cause(
+/// The first output of agent `i` at this step that is not a finite number, if any: every value
+/// `trajectory.csv` writes for it (state, reference, errors, commands, constraint bounds, barrier
+/// values, faults, estimates) and the rest of the controller's telemetry but the barrier widths
+/// C_i1, C_i2 (infinite by design in the `unconstrained` variant, Remark 4). A non-finite output is
+/// a divergence: the run stops there, and `summary.json` says so.
+fn non_finite_output(
+    r: &ReferenceFrame,
+    i: usize,
     tr: &PlantTruth,
     cmd: &ControlCommand,
     e: f64,
-    pos_bound: f64,
-    tilt_bound: f64,
-) -> Option<String> {
-    let st = &tr.state;
-    let groups: [(&str, &[f64]); 6] = [
+    margin: f64,
+) -> Option<&'static str> {
+    let (st, tm) = (&tr.state, &cmd.telemetry);
+    let one = |v: f64| [v];
+    let (error, thrust_cmd, thrust) = (one(e), one(cmd.thrust_n), one(tr.thrust_n));
+    let (att_norm, c1_bar) = (one(norm(st.attitude)), one(norm(tm.attitude_cmd) + margin));
+    let (rate_norm, alpha_norm) = (one(norm(st.rate)), one(norm(tm.alpha)));
+    let (blf1, blf2) = (one(tm.blf1), one(tm.blf2));
+    let (d_norm, d_hat) = (one(norm(tr.disturbance)), one(tm.d_hat));
+    let (nn_norm, tau, model_dev) = (one(tm.nn_weight_norm), one(tm.tau_s), one(tm.model_hat_dev));
+    let groups: [(&'static str, &[f64]); 40] = [
         ("position", &st.position),
         ("velocity", &st.velocity),
         ("attitude", &st.attitude),
         ("body rate", &st.rate),
+        ("reference position P_d", &r.p_d),
+        ("formation offset", &r.offset[i]),
+        ("target position", &r.target),
+        ("formation error", &error),
+        ("position control U_iP", &tm.u_p),
+        ("thrust command", &thrust_cmd),
+        ("applied thrust", &thrust),
+        ("attitude command A_iC", &tm.attitude_cmd),
+        ("raw attitude command", &tm.attitude_cmd_raw),
+        ("virtual control alpha_i", &tm.alpha),
+        ("attitude norm", &att_norm),
+        ("attitude constraint C-bar_i1", &c1_bar),
+        ("rate norm", &rate_norm),
+        ("alpha norm", &alpha_norm),
+        ("barrier value V_i1B (blf1)", &blf1),
+        ("barrier value V_i2B (blf2)", &blf2),
         ("torque command U_iAC", &cmd.torque_nm),
-        ("thrust command", std::slice::from_ref(&cmd.thrust_n)),
+        ("applied torque U_iA", &tr.torque_applied_nm),
+        ("fault Gamma_i", &tr.gamma),
+        ("estimate Gamma-hat_i", &tm.gamma_hat),
+        ("fault delta_i", &tr.delta),
+        ("estimate delta-hat_i", &tm.delta_hat),
+        ("disturbance D_iA", &tr.disturbance),
+        ("disturbance norm", &d_norm),
+        ("estimate D-hat_iA", &d_hat),
+        ("uncertainty F_iP", &tr.uncertainty),
+        ("RBFNN output F-hat_iP", &tm.f_hat),
+        ("RBFNN weight norm (nn_norm)", &nn_norm),
+        ("delay tau_i", &tau),
+        ("consensus error e_iP", &tm.e_p),
+        ("consensus error e_iV", &tm.e_v),
+        ("attitude error z_i1", &tm.z1),
+        ("rate error z_i2", &tm.z2),
+        ("auxiliary state E_i1", &tm.e1),
+        ("auxiliary state E_i2", &tm.e2),
+        ("estimate Delta F-hat_i", &model_dev),
     ];
-    for (name, vals) in groups {
-        if vals.iter().any(|v| !v.is_finite()) {
-            return Some(format!("{name} is not finite"));
-        }
-    }
+    let first = groups
+        .iter()
+        .find(|(_, vals)| vals.iter().any(|v| !v.is_finite()))
+        .map(|(name, _)| *name);
+    first
+}
+
+/// The first quantity of one agent that left its bounds (tilt, formation error), if any.
+fn divergence_cause(tr: &PlantTruth, e: f64, pos_bound: f64, tilt_bound: f64) -> Option<String> {
+    let st = &tr.state;
     for (k, name) in [(0usize, "roll phi"), (1, "pitch theta")] {
         if st.attitude[k].abs() > tilt_bound {
             return Some(format!(
@@ -242,4 +296,68 @@ fn divergence_cause(
         return Some(format!("formation error {e:.1} m beyond {pos_bound} m"));
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn one_step(tr: PlantTruth, cmd: ControlCommand) -> Option<Divergence> {
+        let s = Scenario::paper();
+        let mut m = Metrics::new(&s);
+        let n = s.n_agents();
+        let mut truths = vec![PlantTruth::default(); n];
+        let mut commands = vec![ControlCommand::default(); n];
+        truths[2] = tr;
+        commands[2] = cmd;
+        let r = ReferenceFrame::default();
+        m.record(0, &r, &truths, &commands)
+    }
+
+    #[test]
+    fn finite_outputs_within_bounds_are_no_divergence() {
+        assert_eq!(
+            one_step(PlantTruth::default(), ControlCommand::default()),
+            None
+        );
+    }
+
+    #[test]
+    fn a_non_finite_barrier_value_is_a_divergence_naming_it() {
+        let mut cmd = ControlCommand::default();
+        cmd.telemetry.blf1 = f64::NAN;
+        let d = one_step(PlantTruth::default(), cmd).expect("NaN in blf1 is a divergence");
+        assert_eq!(d.agent, 3);
+        assert!(
+            d.cause.contains("blf1") && d.cause.contains("not finite"),
+            "{}",
+            d.cause
+        );
+    }
+
+    #[test]
+    fn an_infinite_estimate_is_a_divergence_naming_it() {
+        let mut cmd = ControlCommand::default();
+        cmd.telemetry.nn_weight_norm = f64::INFINITY;
+        let d = one_step(PlantTruth::default(), cmd).expect("inf in nn_norm is a divergence");
+        assert!(d.cause.contains("nn_norm"), "{}", d.cause);
+        let mut cmd = ControlCommand::default();
+        cmd.telemetry.e2[1] = f64::NEG_INFINITY;
+        assert!(one_step(PlantTruth::default(), cmd).is_some());
+    }
+
+    #[test]
+    fn a_non_finite_plant_quantity_or_an_overflowing_norm_is_a_divergence() {
+        let mut tr = PlantTruth::default();
+        tr.uncertainty[0] = f64::NAN;
+        let d = one_step(tr, ControlCommand::default()).expect("NaN uncertainty");
+        assert!(d.cause.contains("uncertainty"), "{}", d.cause);
+        // Every component finite, the norm written to the CSV is not.
+        let tr = PlantTruth {
+            disturbance: [1e200, 0.0, 0.0],
+            ..PlantTruth::default()
+        };
+        let d = one_step(tr, ControlCommand::default()).expect("overflowing norm");
+        assert!(d.cause.contains("disturbance norm"), "{}", d.cause);
+    }
 }

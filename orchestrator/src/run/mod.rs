@@ -34,7 +34,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Arguments of `formation run`.
-#[derive(clap::Args, Debug, Default)]
+#[derive(clap::Args, Debug)]
 pub struct RunArgs {
     /// Scenario, variant, output directory, overrides.
     #[command(flatten)]
@@ -47,11 +47,16 @@ pub struct RunArgs {
     #[arg(long, value_enum, default_value_t = timing::WaitMode::Block)]
     pub wait: timing::WaitMode,
     /// Realtime mode with `--wait spin-block`: busy-poll time before blocking, µs.
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = crate::cli::whole_number::<u32>, allow_negative_numbers = true)]
     pub spin_us: u32,
     /// Realtime mode: run plant and agents under SCHED_FIFO at this priority (1..=99; needs
     /// CAP_SYS_NICE; 0, the default: normal policy).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=99))]
+    #[arg(
+        long,
+        default_value_t = 0,
+        value_parser = clap::value_parser!(u32).range(0..=99),
+        allow_negative_numbers = true
+    )]
     pub rt_priority: u32,
     /// CPU placement of plant and agents: `auto` (lockstep: plant on the first CPU this process
     /// may use, agent i on the CPU i + 1 places further, round-robin; realtime: not pinned),
@@ -80,8 +85,6 @@ impl Mode {
     }
 }
 
-/// Exit code after Ctrl-C.
-const EXIT_INTERRUPTED: u8 = 130;
 /// How long the role processes get to exit by themselves before they are killed.
 const STOP_GRACE: Duration = Duration::from_millis(1000);
 
@@ -194,20 +197,14 @@ pub fn main(args: RunArgs) -> ExitCode {
                 None => {}
             }
             println!("wrote {}/trajectory.csv and summary.json", out.display());
-            if let Some(d) = &summary.divergence {
-                eprintln!(
-                    "diverged: t = {:.3} s, agent {}: {} (outputs up to that step are written)",
-                    d.time_s, d.agent, d.cause
-                );
-            }
-            ExitCode::SUCCESS
+            crate::sim::exit_code(&summary)
         }
         Ok((Outcome::Interrupted, _)) => {
             eprintln!(
                 "interrupted: outputs up to the last recorded step are in {}",
                 out.display()
             );
-            ExitCode::from(EXIT_INTERRUPTED)
+            ExitCode::from(cli::EXIT_INTERRUPTED)
         }
         // Named on stderr when it was detected.
         Ok((Outcome::Died(_), _)) => ExitCode::from(1),

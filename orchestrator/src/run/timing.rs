@@ -51,7 +51,7 @@ pub fn collect(
     let dir = timing::dir(run_dir);
     let plant = TimingReport::read(&dir.join("plant.json"))?;
     let agents: Vec<TimingReport> = (0..n)
-        .map(|i| TimingReport::read(&dir.join(format!("agent-{i}.json"))))
+        .map(|i| TimingReport::read(&dir.join(format!("agent-{}.json", i + 1))))
         .collect::<Result<_, _>>()?;
     let hist = |r: &TimingReport, k: &str| r.histograms.get(k).cloned().unwrap_or_default();
     let count = |r: &TimingReport, k: &str| r.counters.get(k).copied().unwrap_or(0);

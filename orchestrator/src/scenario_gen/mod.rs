@@ -22,13 +22,13 @@ use std::process::ExitCode;
 #[derive(clap::Args, Debug)]
 pub struct ScenarioArgs {
     /// Number of quadrotors (2..=MAX_AGENTS, 128).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub n: usize,
     /// Communication graph: ring, path, k-nearest, complete, random-connected.
     #[arg(long, default_value = "path")]
     pub graph: String,
     /// Neighbours per agent of `--graph k-nearest` (before symmetrisation).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub k: usize,
     /// Seed of `--graph random-connected`.
     #[arg(long, default_value_t = 1)]
