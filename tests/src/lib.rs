@@ -5,9 +5,9 @@ use std::path::PathBuf;
 
 /// Path of the workspace binary `name` (e.g. `formation`) of the same profile as the running test.
 ///
-/// Test executables live in `target/<profile>/deps/`; the binaries in `target/<profile>/`. Cargo does
-/// not build another package's binaries for a test, so this panics with instructions when the binary
-/// is missing.
+/// Test executables live in `target/<profile>/deps/`; the binaries in `target/<profile>/`.
+/// `cargo test --workspace` builds `formation` (the orchestrator package has integration tests), and
+/// `formation` is the whole system: it starts its role processes from its own executable.
 pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("the test executable has a path");
     let profile_dir = exe
@@ -17,7 +17,7 @@ pub fn bin(name: &str) -> PathBuf {
     let path = profile_dir.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
     if !path.is_file() {
         panic!(
-            "binary `{name}` not found at {}: build it first: cargo build --workspace",
+            "binary `{name}` not found at {}: run the tests with `cargo test --release --workspace`",
             path.display()
         );
     }

@@ -6,6 +6,7 @@
 //! Every test uses its own runs directory (`FORMATION_RUNS_DIR`), so runs of other tests or other
 //! users never interfere; `RunningRun` kills the whole run on drop, even when an assertion fails.
 
+use formation::record::table::Trajectory;
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, temp_dir};
 use serde_json::Value;
@@ -203,37 +204,25 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
         .expect("formation sim runs");
     assert!(status.status.success());
     let late_mean = |csv: &std::path::Path| -> f64 {
-        let text = std::fs::read_to_string(csv).unwrap();
-        let mut lines = text.lines();
-        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-        let (t, agent, g) = (col("t"), col("agent"), col("gamma_hat_y"));
-        let vals: Vec<f64> = lines
-            .map(|l| l.split(',').collect::<Vec<_>>())
-            .filter(|f| f[agent] == "2" && f[t].parse::<f64>().unwrap() >= 30.0)
-            .map(|f| f[g].parse().unwrap())
+        let tr = Trajectory::read(csv).unwrap();
+        let vals: Vec<f64> = tr
+            .agent(2)
+            .filter(|r| tr.value(r, "t") >= 30.0)
+            .map(|r| tr.value(r, "gamma_hat_y"))
             .collect();
         vals.iter().sum::<f64>() / vals.len() as f64
     };
     // The estimates identify the injected fault itself (D16): from 15 s after the injection on, every
     // channel's mean Gamma-hat is within 10 % of 0.5 and delta-hat within 0.05 N m of the injected delta.
-    let text = std::fs::read_to_string(out.join("trajectory.csv")).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let rows: Vec<Vec<&str>> = lines
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|f| f[col("agent")] == "2")
-        .filter(|f| f[col("step")].parse::<u64>().unwrap() >= fault_step + 15_000)
+    let tr = Trajectory::read(&out.join("trajectory.csv")).unwrap();
+    let rows: Vec<&[f64]> = tr
+        .agent(2)
+        .filter(|r| tr.value(r, "step") >= (fault_step + 15_000) as f64)
         .collect();
     assert!(!rows.is_empty(), "the run lasts 15 s past the injection");
     for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-        let mean = |name: &str| {
-            rows.iter()
-                .map(|f| f[col(name)].parse::<f64>().unwrap())
-                .sum::<f64>()
-                / rows.len() as f64
-        };
+        let mean =
+            |name: &str| rows.iter().map(|r| tr.value(r, name)).sum::<f64>() / rows.len() as f64;
         let g = mean(&format!("gamma_hat_{axis}"));
         let d = mean(&format!("delta_hat_{axis}"));
         let injected_delta = [0.15, 0.1, 0.5][k];
@@ -270,18 +259,12 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
 
     // The plant's truth (gamma columns) and the agent's delay (tau column) change exactly at the
     // announced steps.
-    let csv = std::fs::read_to_string(out.join("trajectory.csv")).expect("trajectory.csv");
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let (c_step, c_agent, c_gx, c_tau) = (col("step"), col("agent"), col("gamma_x"), col("tau"));
     let (mut after_fault, mut after_delay) = (0, 0);
-    for line in lines {
-        let f: Vec<&str> = line.split(',').collect();
-        let step: u64 = f[c_step].parse().unwrap();
-        let agent: usize = f[c_agent].parse().unwrap();
-        let gx: f64 = f[c_gx].parse().unwrap();
-        let tau: f64 = f[c_tau].parse().unwrap();
+    for r in tr.rows() {
+        let step = tr.value(r, "step") as u64;
+        let agent = tr.value(r, "agent") as usize;
+        let gx = tr.value(r, "gamma_x");
+        let tau = tr.value(r, "tau");
         if agent == 2 {
             if step >= fault_step {
                 assert_eq!(gx, 0.5, "gamma_x of agent 2 at step {step}");

@@ -1,4 +1,4 @@
-//! End to end: `formation run` starts the real role binaries (one process per quadrotor, plant,
+//! End to end: `formation run` starts the real role processes (one process per quadrotor, plant,
 //! leader) over iceoryx2 and must match `formation sim` byte for byte, stop cleanly on Ctrl-C and on
 //! a dead child, keep concurrent runs apart, and leave nothing in /dev/shm or /tmp/iceoryx2.
 

@@ -9,6 +9,7 @@ pub mod csv;
 pub mod metrics;
 pub mod separation;
 pub mod summary;
+pub mod table;
 
 pub use metrics::Divergence;
 pub use summary::Summary;

@@ -373,7 +373,7 @@ fn run(
     };
     let mut step_timing = step_timing::StepTiming::default();
     // The wall time of the run is that of its steps: from every role process ready (after any
-    // build of the role binaries and the start-up) to the last step recorded.
+    // start-up) to the last step recorded.
     let mut wall = Duration::ZERO;
     let (outcome, recorded) = match driver::wait_for_hellos(&ports, n, &mut children.0, interrupted)
     {

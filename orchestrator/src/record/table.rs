@@ -1,0 +1,106 @@
+//! Reading a `trajectory.csv` back: one row per agent and step, every value a number (`NaN` and
+//! `inf` included, as a diverged step writes them). Used by the tests and by scripts built on the
+//! library; the figures have their own column-oriented loader (`plot::data`).
+
+use std::path::Path;
+
+/// A `trajectory.csv`, parsed.
+#[derive(Debug, Clone)]
+pub struct Trajectory {
+    header: Vec<String>,
+    rows: Vec<Vec<f64>>,
+}
+
+impl Trajectory {
+    /// Reads and parses `path`; the error names the file, the line and the column.
+    pub fn read(path: &Path) -> Result<Trajectory, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        Trajectory::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// Parses the text of a `trajectory.csv`.
+    pub fn parse(text: &str) -> Result<Trajectory, String> {
+        let mut lines = text.lines();
+        let header: Vec<String> = lines
+            .next()
+            .ok_or("empty file: no header")?
+            .split(',')
+            .map(str::to_string)
+            .collect();
+        let mut rows = Vec::new();
+        for (n, line) in lines.enumerate() {
+            let row: Vec<f64> = line
+                .split(',')
+                .enumerate()
+                .map(|(c, v)| {
+                    v.parse::<f64>().map_err(|_| {
+                        format!(
+                            "line {}: column {}: not a number: '{v}'",
+                            n + 2,
+                            header[c.min(header.len() - 1)]
+                        )
+                    })
+                })
+                .collect::<Result<_, _>>()?;
+            if row.len() != header.len() {
+                return Err(format!(
+                    "line {}: {} values for {} columns",
+                    n + 2,
+                    row.len(),
+                    header.len()
+                ));
+            }
+            rows.push(row);
+        }
+        Ok(Trajectory { header, rows })
+    }
+
+    /// The index of column `name`, if the file has it.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.header.iter().position(|h| h == name)
+    }
+
+    /// Every row, in file order.
+    pub fn rows(&self) -> &[Vec<f64>] {
+        &self.rows
+    }
+
+    /// The rows of agent `id` (1-based, as in the `agent` column), in step order.
+    pub fn agent(&self, id: u32) -> impl Iterator<Item = &[f64]> + '_ {
+        let c = self.column("agent").unwrap_or(usize::MAX);
+        self.rows
+            .iter()
+            .filter(move |r| r.get(c) == Some(&f64::from(id)))
+            .map(Vec::as_slice)
+    }
+
+    /// Value of column `name` in `row` (NaN when the file has no such column).
+    pub fn value(&self, row: &[f64], name: &str) -> f64 {
+        self.column(name).map_or(f64::NAN, |c| row[c])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_of_an_agent_and_their_values_are_found_by_column_name() {
+        let t = Trajectory::parse("step,t,agent,x\n0,0,1,0.5\n0,0,2,NaN\n1,0.001,1,inf\n").unwrap();
+        let a1: Vec<&[f64]> = t.agent(1).collect();
+        assert_eq!(a1.len(), 2);
+        assert_eq!(t.value(a1[0], "x"), 0.5);
+        assert!(t.value(a1[1], "x").is_infinite());
+        assert!(t.value(t.agent(2).next().unwrap(), "x").is_nan());
+        assert!(t.value(a1[0], "missing").is_nan());
+    }
+
+    #[test]
+    fn a_short_row_or_a_word_is_refused_naming_its_line() {
+        let e = Trajectory::parse("a,b\n1,2\n3\n").unwrap_err();
+        assert!(e.contains("line 3"), "{e}");
+        let e = Trajectory::parse("a,b\n1,x\n").unwrap_err();
+        assert!(e.contains("line 2") && e.contains("column b"), "{e}");
+    }
+}
