@@ -70,8 +70,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 fresh = true;
             }
         }
-        let reference_missing = refs.missing(k);
-        if !fresh || reference_missing || k.is_multiple_of(HOUSEKEEPING_EVERY) {
+        if must_read_slow_inputs(fresh, refs.missing(k), k) {
             while let Some(c) = ports.control.receive()? {
                 if c.kind == CONTROL_STOP {
                     tracing::info!(
@@ -125,9 +124,10 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 // this agent's next step, which cannot start before the command is in (a neighbour
                 // whose delayed step is this one is also woken). Otherwise it goes out after the
                 // command, off the critical path of the step.
-                if (0..ports.neighbours_wake.len())
-                    .any(|idx| delays.needed_before_next_step(idx, k))
-                {
+                if share_before_command(
+                    (0..ports.neighbours_wake.len())
+                        .map(|idx| delays.needed_before_next_step(idx, k)),
+                ) {
                     send(&ports.share_out, share)?;
                 } else {
                     share_later = Some(share);
@@ -161,5 +161,50 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
             }
         }
         ports.wake.wait(CHILD_WAIT)?;
+    }
+}
+
+/// Whether the slow inputs (stop, delay injections, references) are read on this wake-up: when it
+/// brought no state of step k (`fresh_state` false: the wake-up came from the orchestrator, the
+/// leader or a timeout), when the reference of step k is missing, and every HOUSEKEEPING_EVERY
+/// steps. Otherwise the wake-up is the plant's, and only the per-step inputs are read.
+fn must_read_slow_inputs(fresh_state: bool, reference_missing: bool, k: u64) -> bool {
+    !fresh_state || reference_missing || k.is_multiple_of(HOUSEKEEPING_EVERY)
+}
+
+/// Whether the share of step k goes out before the command: only if some neighbour may need it
+/// before this agent's next step (`needed`, one answer per neighbour); otherwise it goes out after
+/// the command, off the critical path of the step.
+fn share_before_command(mut needed: impl Iterator<Item = bool>) -> bool {
+    needed.any(|n| n)
+}
+
+#[cfg(test)]
+mod decisions {
+    use super::*;
+
+    #[test]
+    fn a_plant_wake_up_with_the_state_and_the_reference_reads_no_slow_input() {
+        assert!(!must_read_slow_inputs(true, false, HOUSEKEEPING_EVERY + 1));
+    }
+
+    #[test]
+    fn slow_inputs_are_read_without_a_state_with_a_missing_reference_and_every_period() {
+        assert!(
+            must_read_slow_inputs(false, false, 3),
+            "no state: another wake-up"
+        );
+        assert!(
+            must_read_slow_inputs(true, true, 3),
+            "reference of k missing"
+        );
+        assert!(must_read_slow_inputs(true, false, 2 * HOUSEKEEPING_EVERY));
+    }
+
+    #[test]
+    fn the_share_goes_out_first_only_if_a_neighbour_may_need_it_before_the_next_step() {
+        assert!(!share_before_command([false, false].into_iter()));
+        assert!(share_before_command([false, true].into_iter()));
+        assert!(!share_before_command(std::iter::empty()), "no neighbour");
     }
 }

@@ -3,15 +3,18 @@
 //! order of arrival changes nothing: `plant/tests/physics.rs`); once all N are in, k advances, the
 //! states of k + 1 go out and then the step record of k.
 
+mod lockstep;
 mod ports;
 mod realtime;
+
+use lockstep::{Lockstep, States};
 
 use crate::Plant;
 use formation_config::node::boot::{boot, hello};
 use formation_config::node::error::NodeError;
 use formation_config::node::ports::{poke, send};
 use formation_config::protocol::messages::{Role, StepEntry, CONTROL_STOP};
-use formation_config::protocol::pacing::{ACK_EVERY, CHILD_WAIT, HOUSEKEEPING_EVERY, PLANT_LEAD};
+use formation_config::protocol::pacing::CHILD_WAIT;
 use formation_config::protocol::wire::FaultInjection;
 
 /// Runs the plant until the orchestrator says stop (or goes away).
@@ -28,18 +31,14 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     let mut arrived = vec![false; n];
     let mut entries = vec![StepEntry::default(); n];
     let mut faults: Vec<FaultInjection> = Vec::new();
-    let mut got = 0;
-    let mut k: u64 = 0;
-    let mut recorded: Option<u64> = None;
-    let mut states_out = false;
-    let mut told_blocked = false;
-    let mut record_pending = false;
+    let mut pace = Lockstep::new(n, steps);
     // Reading fewer subscribers per wake-up keeps the plant, which is on the critical path of every
     // step, short (docs/runtime.md, "Cost of a step"): the commands still missing on every wake-up;
     // stop and the lifeline on a wake-up that brought no command (a stop comes with a poke, the
     // parent's death with SIGTERM); progress and fault injections when the states of a step go out
     // at a multiple of HOUSEKEEPING_EVERY, on such a wake-up, and whenever the lead is used up.
     loop {
+        let k = pace.k();
         let mut fresh = 0;
         for (i, sub) in ports.commands.iter().enumerate() {
             if arrived[i] {
@@ -64,7 +63,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 };
                 plant.advance_vehicle(i);
                 arrived[i] = true;
-                got += 1;
+                pace.on_command();
                 fresh += 1;
             }
         }
@@ -82,73 +81,66 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
             }
         }
         loop {
-            if !states_out && k < steps {
-                let lead_used_up = recorded.is_none_or(|r| k >= r + PLANT_LEAD);
-                if lead_used_up || idle || k.is_multiple_of(HOUSEKEEPING_EVERY) {
-                    // Faults are forwarded before the progress that lets the plant reach their
-                    // step, so they are drained together with (after) the progress.
-                    while let Some(p) = ports.progress.receive()? {
-                        recorded = Some(recorded.map_or(p.recorded, |r| r.max(p.recorded)));
-                    }
-                    while let Some(f) = ports.faults.receive()? {
-                        faults.push(*f);
-                    }
+            let k = pace.k();
+            if pace.states_pending() && pace.must_read_slow_inputs(idle) {
+                // Faults are forwarded before the progress that lets the plant reach their step,
+                // so they are drained together with (after) the progress.
+                while let Some(p) = ports.progress.receive()? {
+                    pace.on_progress(p.recorded);
                 }
-                match recorded {
-                    Some(r) if k < r + PLANT_LEAD => {
-                        // Each agent is woken right after its state is out: the first ones
-                        // start while the plant still publishes to the others.
-                        for (i, (state, wake)) in
-                            ports.states.iter().zip(&ports.agents_wake).enumerate()
-                        {
-                            send(state, plant.vehicle_state(i))?;
-                            poke(wake);
+                while let Some(f) = ports.faults.receive()? {
+                    faults.push(*f);
+                }
+            }
+            match pace.states() {
+                States::Send => {
+                    // Each agent is woken right after its state is out: the first ones start
+                    // while the plant still publishes to the others.
+                    for (i, (state, wake)) in
+                        ports.states.iter().zip(&ports.agents_wake).enumerate()
+                    {
+                        send(state, plant.vehicle_state(i))?;
+                        poke(wake);
+                    }
+                    pace.on_states_sent();
+                    // Injections of step k act from its first command on.
+                    faults.retain(|f| {
+                        if f.step <= k {
+                            plant.inject_fault(f);
+                            tracing::info!(
+                                step = k,
+                                agent = f.agent + 1,
+                                gamma = ?f.gamma,
+                                delta = ?f.delta,
+                                mode = f.mode,
+                                "fault injection applied"
+                            );
+                            false
+                        } else {
+                            true
                         }
-                        states_out = true;
-                        // Injections of step k act from its first command on.
-                        faults.retain(|f| {
-                            if f.step <= k {
-                                plant.inject_fault(f);
-                                tracing::info!(
-                                    step = k,
-                                    agent = f.agent + 1,
-                                    gamma = ?f.gamma,
-                                    delta = ?f.delta,
-                                    mode = f.mode,
-                                    "fault injection applied"
-                                );
-                                false
-                            } else {
-                                true
-                            }
-                        });
-                        told_blocked = false;
-                    }
-                    Some(_) if !told_blocked => {
-                        poke(&ports.orchestrator_wake);
-                        told_blocked = true;
-                    }
-                    _ => {}
+                    });
                 }
+                States::TellBlocked => {
+                    poke(&ports.orchestrator_wake);
+                    pace.on_told_blocked();
+                }
+                States::Wait => {}
             }
             // The record of the previous step goes out after the states of this one: the agents
             // are already computing while it is copied.
-            if record_pending {
+            if let Some(wake_orchestrator) = pace.take_record() {
                 ports.publish_step(&entries)?;
-                record_pending = false;
-                if k.is_multiple_of(ACK_EVERY) || k == steps {
+                if wake_orchestrator {
                     poke(&ports.orchestrator_wake);
                 }
             }
-            if k >= steps || !(states_out && got == n) {
+            if !pace.may_advance() {
                 break;
             }
             arrived.fill(false);
             plant.advance();
-            record_pending = true;
-            got = 0;
-            states_out = false;
-            k += 1;
+            pace.on_advance();
         }
         ports.wake.wait(CHILD_WAIT)?;
     }
