@@ -11,7 +11,7 @@ use crate::params::AgentParams;
 use crate::position::{clip_norm, consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
 use formation_config::protocol::wire::{
-    ControlCommand, ControllerTelemetry, DelayInjection, NeighborState, ReferenceFrame,
+    ControlCommand, ControllerTelemetry, DelayInjection, NeighbourState, ReferenceFrame,
     VehicleState,
 };
 use formation_config::scenario::{DelaySpec, Scenario};
@@ -87,15 +87,15 @@ impl Agent {
         &self.p
     }
 
-    /// Neighbour indices j (0-based) whose [`NeighborState`] this agent needs.
+    /// Neighbour indices j (0-based) whose [`NeighbourState`] this agent needs.
     pub fn neighbour_ids(&self) -> impl Iterator<Item = usize> + '_ {
         self.p.neighbours.iter().map(|(j, _)| *j)
     }
 
     /// Records the agent's own state of step k and returns the message to share with its neighbours.
-    pub fn observe_own(&mut self, s: &VehicleState) -> NeighborState {
+    pub fn observe_own(&mut self, s: &VehicleState) -> NeighbourState {
         self.own.push(s.step, (s.position, s.velocity));
-        NeighborState {
+        NeighbourState {
             step: s.step,
             t: s.t,
             agent: self.p.id as u32,
@@ -112,7 +112,7 @@ impl Agent {
     }
 
     /// Records a neighbour's shared state (messages from non-neighbours are ignored).
-    pub fn observe_neighbor(&mut self, m: &NeighborState) {
+    pub fn observe_neighbour(&mut self, m: &NeighbourState) {
         if let Some(idx) = self
             .p
             .neighbours

@@ -5,7 +5,7 @@
 
 use formation_agent::Agent;
 use formation_config::protocol::wire::{
-    ControlCommand, NeighborState, PlantTruth, ReferenceFrame, VehicleState,
+    ControlCommand, NeighbourState, PlantTruth, ReferenceFrame, VehicleState,
 };
 use formation_config::{Scenario, Variant};
 use formation_leader::Mission;
@@ -19,7 +19,7 @@ pub struct ClosedLoop {
     neighbours: Vec<Vec<usize>>,
     reference: ReferenceFrame,
     states: Vec<VehicleState>,
-    shares: Vec<NeighborState>,
+    shares: Vec<NeighbourState>,
     commands: Vec<ControlCommand>,
     truths: Vec<PlantTruth>,
     dt: f64,
@@ -39,7 +39,7 @@ impl ClosedLoop {
             neighbours,
             reference: ReferenceFrame::default(),
             states: vec![VehicleState::default(); n],
-            shares: vec![NeighborState::default(); n],
+            shares: vec![NeighbourState::default(); n],
             commands: vec![ControlCommand::default(); n],
             truths: vec![PlantTruth::default(); n],
             dt: scenario.simulation.dt_s,
@@ -62,7 +62,7 @@ impl ClosedLoop {
         }
         for (a, neighbours) in self.agents.iter_mut().zip(&self.neighbours) {
             for &j in neighbours {
-                a.observe_neighbor(&self.shares[j]);
+                a.observe_neighbour(&self.shares[j]);
             }
         }
     }

@@ -16,7 +16,7 @@ use formation_config::node::error::NodeError;
 use formation_config::node::ports::{poke, send};
 use formation_config::protocol::messages::{Role, CONTROL_STOP};
 use formation_config::protocol::pacing::{CHILD_WAIT, HOUSEKEEPING_EVERY};
-use formation_config::protocol::wire::{DelayInjection, NeighborState, VehicleState};
+use formation_config::protocol::wire::{DelayInjection, NeighbourState, VehicleState};
 
 /// Runs agent `--agent i` until the orchestrator says stop (or goes away).
 pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeError> {
@@ -37,7 +37,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut own: Option<VehicleState> = None;
     let mut observed = false;
-    let mut share_later: Option<NeighborState> = None;
+    let mut share_later: Option<NeighbourState> = None;
     let mut k: u64 = 0;
     let mut sampler = telemetry::Sampler::new(&b.scenario, i);
     tracing::info!(
@@ -52,7 +52,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     loop {
         for sub in &ports.shares_in {
             while let Some(s) = sub.receive()? {
-                agent.observe_neighbor(&s);
+                agent.observe_neighbour(&s);
             }
         }
         let mut fresh = false;

@@ -7,7 +7,7 @@ use formation_config::node::ports::{
 use formation_config::protocol::messages::RunControl;
 use formation_config::protocol::services;
 use formation_config::protocol::wire::{
-    AgentTelemetry, ControlCommand, DelayInjection, NeighborState, ReferenceFrame, VehicleState,
+    AgentTelemetry, ControlCommand, DelayInjection, NeighbourState, ReferenceFrame, VehicleState,
 };
 use iceoryx2::port::notifier::Notifier;
 
@@ -18,8 +18,8 @@ pub struct Ports {
     pub reference: Input<ReferenceFrame>,
     pub state: Input<VehicleState>,
     /// One per neighbour, in `neighbours` order.
-    pub shares_in: Vec<Input<NeighborState>>,
-    pub share_out: Output<NeighborState>,
+    pub shares_in: Vec<Input<NeighbourState>>,
+    pub share_out: Output<NeighbourState>,
     pub command: Output<ControlCommand>,
     /// Live samples for `formation inspect` (never waited on).
     pub telemetry: Output<AgentTelemetry>,
@@ -39,9 +39,9 @@ impl Ports {
             state: subscriber(node, &services::VEHICLE_STATE.at(i))?,
             shares_in: neighbours
                 .iter()
-                .map(|&j| subscriber(node, &services::NEIGHBOR_STATE.at(j)))
+                .map(|&j| subscriber(node, &services::NEIGHBOUR_STATE.at(j)))
                 .collect::<Result<_, _>>()?,
-            share_out: publisher(node, &services::NEIGHBOR_STATE.at(i))?,
+            share_out: publisher(node, &services::NEIGHBOUR_STATE.at(i))?,
             command: publisher(node, &services::CONTROL_COMMAND.at(i))?,
             telemetry: publisher(node, &services::TELEMETRY.at(i))?,
             plant_wake: notifier(node, &services::WAKE_PLANT.named())?,

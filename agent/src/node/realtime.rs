@@ -56,7 +56,7 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), No
                 if s.sent_ns != 0 {
                     m.share_hop.record(now_ns().saturating_sub(s.sent_ns));
                 }
-                agent.observe_neighbor(&s);
+                agent.observe_neighbour(&s);
             }
         }
         while let Some(s) = ports.state.receive()? {

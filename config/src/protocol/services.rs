@@ -15,7 +15,7 @@ use super::pacing::{
     CONTROL_BUFFER, LOCKSTEP_BUFFER, REALTIME_STEPS_BUFFER, REFERENCE_BUFFER, STEPS_BUFFER,
 };
 use super::wire::{
-    AgentTelemetry, ControlCommand, DelayInjection, FaultInjection, NeighborState, ReferenceFrame,
+    AgentTelemetry, ControlCommand, DelayInjection, FaultInjection, NeighbourState, ReferenceFrame,
     VehicleState,
 };
 use core::marker::PhantomData;
@@ -42,7 +42,7 @@ macro_rules! messages {
 }
 messages!(
     VehicleState,
-    NeighborState,
+    NeighbourState,
     ReferenceFrame,
     ControlCommand,
     FaultInjection,
@@ -375,7 +375,7 @@ pub static VEHICLE_STATE: Topic<VehicleState> = Topic {
 };
 
 /// Agent i -> its neighbours: what it shares for consensus.
-pub static NEIGHBOR_STATE: Topic<NeighborState> = Topic {
+pub static NEIGHBOUR_STATE: Topic<NeighbourState> = Topic {
     pattern: "formation/agent/{i}/share",
     scope: Scope::PerAgent,
     publishers: &[Agent],
@@ -486,7 +486,7 @@ pub fn visit<V: Visitor>(sizing: &Sizing, v: &mut V) -> Result<(), V::Error> {
     v.event(WAKE_LEADER.named(), WAKE_LEADER.limits(s))?;
     for i in 0..s.n {
         v.topic(VEHICLE_STATE.at(i), VEHICLE_STATE.limits(s))?;
-        v.topic(NEIGHBOR_STATE.at(i), NEIGHBOR_STATE.limits(s))?;
+        v.topic(NEIGHBOUR_STATE.at(i), NEIGHBOUR_STATE.limits(s))?;
         v.topic(CONTROL_COMMAND.at(i), CONTROL_COMMAND.limits(s))?;
         v.event(WAKE_AGENT.at(i), WAKE_AGENT.limits(s))?;
         v.topic(TELEMETRY.at(i), TELEMETRY.limits(s))?;

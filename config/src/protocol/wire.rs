@@ -8,7 +8,7 @@
 //! Data flow of step k (lockstep):
 //! 1. leader  -> agents : [`ReferenceFrame`] for t_k (and plant / orchestrator, for the metrics).
 //! 2. plant   -> agent i: [`VehicleState`] of quadrotor i at t_k.
-//! 3. agent i -> its neighbours: [`NeighborState`] (P_i, V_i at t_k), published as soon as step 2 arrives.
+//! 3. agent i -> its neighbours: [`NeighbourState`] (P_i, V_i at t_k), published as soon as step 2 arrives.
 //! 4. agent i -> plant  : [`ControlCommand`] for step k, computed from information stamped
 //!    t_k - tau_i(t_k) (its own, its neighbours', the leader's) and its current attitude and rate.
 //! 5. plant integrates [t_k, t_{k+1}] once all N commands of step k are in, and sends the step's
@@ -55,9 +55,9 @@ pub struct VehicleState {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v2.NeighborState")
+    type_name("formation.v3.NeighbourState")
 )]
-pub struct NeighborState {
+pub struct NeighbourState {
     /// Simulation step k at which the state was measured.
     pub step: u64,
     /// Simulation time t_k, s.

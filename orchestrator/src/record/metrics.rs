@@ -274,11 +274,19 @@ fn non_finite_output(
         ("auxiliary state E_i2", &tm.e2),
         ("estimate Delta F-hat_i", &model_dev),
     ];
-    let first = groups
+    // x * 0.0 is 0 for every finite x and NaN for NaN and +-inf: one branch-free sum says whether
+    // any value is not finite; only then is the first one looked for.
+    let probe = groups
+        .iter()
+        .flat_map(|(_, vals)| vals.iter())
+        .fold(0.0, |acc, v| acc + v * 0.0);
+    if probe == 0.0 {
+        return None;
+    }
+    groups
         .iter()
         .find(|(_, vals)| vals.iter().any(|v| !v.is_finite()))
-        .map(|(name, _)| *name);
-    first
+        .map(|(name, _)| *name)
 }
 
 /// The first quantity of one agent that left its bounds (tilt, formation error), if any.
