@@ -9,6 +9,7 @@
 //! prefix from /dev/shm and /tmp/iceoryx2 ([`crate::node::ipc::remove_residue`]), so a SIGKILLed
 //! orchestrator leaves nothing behind.
 
+use super::error::NodeError;
 use super::files::{self, Lock};
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -27,25 +28,23 @@ pub struct Membership {
 
 impl Membership {
     /// Creates the lock file (orchestrator, before any role process starts) and joins.
-    pub fn create(run_dir: &Path, prefix: &str) -> Result<Membership, String> {
+    pub fn create(run_dir: &Path, prefix: &str) -> Result<Membership, NodeError> {
         let path = lock_path(run_dir);
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir)
-                .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(|e| file_error(dir, "cannot create", e))?;
         }
         Membership::open(&path, prefix, true)
     }
 
     /// Joins the run whose lock file the orchestrator created (role processes).
-    pub fn join(run_dir: &Path, prefix: &str) -> Result<Membership, String> {
+    pub fn join(run_dir: &Path, prefix: &str) -> Result<Membership, NodeError> {
         Membership::open(&lock_path(run_dir), prefix, false)
     }
 
-    fn open(path: &Path, prefix: &str, create: bool) -> Result<Membership, String> {
-        let file = files::open_lock_file(path, create)
-            .map_err(|e| format!("cannot open {}: {e}", path.display()))?;
-        files::lock(&file, Lock::Shared)
-            .map_err(|e| format!("cannot lock {}: {e}", path.display()))?;
+    fn open(path: &Path, prefix: &str, create: bool) -> Result<Membership, NodeError> {
+        let file =
+            files::open_lock_file(path, create).map_err(|e| file_error(path, "cannot open", e))?;
+        files::lock(&file, Lock::Shared).map_err(|e| file_error(path, "cannot lock", e))?;
         Ok(Membership {
             file,
             prefix: prefix.to_string(),
@@ -60,6 +59,13 @@ impl Membership {
             Ok(true) => Some(crate::node::ipc::remove_residue(&self.prefix)),
             _ => None,
         }
+    }
+}
+
+fn file_error(path: &Path, what: &str, e: std::io::Error) -> NodeError {
+    NodeError::File {
+        path: path.to_path_buf(),
+        detail: format!("{what}: {e}"),
     }
 }
 

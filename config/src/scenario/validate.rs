@@ -131,478 +131,14 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     if !c.0.is_empty() {
         return Err(ValidationErrors(c.0));
     }
-    let n = s.n_agents();
-    // Simulation.
-    let sim = &s.simulation;
-    c.positive("simulation.dt_s", sim.dt_s, SIM);
-    c.positive("simulation.duration_s", sim.duration_s, SIM);
-    if sim.dt_s > 0.0 && sim.duration_s > 0.0 && sim.duration_s < sim.dt_s {
-        c.push(
-            "simulation.duration_s",
-            SIM,
-            format!(
-                "{} s is shorter than one step dt = {} s: the run would have no step",
-                sim.duration_s, sim.dt_s
-            ),
-        );
-    }
-    c.positive("simulation.output_rate_hz", sim.output_rate_hz, SIM);
-    c.positive("simulation.gravity_m_s2", sim.gravity_m_s2, PHYS);
-    c.positive("simulation.max_delay_s", sim.max_delay_s, A2);
-    if sim.dt_s > 0.0 && sim.output_rate_hz > 0.0 && 1.0 / sim.output_rate_hz < sim.dt_s {
-        c.push(
-            "simulation.output_rate_hz",
-            SIM,
-            format!(
-                "output rate {} Hz exceeds the step rate {} Hz",
-                sim.output_rate_hz,
-                1.0 / sim.dt_s
-            ),
-        );
-    }
-    if sim.max_delay_s > 0.0 && sim.dt_s > 0.0 && sim.max_delay_s / sim.dt_s > 100_000.0 {
-        c.push(
-            "simulation.max_delay_s",
-            A2,
-            "delay bound spans more than 100000 steps",
-        );
-    }
-    // Metrics windows.
-    for (name, w) in [
-        ("metrics.cover_window_s", s.metrics.cover_window_s),
-        ("metrics.enclose_window_s", s.metrics.enclose_window_s),
-    ] {
-        if !(w[0] >= 0.0 && w[1] > w[0]) {
-            c.push(
-                name,
-                SIM,
-                format!(
-                    "window must satisfy 0 <= start < end, got [{}, {}]",
-                    w[0], w[1]
-                ),
-            );
-        }
-    }
-    c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
-    c.positive(
-        "metrics.safety_distance_m",
-        s.metrics.safety_distance_m,
-        PHYS,
-    );
-    c.positive(
-        "metrics.divergence_position_m",
-        s.metrics.divergence_position_m,
-        SIM,
-    );
-    c.positive(
-        "metrics.divergence_tilt_rad",
-        s.metrics.divergence_tilt_rad,
-        SIM,
-    );
-    if !(s.metrics.sensor_fov_deg > 0.0 && s.metrics.sensor_fov_deg < 180.0) {
-        c.push(
-            "metrics.sensor_fov_deg",
-            PHYS,
-            format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg),
-        );
-    }
-    // Mission.
-    let (leader, formation) = (&s.mission.leader, &s.mission.formation);
-    c.positive(
-        "mission.leader.convergence_rate",
-        leader.convergence_rate,
-        MISSION,
-    );
-    c.positive("mission.leader.climb_rate", leader.climb_rate, MISSION);
-    for (name, val) in [
-        ("mission.leader.descent_sharpness", leader.descent_sharpness),
-        ("mission.formation.cover_radius_m", formation.cover_radius_m),
-        (
-            "mission.formation.enclose_radius_m",
-            formation.enclose_radius_m,
-        ),
-        (
-            "mission.formation.radius_sharpness",
-            formation.radius_sharpness,
-        ),
-        (
-            "mission.formation.spin_onset_sharpness",
-            formation.spin_onset_sharpness,
-        ),
-    ] {
-        c.non_negative(name, val, MISSION);
-    }
-    // Vehicle.
-    let v = &s.vehicle;
-    c.positive("vehicle.mass_kg", v.mass_kg, PHYS);
-    for k in 0..3 {
-        c.positive(
-            &format!("vehicle.inertia_kg_m2[{k}]"),
-            v.inertia_kg_m2[k],
-            PHYS,
-        );
-        c.non_negative(
-            &format!("vehicle.rotational_drag[{k}]"),
-            v.rotational_drag[k],
-            PHYS,
-        );
-        if !(v.torque_min_nm[k] < v.torque_max_nm[k]) {
-            c.push(
-                format!("vehicle.torque_min_nm[{k}]"),
-                SAT,
-                format!(
-                    "U_min {} must be below U_max {}",
-                    v.torque_min_nm[k], v.torque_max_nm[k]
-                ),
-            );
-        }
-    }
-    if v.mass_kg > 0.0 && !(v.thrust_max_n > v.mass_kg * sim.gravity_m_s2) {
-        c.push(
-            "vehicle.thrust_max_n",
-            PHYS,
-            format!(
-                "{} N cannot lift m g = {:.3} N",
-                v.thrust_max_n,
-                v.mass_kg * sim.gravity_m_s2
-            ),
-        );
-    }
-    // Graph.
-    if n == 0 {
-        c.push("agents", A1, "at least one agent is needed");
-    }
-    if n > MAX_AGENTS {
-        c.push(
-            "agents",
-            INDEX,
-            format!("{n} agents exceed the supported maximum {MAX_AGENTS}"),
-        );
-    }
-    if s.graph.leader_weights.len() != n {
-        c.push(
-            "graph.leader_weights",
-            INDEX,
-            format!(
-                "has {} entries for {n} agents",
-                s.graph.leader_weights.len()
-            ),
-        );
-    }
-    let mut graph_ok = s.graph.leader_weights.len() == n && n > 0;
-    let mut seen_edges: Vec<(usize, usize)> = Vec::with_capacity(s.graph.edges.len());
-    for (k, e) in s.graph.edges.iter().enumerate() {
-        // An undirected edge carries one weight a_ij = a_ji: listing (a, b) and (b, a), or (a, b)
-        // twice, would silently add the weights in L.
-        let pair = (e.a.min(e.b), e.a.max(e.b));
-        if let Some(first) = seen_edges.iter().position(|&p| p == pair) {
-            c.push(
-                format!("graph.edges[{k}]"),
-                A1,
-                format!("edge ({}, {}) repeats graph.edges[{first}]: list each undirected edge once (a_ij = a_ji)", e.a, e.b),
-            );
-            graph_ok = false;
-        }
-        seen_edges.push(pair);
-        for (end, idx) in [("a", e.a), ("b", e.b)] {
-            if idx < 1 || idx > n {
-                c.push(
-                    format!("graph.edges[{k}].{end}"),
-                    INDEX,
-                    format!("agent {idx} is not in 1..={n}"),
-                );
-                graph_ok = false;
-            }
-        }
-        if e.a == e.b {
-            c.push(
-                format!("graph.edges[{k}]"),
-                A1,
-                format!("self-loop on agent {} (a_ii = 0)", e.a),
-            );
-            graph_ok = false;
-        }
-        if !(e.weight > 0.0) {
-            c.push(
-                format!("graph.edges[{k}].weight"),
-                A1,
-                format!("a_ij must be > 0, got {}", e.weight),
-            );
-            graph_ok = false;
-        }
-    }
-    for (i, b) in s.graph.leader_weights.iter().enumerate() {
-        c.non_negative(&format!("graph.leader_weights[{i}]"), *b, A1);
-    }
-    if graph_ok {
-        let topo = Topology::from_scenario(s);
-        if !topo.connected() {
-            c.push("graph.edges", A1, "the follower graph is not connected");
-        }
-        if !topo.leader_reaches_all() {
-            c.push(
-                "graph.leader_weights",
-                A1,
-                "no agent with b_i > 0 reaches every agent (the leader is unreachable)",
-            );
-        }
-    }
-    // Controller.
-    let ctl = &s.controller;
-    c.positive(
-        "controller.position.k_p",
-        ctl.position.k_p,
-        "Theorem 1: k_P > 0",
-    );
-    c.positive(
-        "controller.position.k_v",
-        ctl.position.k_v,
-        "Theorem 1: k_V > 0",
-    );
-    for (name, val) in [
-        ("controller.position.nn_k_p", ctl.position.nn_k_p),
-        ("controller.position.nn_k_v", ctl.position.nn_k_v),
-        ("controller.position.nn_leakage", ctl.position.nn_leakage),
-        (
-            "controller.position.nn_learning_rate",
-            ctl.position.nn_learning_rate,
-        ),
-    ] {
-        c.non_negative(name, val, EQ15);
-    }
-    c.non_negative(
-        "controller.position.leader_velocity_damping",
-        ctl.position.leader_velocity_damping,
-        D11,
-    );
-    c.non_negative(
-        "controller.position.leader_position_gain",
-        ctl.position.leader_position_gain,
-        D11,
-    );
-    c.positive(
-        "controller.position.max_horizontal_accel_m_s2",
-        ctl.position.max_horizontal_accel_m_s2,
-        CTRL,
-    );
-    c.positive(
-        "controller.position.max_up_accel_m_s2",
-        ctl.position.max_up_accel_m_s2,
-        CTRL,
-    );
-    if !(ctl.position.max_down_accel_m_s2 > 0.0
-        && ctl.position.max_down_accel_m_s2 < sim.gravity_m_s2)
-    {
-        c.push(
-            "controller.position.max_down_accel_m_s2",
-            "Remark 3: U_i3P + g > 0",
-            format!(
-                "must be in (0, g), got {}",
-                ctl.position.max_down_accel_m_s2
-            ),
-        );
-    }
-    if !(ctl.position.max_tilt_rad > 0.0 && ctl.position.max_tilt_rad < std::f64::consts::FRAC_PI_2)
-    {
-        c.push(
-            "controller.position.max_tilt_rad",
-            CTRL,
-            format!("must be in (0, pi/2), got {}", ctl.position.max_tilt_rad),
-        );
-    }
-    if ctl.rbfnn.neurons_per_axis == 0 || ctl.rbfnn.neurons_per_axis > 64 {
-        c.push(
-            "controller.rbfnn.neurons_per_axis",
-            CTRL,
-            format!("must be in 1..=64, got {}", ctl.rbfnn.neurons_per_axis),
-        );
-    }
-    c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
-    c.positive(
-        "controller.rbfnn.max_weight_norm",
-        ctl.rbfnn.max_weight_norm,
-        CTRL,
-    );
-    let nv = ctl.rbfnn.velocity_centres;
-    if nv == 0 || !ctl.rbfnn.neurons_per_axis.is_multiple_of(nv.max(1)) {
-        c.push(
-            "controller.rbfnn.velocity_centres",
-            CTRL,
-            format!(
-                "must be >= 1 and divide neurons_per_axis = {}, got {nv}",
-                ctl.rbfnn.neurons_per_axis
-            ),
-        );
-    }
-    c.non_negative(
-        "controller.rbfnn.initial_weight_amplitude",
-        ctl.rbfnn.initial_weight_amplitude,
-        CTRL,
-    );
-    c.positive(
-        "controller.rbfnn.position_span_m",
-        ctl.rbfnn.position_span_m,
-        CTRL,
-    );
-    c.positive(
-        "controller.rbfnn.velocity_span_m_s",
-        ctl.rbfnn.velocity_span_m_s,
-        CTRL,
-    );
-    for (name, f) in [
-        (
-            "controller.attitude_command_filter",
-            &ctl.attitude_command_filter,
-        ),
-        ("controller.rate_command_filter", &ctl.rate_command_filter),
-    ] {
-        c.positive(
-            &format!("{name}.natural_frequency_rad_s"),
-            f.natural_frequency_rad_s,
-            CTRL,
-        );
-        c.positive(&format!("{name}.damping"), f.damping, CTRL);
-        if sim.dt_s > 0.0 && f.natural_frequency_rad_s * sim.dt_s > 0.5 {
-            c.push(
-                format!("{name}.natural_frequency_rad_s"),
-                SIM,
-                format!(
-                    "omega_B dt = {:.3} > 0.5: the filter is not resolved by the step",
-                    f.natural_frequency_rad_s * sim.dt_s
-                ),
-            );
-        }
-        for k in 0..3 {
-            c.positive(
-                &format!("{name}.magnitude_limit[{k}]"),
-                f.magnitude_limit[k],
-                CTRL,
-            );
-            c.positive(&format!("{name}.rate_limit[{k}]"), f.rate_limit[k], CTRL);
-        }
-    }
-    let att = &ctl.attitude;
-    c.positive(
-        "controller.attitude.k1_alpha",
-        att.k1_alpha,
-        "eq. (34): K_i1alpha > 2 K_i1C > 0",
-    );
-    c.positive(
-        "controller.attitude.k2_phi",
-        att.k2_phi,
-        "eq. (45): K_i2Phi > 2 K_i2C > 0",
-    );
-    c.positive("controller.attitude.eps1_c", att.eps1_c, CTRL);
-    c.positive("controller.attitude.eps2_c", att.eps2_c, CTRL);
-    if att.k1_alpha > 0.0 && att.eps1_c > 0.0 && !(att.k1_alpha > 2.0 * att.eps1_c.sqrt()) {
-        c.push(
-            "controller.attitude.k1_alpha",
-            "eq. (34): K_i1alpha > 2 K_i1C",
-            "K_i1alpha must exceed 2 sqrt(eps1_c)",
-        );
-    }
-    if att.k2_phi > 0.0 && att.eps2_c > 0.0 && !(att.k2_phi > 2.0 * att.eps2_c.sqrt()) {
-        c.push(
-            "controller.attitude.k2_phi",
-            "eq. (45): K_i2Phi > 2 K_i2C",
-            "K_i2Phi must exceed 2 sqrt(eps2_c)",
-        );
-    }
-    c.positive("controller.attitude.mu2", att.mu2, CTRL);
-    c.positive(
-        "controller.attitude.attitude_margin_rad",
-        att.attitude_margin_rad,
-        A4,
-    );
-    c.positive(
-        "controller.attitude.rate_limit_rad_s",
-        att.rate_limit_rad_s,
-        A4,
-    );
-    let alpha_bound = norm3(ctl.rate_command_filter.magnitude_limit);
-    if att.rate_limit_rad_s > 0.0 && !(alpha_bound < att.rate_limit_rad_s) {
-        c.push(
-            "controller.rate_command_filter.magnitude_limit",
-            "eq. (40): C_i2 = C-bar_i2 - alpha-bar_i > 0",
-            format!(
-                "||alpha||max = {alpha_bound:.4} must be below the rate constraint {:.4}",
-                att.rate_limit_rad_s
-            ),
-        );
-    }
-    let ad = &ctl.adaptive;
-    if !(ad.gamma_min > 0.0 && ad.gamma_min <= ad.gamma_max) {
-        c.push(
-            "controller.adaptive.gamma_min",
-            A5,
-            format!(
-                "need 0 < Gamma_min <= Gamma_max, got [{}, {}]",
-                ad.gamma_min, ad.gamma_max
-            ),
-        );
-    }
-    for (name, val) in [
-        ("controller.adaptive.model_rate", ad.model_rate),
-        ("controller.adaptive.model_leakage", ad.model_leakage),
-        ("controller.adaptive.delta_rate", ad.delta_rate),
-        ("controller.adaptive.delta_leakage", ad.delta_leakage),
-        ("controller.adaptive.gamma_rate", ad.gamma_rate),
-        ("controller.adaptive.gamma_leakage", ad.gamma_leakage),
-        ("controller.adaptive.disturbance_rate", ad.disturbance_rate),
-        (
-            "controller.adaptive.disturbance_leakage",
-            ad.disturbance_leakage,
-        ),
-    ] {
-        c.non_negative(name, val, EQ46_49);
-    }
-    c.non_negative(
-        "controller.adaptive.disturbance_hat_initial",
-        ad.disturbance_hat_initial,
-        "eq. (49): D-hat_iA estimates a bound on ||D_iA||, so it starts >= 0",
-    );
-    if !(ad.gamma_hat_initial >= ad.gamma_min && ad.gamma_hat_initial <= ad.gamma_max) {
-        c.push(
-            "controller.adaptive.gamma_hat_initial",
-            A5,
-            format!(
-                "{} lies outside [Gamma_min, Gamma_max]",
-                ad.gamma_hat_initial
-            ),
-        );
-    }
-    check_fault_identification(s, &mut c);
-    if let Some(l) = ctl.position.position_error_limit_m {
-        c.positive("controller.position.position_error_limit_m", l, CTRL);
-    }
-    let aux = &ctl.auxiliary;
-    for (name, val) in [
-        ("controller.auxiliary.k1_e", aux.k1_e),
-        ("controller.auxiliary.k2_e", aux.k2_e),
-    ] {
-        if !(val > 1.0) {
-            c.push(name, EQ35_50, format!("must be > 1, got {val}"));
-        }
-    }
-    c.positive("controller.auxiliary.gamma1_e", aux.gamma1_e, EQ35_50);
-    c.positive("controller.auxiliary.gamma2_e", aux.gamma2_e, EQ35_50);
-    c.positive("controller.auxiliary.e1_threshold", aux.e1_threshold, CTRL);
-    c.positive("controller.auxiliary.e2_threshold", aux.e2_threshold, CTRL);
-    c.positive(
-        "controller.unconstrained.attitude_gain",
-        ctl.unconstrained.attitude_gain,
-        CTRL,
-    );
-    c.positive(
-        "controller.unconstrained.rate_gain",
-        ctl.unconstrained.rate_gain,
-        CTRL,
-    );
-    c.positive(
-        "controller.unconstrained.command_rate_limit_rad_s",
-        ctl.unconstrained.command_rate_limit_rad_s,
-        CTRL,
-    );
+    check_simulation(s, &mut c);
+    check_metrics(s, &mut c);
+    check_mission(s, &mut c);
+    check_vehicle(s, &mut c);
+    check_graph(s, &mut c);
+    check_position_and_filters(s, &mut c);
+    check_attitude(s, &mut c);
+    check_adaptive_and_auxiliary(s, &mut c);
     // Agents.
     for (i, a) in s.agents.iter().enumerate() {
         check_agent(s, i, a, &mut c);
@@ -847,4 +383,511 @@ fn check_finite(s: &Scenario, c: &mut Collector) {
         }
     }
     walk("", &value, c);
+}
+
+/// Checks the simulation section: step, duration, output rate, delay bound.
+fn check_simulation(s: &Scenario, c: &mut Collector) {
+    let sim = &s.simulation;
+    c.positive("simulation.dt_s", sim.dt_s, SIM);
+    c.positive("simulation.duration_s", sim.duration_s, SIM);
+    if sim.dt_s > 0.0 && sim.duration_s > 0.0 && sim.duration_s < sim.dt_s {
+        c.push(
+            "simulation.duration_s",
+            SIM,
+            format!(
+                "{} s is shorter than one step dt = {} s: the run would have no step",
+                sim.duration_s, sim.dt_s
+            ),
+        );
+    }
+    c.positive("simulation.output_rate_hz", sim.output_rate_hz, SIM);
+    c.positive("simulation.gravity_m_s2", sim.gravity_m_s2, PHYS);
+    c.positive("simulation.max_delay_s", sim.max_delay_s, A2);
+    if sim.dt_s > 0.0 && sim.output_rate_hz > 0.0 && 1.0 / sim.output_rate_hz < sim.dt_s {
+        c.push(
+            "simulation.output_rate_hz",
+            SIM,
+            format!(
+                "output rate {} Hz exceeds the step rate {} Hz",
+                sim.output_rate_hz,
+                1.0 / sim.dt_s
+            ),
+        );
+    }
+    if sim.max_delay_s > 0.0 && sim.dt_s > 0.0 && sim.max_delay_s / sim.dt_s > 100_000.0 {
+        c.push(
+            "simulation.max_delay_s",
+            A2,
+            "delay bound spans more than 100000 steps",
+        );
+    }
+}
+
+/// Checks the metrics section: windows and sensor.
+fn check_metrics(s: &Scenario, c: &mut Collector) {
+    // Metrics windows.
+    for (name, w) in [
+        ("metrics.cover_window_s", s.metrics.cover_window_s),
+        ("metrics.enclose_window_s", s.metrics.enclose_window_s),
+    ] {
+        if !(w[0] >= 0.0 && w[1] > w[0]) {
+            c.push(
+                name,
+                SIM,
+                format!(
+                    "window must satisfy 0 <= start < end, got [{}, {}]",
+                    w[0], w[1]
+                ),
+            );
+        }
+    }
+    c.positive("metrics.target_radius_m", s.metrics.target_radius_m, PHYS);
+    c.positive(
+        "metrics.safety_distance_m",
+        s.metrics.safety_distance_m,
+        PHYS,
+    );
+    c.positive(
+        "metrics.divergence_position_m",
+        s.metrics.divergence_position_m,
+        SIM,
+    );
+    c.positive(
+        "metrics.divergence_tilt_rad",
+        s.metrics.divergence_tilt_rad,
+        SIM,
+    );
+    if !(s.metrics.sensor_fov_deg > 0.0 && s.metrics.sensor_fov_deg < 180.0) {
+        c.push(
+            "metrics.sensor_fov_deg",
+            PHYS,
+            format!("must be in (0, 180), got {}", s.metrics.sensor_fov_deg),
+        );
+    }
+}
+
+/// Checks the mission section: leader and formation.
+fn check_mission(s: &Scenario, c: &mut Collector) {
+    // Mission.
+    let (leader, formation) = (&s.mission.leader, &s.mission.formation);
+    c.positive(
+        "mission.leader.convergence_rate",
+        leader.convergence_rate,
+        MISSION,
+    );
+    c.positive("mission.leader.climb_rate", leader.climb_rate, MISSION);
+    for (name, val) in [
+        ("mission.leader.descent_sharpness", leader.descent_sharpness),
+        ("mission.formation.cover_radius_m", formation.cover_radius_m),
+        (
+            "mission.formation.enclose_radius_m",
+            formation.enclose_radius_m,
+        ),
+        (
+            "mission.formation.radius_sharpness",
+            formation.radius_sharpness,
+        ),
+        (
+            "mission.formation.spin_onset_sharpness",
+            formation.spin_onset_sharpness,
+        ),
+    ] {
+        c.non_negative(name, val, MISSION);
+    }
+}
+
+/// Checks the vehicle section: mass, inertia, thrust and torque limits.
+fn check_vehicle(s: &Scenario, c: &mut Collector) {
+    let sim = &s.simulation;
+    // Vehicle.
+    let v = &s.vehicle;
+    c.positive("vehicle.mass_kg", v.mass_kg, PHYS);
+    for k in 0..3 {
+        c.positive(
+            &format!("vehicle.inertia_kg_m2[{k}]"),
+            v.inertia_kg_m2[k],
+            PHYS,
+        );
+        c.non_negative(
+            &format!("vehicle.rotational_drag[{k}]"),
+            v.rotational_drag[k],
+            PHYS,
+        );
+        if !(v.torque_min_nm[k] < v.torque_max_nm[k]) {
+            c.push(
+                format!("vehicle.torque_min_nm[{k}]"),
+                SAT,
+                format!(
+                    "U_min {} must be below U_max {}",
+                    v.torque_min_nm[k], v.torque_max_nm[k]
+                ),
+            );
+        }
+    }
+    if v.mass_kg > 0.0 && !(v.thrust_max_n > v.mass_kg * sim.gravity_m_s2) {
+        c.push(
+            "vehicle.thrust_max_n",
+            PHYS,
+            format!(
+                "{} N cannot lift m g = {:.3} N",
+                v.thrust_max_n,
+                v.mass_kg * sim.gravity_m_s2
+            ),
+        );
+    }
+}
+
+/// Checks the graph section: N, edges, leader weights, Assumption 1.
+fn check_graph(s: &Scenario, c: &mut Collector) {
+    let n = s.n_agents();
+    // Graph.
+    if n == 0 {
+        c.push("agents", A1, "at least one agent is needed");
+    }
+    if n > MAX_AGENTS {
+        c.push(
+            "agents",
+            INDEX,
+            format!("{n} agents exceed the supported maximum {MAX_AGENTS}"),
+        );
+    }
+    if s.graph.leader_weights.len() != n {
+        c.push(
+            "graph.leader_weights",
+            INDEX,
+            format!(
+                "has {} entries for {n} agents",
+                s.graph.leader_weights.len()
+            ),
+        );
+    }
+    let mut graph_ok = s.graph.leader_weights.len() == n && n > 0;
+    let mut seen_edges: Vec<(usize, usize)> = Vec::with_capacity(s.graph.edges.len());
+    for (k, e) in s.graph.edges.iter().enumerate() {
+        // An undirected edge carries one weight a_ij = a_ji: listing (a, b) and (b, a), or (a, b)
+        // twice, would silently add the weights in L.
+        let pair = (e.a.min(e.b), e.a.max(e.b));
+        if let Some(first) = seen_edges.iter().position(|&p| p == pair) {
+            c.push(
+                format!("graph.edges[{k}]"),
+                A1,
+                format!("edge ({}, {}) repeats graph.edges[{first}]: list each undirected edge once (a_ij = a_ji)", e.a, e.b),
+            );
+            graph_ok = false;
+        }
+        seen_edges.push(pair);
+        for (end, idx) in [("a", e.a), ("b", e.b)] {
+            if idx < 1 || idx > n {
+                c.push(
+                    format!("graph.edges[{k}].{end}"),
+                    INDEX,
+                    format!("agent {idx} is not in 1..={n}"),
+                );
+                graph_ok = false;
+            }
+        }
+        if e.a == e.b {
+            c.push(
+                format!("graph.edges[{k}]"),
+                A1,
+                format!("self-loop on agent {} (a_ii = 0)", e.a),
+            );
+            graph_ok = false;
+        }
+        if !(e.weight > 0.0) {
+            c.push(
+                format!("graph.edges[{k}].weight"),
+                A1,
+                format!("a_ij must be > 0, got {}", e.weight),
+            );
+            graph_ok = false;
+        }
+    }
+    for (i, b) in s.graph.leader_weights.iter().enumerate() {
+        c.non_negative(&format!("graph.leader_weights[{i}]"), *b, A1);
+    }
+    if graph_ok {
+        let topo = Topology::from_scenario(s);
+        if !topo.connected() {
+            c.push("graph.edges", A1, "the follower graph is not connected");
+        }
+        if !topo.leader_reaches_all() {
+            c.push(
+                "graph.leader_weights",
+                A1,
+                "no agent with b_i > 0 reaches every agent (the leader is unreachable)",
+            );
+        }
+    }
+}
+
+/// Checks the position loop, RBFNN and command filters.
+fn check_position_and_filters(s: &Scenario, c: &mut Collector) {
+    let sim = &s.simulation;
+    // Controller.
+    let ctl = &s.controller;
+    c.positive(
+        "controller.position.k_p",
+        ctl.position.k_p,
+        "Theorem 1: k_P > 0",
+    );
+    c.positive(
+        "controller.position.k_v",
+        ctl.position.k_v,
+        "Theorem 1: k_V > 0",
+    );
+    for (name, val) in [
+        ("controller.position.nn_k_p", ctl.position.nn_k_p),
+        ("controller.position.nn_k_v", ctl.position.nn_k_v),
+        ("controller.position.nn_leakage", ctl.position.nn_leakage),
+        (
+            "controller.position.nn_learning_rate",
+            ctl.position.nn_learning_rate,
+        ),
+    ] {
+        c.non_negative(name, val, EQ15);
+    }
+    c.non_negative(
+        "controller.position.leader_velocity_damping",
+        ctl.position.leader_velocity_damping,
+        D11,
+    );
+    c.non_negative(
+        "controller.position.leader_position_gain",
+        ctl.position.leader_position_gain,
+        D11,
+    );
+    c.positive(
+        "controller.position.max_horizontal_accel_m_s2",
+        ctl.position.max_horizontal_accel_m_s2,
+        CTRL,
+    );
+    c.positive(
+        "controller.position.max_up_accel_m_s2",
+        ctl.position.max_up_accel_m_s2,
+        CTRL,
+    );
+    if !(ctl.position.max_down_accel_m_s2 > 0.0
+        && ctl.position.max_down_accel_m_s2 < sim.gravity_m_s2)
+    {
+        c.push(
+            "controller.position.max_down_accel_m_s2",
+            "Remark 3: U_i3P + g > 0",
+            format!(
+                "must be in (0, g), got {}",
+                ctl.position.max_down_accel_m_s2
+            ),
+        );
+    }
+    if !(ctl.position.max_tilt_rad > 0.0 && ctl.position.max_tilt_rad < std::f64::consts::FRAC_PI_2)
+    {
+        c.push(
+            "controller.position.max_tilt_rad",
+            CTRL,
+            format!("must be in (0, pi/2), got {}", ctl.position.max_tilt_rad),
+        );
+    }
+    if ctl.rbfnn.neurons_per_axis == 0 || ctl.rbfnn.neurons_per_axis > 64 {
+        c.push(
+            "controller.rbfnn.neurons_per_axis",
+            CTRL,
+            format!("must be in 1..=64, got {}", ctl.rbfnn.neurons_per_axis),
+        );
+    }
+    c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    c.positive(
+        "controller.rbfnn.max_weight_norm",
+        ctl.rbfnn.max_weight_norm,
+        CTRL,
+    );
+    let nv = ctl.rbfnn.velocity_centres;
+    if nv == 0 || !ctl.rbfnn.neurons_per_axis.is_multiple_of(nv.max(1)) {
+        c.push(
+            "controller.rbfnn.velocity_centres",
+            CTRL,
+            format!(
+                "must be >= 1 and divide neurons_per_axis = {}, got {nv}",
+                ctl.rbfnn.neurons_per_axis
+            ),
+        );
+    }
+    c.non_negative(
+        "controller.rbfnn.initial_weight_amplitude",
+        ctl.rbfnn.initial_weight_amplitude,
+        CTRL,
+    );
+    c.positive(
+        "controller.rbfnn.position_span_m",
+        ctl.rbfnn.position_span_m,
+        CTRL,
+    );
+    c.positive(
+        "controller.rbfnn.velocity_span_m_s",
+        ctl.rbfnn.velocity_span_m_s,
+        CTRL,
+    );
+    for (name, f) in [
+        (
+            "controller.attitude_command_filter",
+            &ctl.attitude_command_filter,
+        ),
+        ("controller.rate_command_filter", &ctl.rate_command_filter),
+    ] {
+        c.positive(
+            &format!("{name}.natural_frequency_rad_s"),
+            f.natural_frequency_rad_s,
+            CTRL,
+        );
+        c.positive(&format!("{name}.damping"), f.damping, CTRL);
+        if sim.dt_s > 0.0 && f.natural_frequency_rad_s * sim.dt_s > 0.5 {
+            c.push(
+                format!("{name}.natural_frequency_rad_s"),
+                SIM,
+                format!(
+                    "omega_B dt = {:.3} > 0.5: the filter is not resolved by the step",
+                    f.natural_frequency_rad_s * sim.dt_s
+                ),
+            );
+        }
+        for k in 0..3 {
+            c.positive(
+                &format!("{name}.magnitude_limit[{k}]"),
+                f.magnitude_limit[k],
+                CTRL,
+            );
+            c.positive(&format!("{name}.rate_limit[{k}]"), f.rate_limit[k], CTRL);
+        }
+    }
+}
+
+/// Checks the attitude loop (BLF-AFTAC).
+fn check_attitude(s: &Scenario, c: &mut Collector) {
+    let ctl = &s.controller;
+    let att = &ctl.attitude;
+    c.positive(
+        "controller.attitude.k1_alpha",
+        att.k1_alpha,
+        "eq. (34): K_i1alpha > 2 K_i1C > 0",
+    );
+    c.positive(
+        "controller.attitude.k2_phi",
+        att.k2_phi,
+        "eq. (45): K_i2Phi > 2 K_i2C > 0",
+    );
+    c.positive("controller.attitude.eps1_c", att.eps1_c, CTRL);
+    c.positive("controller.attitude.eps2_c", att.eps2_c, CTRL);
+    if att.k1_alpha > 0.0 && att.eps1_c > 0.0 && !(att.k1_alpha > 2.0 * att.eps1_c.sqrt()) {
+        c.push(
+            "controller.attitude.k1_alpha",
+            "eq. (34): K_i1alpha > 2 K_i1C",
+            "K_i1alpha must exceed 2 sqrt(eps1_c)",
+        );
+    }
+    if att.k2_phi > 0.0 && att.eps2_c > 0.0 && !(att.k2_phi > 2.0 * att.eps2_c.sqrt()) {
+        c.push(
+            "controller.attitude.k2_phi",
+            "eq. (45): K_i2Phi > 2 K_i2C",
+            "K_i2Phi must exceed 2 sqrt(eps2_c)",
+        );
+    }
+    c.positive("controller.attitude.mu2", att.mu2, CTRL);
+    c.positive(
+        "controller.attitude.attitude_margin_rad",
+        att.attitude_margin_rad,
+        A4,
+    );
+    c.positive(
+        "controller.attitude.rate_limit_rad_s",
+        att.rate_limit_rad_s,
+        A4,
+    );
+    let alpha_bound = norm3(ctl.rate_command_filter.magnitude_limit);
+    if att.rate_limit_rad_s > 0.0 && !(alpha_bound < att.rate_limit_rad_s) {
+        c.push(
+            "controller.rate_command_filter.magnitude_limit",
+            "eq. (40): C_i2 = C-bar_i2 - alpha-bar_i > 0",
+            format!(
+                "||alpha||max = {alpha_bound:.4} must be below the rate constraint {:.4}",
+                att.rate_limit_rad_s
+            ),
+        );
+    }
+}
+
+/// Checks the adaptive laws (46)-(49) and the auxiliary systems.
+fn check_adaptive_and_auxiliary(s: &Scenario, c: &mut Collector) {
+    let ctl = &s.controller;
+    let ad = &ctl.adaptive;
+    if !(ad.gamma_min > 0.0 && ad.gamma_min <= ad.gamma_max) {
+        c.push(
+            "controller.adaptive.gamma_min",
+            A5,
+            format!(
+                "need 0 < Gamma_min <= Gamma_max, got [{}, {}]",
+                ad.gamma_min, ad.gamma_max
+            ),
+        );
+    }
+    for (name, val) in [
+        ("controller.adaptive.model_rate", ad.model_rate),
+        ("controller.adaptive.model_leakage", ad.model_leakage),
+        ("controller.adaptive.delta_rate", ad.delta_rate),
+        ("controller.adaptive.delta_leakage", ad.delta_leakage),
+        ("controller.adaptive.gamma_rate", ad.gamma_rate),
+        ("controller.adaptive.gamma_leakage", ad.gamma_leakage),
+        ("controller.adaptive.disturbance_rate", ad.disturbance_rate),
+        (
+            "controller.adaptive.disturbance_leakage",
+            ad.disturbance_leakage,
+        ),
+    ] {
+        c.non_negative(name, val, EQ46_49);
+    }
+    c.non_negative(
+        "controller.adaptive.disturbance_hat_initial",
+        ad.disturbance_hat_initial,
+        "eq. (49): D-hat_iA estimates a bound on ||D_iA||, so it starts >= 0",
+    );
+    if !(ad.gamma_hat_initial >= ad.gamma_min && ad.gamma_hat_initial <= ad.gamma_max) {
+        c.push(
+            "controller.adaptive.gamma_hat_initial",
+            A5,
+            format!(
+                "{} lies outside [Gamma_min, Gamma_max]",
+                ad.gamma_hat_initial
+            ),
+        );
+    }
+    check_fault_identification(s, c);
+    if let Some(l) = ctl.position.position_error_limit_m {
+        c.positive("controller.position.position_error_limit_m", l, CTRL);
+    }
+    let aux = &ctl.auxiliary;
+    for (name, val) in [
+        ("controller.auxiliary.k1_e", aux.k1_e),
+        ("controller.auxiliary.k2_e", aux.k2_e),
+    ] {
+        if !(val > 1.0) {
+            c.push(name, EQ35_50, format!("must be > 1, got {val}"));
+        }
+    }
+    c.positive("controller.auxiliary.gamma1_e", aux.gamma1_e, EQ35_50);
+    c.positive("controller.auxiliary.gamma2_e", aux.gamma2_e, EQ35_50);
+    c.positive("controller.auxiliary.e1_threshold", aux.e1_threshold, CTRL);
+    c.positive("controller.auxiliary.e2_threshold", aux.e2_threshold, CTRL);
+    c.positive(
+        "controller.unconstrained.attitude_gain",
+        ctl.unconstrained.attitude_gain,
+        CTRL,
+    );
+    c.positive(
+        "controller.unconstrained.rate_gain",
+        ctl.unconstrained.rate_gain,
+        CTRL,
+    );
+    c.positive(
+        "controller.unconstrained.command_rate_limit_rad_s",
+        ctl.unconstrained.command_rate_limit_rad_s,
+        CTRL,
+    );
 }
