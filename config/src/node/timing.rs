@@ -137,6 +137,13 @@ impl TimingReport {
     }
 }
 
+fn file_error(path: &Path, what: &str, e: impl std::fmt::Display) -> NodeError {
+    NodeError::File {
+        path: path.to_path_buf(),
+        detail: format!("{what}: {e}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -170,12 +177,5 @@ mod tests {
         a.merge(&b);
         assert_eq!(a.len(), 2);
         assert!(a.max() >= 999_000);
-    }
-}
-
-fn file_error(path: &Path, what: &str, e: impl std::fmt::Display) -> NodeError {
-    NodeError::File {
-        path: path.to_path_buf(),
-        detail: format!("{what}: {e}"),
     }
 }
