@@ -7,6 +7,7 @@
 //! * [`live`]: `ps`, `inspect`, `inject` on a running run.
 //! * [`plot`], [`check`], [`bench`], [`scenario_gen`], [`sweep`]: figures, gain checks, IPC
 //!   benchmarks, generated scenarios of any N, parameter sweeps.
+//! * [`schema`]: `formation schema`, the service table for outside clients and docs/services.md.
 //! * [`rng`]: the seeded generator of generated graphs and sweeps.
 //! * [`cli`], [`cpus`]: shared command-line plumbing and CPU sets.
 
@@ -23,6 +24,7 @@ pub mod rng;
 pub mod role;
 pub mod run;
 pub mod scenario_gen;
+pub mod schema;
 pub mod sim;
 pub mod sweep;
 

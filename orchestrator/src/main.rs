@@ -7,11 +7,13 @@
 //! * `check`   — what decides whether a gain set can work (graph spectrum, Theorem 1, bandwidths).
 //! * `ps`, `inspect`, `inject` — look at and act on a running `run` from another terminal.
 //! * `bench`   — IPC latency and jitter: iceoryx2 vs Unix sockets vs UDP.
+//! * `schema`  — every service of a run (wire contract for outside clients).
+//! * `completions` — shell completion script.
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
 
-use formation::{bench, check, cli, live, plot, role, run, scenario_gen, sim, sweep};
+use formation::{bench, check, cli, live, plot, role, run, scenario_gen, schema, sim, sweep};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -45,6 +47,11 @@ enum Command {
     Inspect(live::inspect::InspectArgs),
     /// Inject an actuator fault or a delay profile into a running run (agent ids are 1-based).
     Inject(live::inject::InjectArgs),
+    /// Print every service of a run (name pattern, message type and iceoryx2 type name, size,
+    /// alignment, senders, receivers, limits) from the service table.
+    Schema(schema::SchemaArgs),
+    /// Print a shell completion script (e.g. `formation completions bash > ~/.local/share/bash-completion/completions/formation`).
+    Completions(CompletionsArgs),
     /// Internal: one agent process of `formation bench`.
     #[command(hide = true)]
     BenchPeer(bench::PeerArgs),
@@ -52,6 +59,18 @@ enum Command {
     /// orchestrator from this same executable.
     #[command(hide = true)]
     Node(role::NodeArgs),
+}
+
+/// Arguments of `formation completions`.
+#[derive(clap::Args, Debug)]
+struct CompletionsArgs {
+    /// The shell to complete for.
+    shell: clap_complete::Shell,
+}
+
+/// Writes the completion script of `formation` for `shell`.
+fn completions(shell: clap_complete::Shell, out: &mut dyn std::io::Write) {
+    clap_complete::generate(shell, &mut Cli::command(), "formation", out);
 }
 
 fn main() -> ExitCode {
@@ -73,6 +92,11 @@ fn main() -> ExitCode {
         Some(Command::Ps(a)) => live::ps::main(a),
         Some(Command::Inspect(a)) => live::inspect::main(a),
         Some(Command::Inject(a)) => live::inject::main(a),
+        Some(Command::Schema(a)) => schema::main(a),
+        Some(Command::Completions(a)) => {
+            completions(a.shell, &mut std::io::stdout());
+            ExitCode::SUCCESS
+        }
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
         Some(Command::Node(a)) => role::main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
@@ -83,7 +107,6 @@ fn main() -> ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use clap::CommandFactory;
 
     fn parse(args: &[&str]) -> Result<Cli, clap::Error> {
         Cli::try_parse_from(std::iter::once("formation").chain(args.iter().copied()))
@@ -135,6 +158,33 @@ mod tests {
             let e = parse(args).expect_err("a negative count").to_string();
             assert!(e.contains("is negative"), "{args:?}: {e}");
             assert!(!e.contains("unexpected argument"), "{args:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_bash_completion_script_completes_formation_and_its_subcommands() {
+        let mut out = Vec::new();
+        completions(clap_complete::Shell::Bash, &mut out);
+        let script = String::from_utf8(out).expect("utf-8");
+        assert!(script.contains("formation"));
+        for sub in [
+            "sim",
+            "run",
+            "scenario",
+            "sweep",
+            "plot",
+            "check",
+            "bench",
+            "ps",
+            "inspect",
+            "inject",
+            "schema",
+            "completions",
+        ] {
+            assert!(
+                script.contains(&format!("formation__subcmd__{sub}")),
+                "bash completion lacks the subcommand {sub}"
+            );
         }
     }
 }

@@ -55,6 +55,15 @@ messages!(
     InjectRequest,
 );
 
+/// The iceoryx2 type name of a message (its `#[type_name("formation.vN.X")]`): what an outside
+/// client must declare to open the service.
+#[cfg(feature = "ipc")]
+pub fn wire_type_name<T: Message>() -> &'static str {
+    // SAFETY: reading the name has no precondition; the trait's safety contract binds the
+    // implementer (the layout behind the name), which `Message` types uphold with `#[repr(C)]`.
+    unsafe { <T as iceoryx2::prelude::ZeroCopySend>::type_name() }
+}
+
 /// A process (or set of processes) that opens ports on a service.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Party {
@@ -550,6 +559,16 @@ mod tests {
         assert_eq!(lock, STEPS_BUFFER);
         assert_eq!(rt, REALTIME_STEPS_BUFFER);
         assert!(rt > lock);
+    }
+
+    #[cfg(feature = "ipc")]
+    #[test]
+    fn the_wire_type_name_is_the_declared_versioned_name_not_the_rust_path() {
+        assert_eq!(
+            wire_type_name::<AgentTelemetry>(),
+            "formation.v1.AgentTelemetry"
+        );
+        assert_eq!(wire_type_name::<StepEntry>(), "formation.v2.StepEntry");
     }
 
     #[test]

@@ -1,0 +1,404 @@
+//! `formation schema [--json | --markdown] [--n N]`: every service of a run, read from the typed
+//! service table (`formation_config::protocol::services`) — name pattern, scope, message type
+//! (Rust and iceoryx2 names, size, alignment), who sends and receives, history, and the limits the
+//! orchestrator creates it with for N agents. `docs/services.md` is its `--markdown` output.
+
+use formation_config::protocol::services::{
+    self, wire_type_name, Event, Limits, Message, Named, Party, Scope, Sizing, Slice, Topic,
+    Visitor,
+};
+use serde::Serialize;
+use std::convert::Infallible;
+use std::process::ExitCode;
+
+/// Arguments of `formation schema`.
+#[derive(clap::Args, Debug)]
+pub struct SchemaArgs {
+    /// Number of agents the limits are sized for (1..=128).
+    #[arg(long, default_value_t = 5, value_parser = crate::cli::whole_number::<usize>)]
+    pub n: usize,
+    /// Print `{"n", "services": [{"pattern", "scope", "kind", "message", ...}]}`.
+    #[arg(long, conflicts_with = "markdown")]
+    pub json: bool,
+    /// Print the Markdown page kept as docs/services.md.
+    #[arg(long)]
+    pub markdown: bool,
+}
+
+/// The message a publish-subscribe service carries.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct MessageType {
+    /// Rust type, without its module path (`[T]` for a slice of one `T` per agent).
+    pub rust: String,
+    /// iceoryx2 type name (`#[type_name]`), what an outside client must declare.
+    pub iceoryx2: &'static str,
+    /// Whether a sample is a slice of N elements rather than one value.
+    pub slice: bool,
+    /// Size of one element in bytes.
+    pub size: usize,
+    /// Alignment in bytes.
+    pub align: usize,
+}
+
+/// Upper bounds the service is created with (see `services::Limits`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct ServiceLimits {
+    /// Nodes that may open it.
+    pub nodes: usize,
+    /// Publishers or notifiers.
+    pub senders: usize,
+    /// Subscribers or listeners.
+    pub receivers: usize,
+    /// Samples a subscriber buffers (publish-subscribe only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub buffer: Option<usize>,
+}
+
+/// One service of the table.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Service {
+    /// Name pattern relative to the run prefix (`{i}`: 0-based agent index).
+    pub pattern: &'static str,
+    /// `run` or `per agent`.
+    pub scope: &'static str,
+    /// `publish-subscribe` or `event`.
+    pub kind: &'static str,
+    /// The message (publish-subscribe only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub message: Option<MessageType>,
+    /// Publishers or notifiers.
+    pub senders: Vec<&'static str>,
+    /// Subscribers or listeners.
+    pub receivers: Vec<&'static str>,
+    /// Samples kept for late subscribers (publish-subscribe only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub history: Option<usize>,
+    /// Limits for the requested N.
+    pub limits: ServiceLimits,
+    /// What it carries or wakes.
+    pub doc: &'static str,
+}
+
+/// The services of a run of `n` agents, in the order the orchestrator creates them (run-wide ones
+/// first, then each per-agent service once, by its pattern).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Schema {
+    /// Number of agents the limits are sized for.
+    pub n: usize,
+    /// The services.
+    pub services: Vec<Service>,
+}
+
+fn scope_name(s: Scope) -> &'static str {
+    match s {
+        Scope::Run => "run",
+        Scope::PerAgent => "per agent",
+    }
+}
+
+fn parties(p: &[Party]) -> Vec<&'static str> {
+    p.iter().map(|p| p.name()).collect()
+}
+
+fn short_rust_name<T>() -> &'static str {
+    let full = core::any::type_name::<T>();
+    full.rsplit("::").next().unwrap_or(full)
+}
+
+fn limits(l: Limits, buffer: bool) -> ServiceLimits {
+    ServiceLimits {
+        nodes: l.nodes,
+        senders: l.senders,
+        receivers: l.receivers,
+        buffer: buffer.then_some(l.buffer),
+    }
+}
+
+/// Collects each service once (by pattern) while `services::visit` walks a run.
+struct Collect(Vec<Service>);
+
+impl Collect {
+    fn push_topic<T: Message, S>(&mut self, t: &Topic<T, S>, l: Limits, slice: bool) {
+        if self.0.iter().any(|s| s.pattern == t.pattern) {
+            return;
+        }
+        let (size, align) = t.layout();
+        let rust = short_rust_name::<T>();
+        self.0.push(Service {
+            pattern: t.pattern,
+            scope: scope_name(t.scope),
+            kind: "publish-subscribe",
+            message: Some(MessageType {
+                rust: if slice {
+                    format!("[{rust}]")
+                } else {
+                    rust.to_string()
+                },
+                iceoryx2: wire_type_name::<T>(),
+                slice,
+                size,
+                align,
+            }),
+            senders: parties(t.publishers),
+            receivers: parties(t.subscribers),
+            history: Some(t.history),
+            limits: limits(l, true),
+            doc: t.doc,
+        });
+    }
+}
+
+impl Visitor for Collect {
+    type Error = Infallible;
+    fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), Infallible> {
+        self.push_topic(s.spec, l, false);
+        Ok(())
+    }
+    fn slices<T: Message>(
+        &mut self,
+        s: Named<Topic<T, Slice>>,
+        l: Limits,
+    ) -> Result<(), Infallible> {
+        self.push_topic(s.spec, l, true);
+        Ok(())
+    }
+    fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), Infallible> {
+        let e: &Event = s.spec;
+        if !self.0.iter().any(|x| x.pattern == e.pattern) {
+            self.0.push(Service {
+                pattern: e.pattern,
+                scope: scope_name(e.scope),
+                kind: "event",
+                message: None,
+                senders: parties(e.notifiers),
+                receivers: parties(e.listeners),
+                history: None,
+                limits: limits(l, false),
+                doc: e.doc,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The schema of a lockstep run of `n >= 1` agents with the default number of clients.
+pub fn schema(n: usize) -> Schema {
+    let mut c = Collect(Vec::new());
+    let Ok(()) = services::visit(&Sizing::run(n, false), &mut c);
+    Schema { n, services: c.0 }
+}
+
+/// The cells of one row, in the order of [`HEADER`].
+fn cells(s: &Service) -> Vec<String> {
+    let opt = |v: Option<usize>| v.map_or_else(|| "-".to_string(), |v| v.to_string());
+    let (rust, iox, size, align) = match &s.message {
+        Some(m) => (
+            m.rust.clone(),
+            m.iceoryx2.to_string(),
+            m.size.to_string(),
+            m.align.to_string(),
+        ),
+        None => ("-".into(), "-".into(), "-".into(), "-".into()),
+    };
+    vec![
+        s.pattern.to_string(),
+        s.scope.to_string(),
+        s.kind.to_string(),
+        rust,
+        iox,
+        size,
+        align,
+        s.senders.join(", "),
+        s.receivers.join(", "),
+        opt(s.history),
+        s.limits.nodes.to_string(),
+        s.limits.senders.to_string(),
+        s.limits.receivers.to_string(),
+        opt(s.limits.buffer),
+    ]
+}
+
+const HEADER: [&str; 14] = [
+    "service",
+    "scope",
+    "kind",
+    "message",
+    "iceoryx2 type name",
+    "size",
+    "align",
+    "senders",
+    "receivers",
+    "history",
+    "max nodes",
+    "max senders",
+    "max receivers",
+    "buffer",
+];
+
+/// A plain-text table, columns padded to their widest cell.
+pub fn text(schema: &Schema) -> String {
+    let rows: Vec<Vec<String>> = std::iter::once(HEADER.iter().map(|h| h.to_string()).collect())
+        .chain(schema.services.iter().map(cells))
+        .collect();
+    let widths: Vec<usize> = (0..HEADER.len())
+        .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
+        .collect();
+    let mut out = format!(
+        "services of a run of N = {} agents (names relative to the run prefix fm<run id>_; {{i}}: 0-based agent index)\n",
+        schema.n
+    );
+    for r in &rows {
+        let line: Vec<String> = r
+            .iter()
+            .zip(&widths)
+            .map(|(cell, w)| format!("{cell:<w$}"))
+            .collect();
+        out.push_str(line.join("  ").trim_end());
+        out.push('\n');
+    }
+    out
+}
+
+/// The Markdown page kept as `docs/services.md`.
+pub fn markdown(schema: &Schema) -> String {
+    let mut out = String::from(
+        "# Services of a run\n\n\
+         Generated by `formation schema --markdown > docs/services.md` from the typed service table\n\
+         (`config/src/protocol/services.rs`); a unit test fails when this page differs from it.\n\
+         `formation schema --json` prints the same table for programs.\n\n\
+         Names are relative to the run's iceoryx2 prefix `fm<run id>_`; `{i}` is the 0-based agent\n\
+         index. A client opening a publish-subscribe service must declare its message with the\n\
+         iceoryx2 type name and the same size and alignment (`#[repr(C)]`, fields in\n\
+         `config/src/protocol/wire.rs` and `messages.rs`); a slice service carries N elements per\n\
+         sample. Senders are publishers or notifiers, receivers subscribers or listeners. Limits are\n",
+    );
+    out.push_str(&format!(
+        "those the orchestrator creates a lockstep run of N = {} agents with (`formation schema --n N`\n\
+         prints them for another N; a realtime run has a deeper `formation/plant/steps` buffer).\n\n",
+        schema.n
+    ));
+    out.push_str(&format!("| {} | what |\n", HEADER.join(" | ")));
+    out.push_str(&format!("|{}\n", "---|".repeat(HEADER.len() + 1)));
+    for s in &schema.services {
+        let mut c = cells(s);
+        c[0] = format!("`{}`", c[0]);
+        if s.message.is_some() {
+            c[4] = format!("`{}`", c[4]);
+        }
+        out.push_str(&format!("| {} | {} |\n", c.join(" | "), s.doc));
+    }
+    out
+}
+
+/// Entry point of `formation schema`.
+pub fn main(args: SchemaArgs) -> ExitCode {
+    if !(1..=formation_config::MAX_AGENTS).contains(&args.n) {
+        eprintln!(
+            "error: --n {}: must be within 1..={} agents",
+            args.n,
+            formation_config::MAX_AGENTS
+        );
+        return ExitCode::from(crate::cli::EXIT_INVALID);
+    }
+    let s = schema(args.n);
+    if args.json {
+        match serde_json::to_string_pretty(&s) {
+            Ok(j) => println!("{j}"),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else if args.markdown {
+        print!("{}", markdown(&s));
+    } else {
+        print!("{}", text(&s));
+    }
+    ExitCode::SUCCESS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn docs_services_md_is_the_generated_markdown_of_a_five_agent_run() {
+        let generated = markdown(&schema(5));
+        assert!(
+            generated == include_str!("../../docs/services.md"),
+            "docs/services.md is stale: regenerate it with \
+             `formation schema --markdown > docs/services.md`"
+        );
+    }
+
+    #[test]
+    fn the_schema_lists_each_service_of_the_table_once_with_its_wire_type_and_layout() {
+        let s = schema(3);
+        assert_eq!(s.services.len(), 11 + 5);
+        let tel = s
+            .services
+            .iter()
+            .find(|x| x.pattern == "formation/agent/{i}/telemetry")
+            .expect("telemetry");
+        let m = tel.message.as_ref().expect("a message");
+        assert_eq!(m.rust, "AgentTelemetry");
+        assert_eq!(m.iceoryx2, "formation.v1.AgentTelemetry");
+        assert_eq!(
+            (m.size, m.align),
+            (
+                size_of::<formation_config::protocol::wire::AgentTelemetry>(),
+                align_of::<formation_config::protocol::wire::AgentTelemetry>()
+            )
+        );
+        assert_eq!(tel.scope, "per agent");
+        assert_eq!(tel.history, Some(1));
+        assert_eq!(tel.receivers, vec!["clients"]);
+        let steps = s
+            .services
+            .iter()
+            .find(|x| x.pattern == "formation/plant/steps")
+            .expect("steps");
+        assert_eq!(steps.message.as_ref().map(|m| m.slice), Some(true));
+        let wake = s
+            .services
+            .iter()
+            .find(|x| x.pattern == "formation/wake/agent/{i}")
+            .expect("wake");
+        assert_eq!(wake.kind, "event");
+        assert!(wake.message.is_none() && wake.limits.buffer.is_none());
+    }
+
+    #[test]
+    fn limits_follow_the_requested_number_of_agents() {
+        let share = |n: usize| {
+            schema(n)
+                .services
+                .into_iter()
+                .find(|x| x.pattern == "formation/agent/{i}/share")
+                .expect("share")
+                .limits
+        };
+        assert_eq!(share(9).receivers, 9);
+        assert_eq!(share(9).nodes, 9 + 4 + services::MAX_CLIENTS);
+        assert_eq!(share(2).receivers, 2);
+    }
+
+    #[test]
+    fn the_json_names_every_field_a_client_needs() {
+        let v = serde_json::to_value(schema(5)).expect("serialises");
+        let first = &v["services"][0];
+        for key in [
+            "pattern",
+            "scope",
+            "kind",
+            "message",
+            "senders",
+            "receivers",
+            "history",
+            "limits",
+        ] {
+            assert!(first.get(key).is_some(), "{key} in {first}");
+        }
+        assert_eq!(first["message"]["iceoryx2"], "formation.v1.ReferenceFrame");
+    }
+}
