@@ -10,6 +10,7 @@ use crate::delay::{delay_steps, StepHistory};
 use crate::params::AgentParams;
 use crate::position::{clip_norm, consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
+use crate::startup::Blend;
 use formation_config::protocol::wire::{
     ControlCommand, ControllerTelemetry, DelayInjection, NeighbourState, ReferenceFrame,
     VehicleState,
@@ -37,6 +38,9 @@ pub struct Agent {
     attitude_filter: CommandFilter,
     attitude: AttitudeLoop,
     delay_override: Option<(u64, DelaySpec)>,
+    /// Start-up blends (D19), index 0: this agent's, then one per neighbour; set at the first step.
+    startup: Vec<Option<Blend>>,
+    startup_set: bool,
 }
 
 impl Agent {
@@ -73,6 +77,8 @@ impl Agent {
             attitude_filter,
             attitude,
             delay_override: None,
+            startup: vec![None; n_nb + 1],
+            startup_set: false,
             p,
         }
     }
@@ -194,6 +200,33 @@ impl Agent {
             .unwrap_or((own.position, own.velocity));
         let zero: Offsets = [[0.0; 3]; 3];
         let off = self.offsets[0].at_or_before(kd).unwrap_or(zero);
+        let leader = self.leader.at_or_before(kd).unwrap_or_default();
+        let t_kd = kd as f64 * self.p.dt;
+        if !self.startup_set {
+            self.startup_set = true;
+            if let Some(a_s) = g.position.startup_blend_accel_m_s2 {
+                // Every agent's blend from its first shared state, the same on all agents (D19).
+                for (m, slot) in self.startup.iter_mut().enumerate() {
+                    // Position only: the blended reference moves with the slot's velocity from the
+                    // start (matching the initial velocity too runs away behind a fast target).
+                    let p = if m == 0 {
+                        p_d
+                    } else {
+                        self.neighbours[m - 1].at_or_before(kd).map_or(p_d, |s| s.0)
+                    };
+                    let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
+                    let e0 = std::array::from_fn(|k| p[k] - leader.p[k] - o[0][k]);
+                    *slot = Blend::new(e0, t_kd, a_s);
+                }
+            }
+        }
+        let blend = |m: usize, o: Offsets| -> Offsets {
+            match self.startup[m].and_then(|b| b.at(t_kd)) {
+                Some(e) => std::array::from_fn(|d| std::array::from_fn(|k| o[d][k] + e[d][k])),
+                None => o,
+            }
+        };
+        let off = blend(0, off);
         let me = Member {
             p: p_d,
             v: v_d,
@@ -201,10 +234,12 @@ impl Agent {
             off_v: off[1],
             off_a: off[2],
         };
-        let leader = self.leader.at_or_before(kd).unwrap_or_default();
         let neighbours = self.p.neighbours.iter().enumerate().map(|(idx, (_, a))| {
             let (p, v) = self.neighbours[idx].at_or_before(kd).unwrap_or((p_d, v_d));
-            let o = self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero);
+            let o = blend(
+                idx + 1,
+                self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero),
+            );
             (
                 *a,
                 Member {

@@ -18,6 +18,7 @@ pub mod fault_id;
 pub mod params;
 pub mod position;
 pub mod rbfnn;
+pub mod startup;
 
 /// The role process around the library: its ports, its event loop (lockstep and realtime).
 #[cfg(feature = "node")]

@@ -294,6 +294,16 @@ pub struct PositionGains {
     /// is flown at the speed where k_V, k_L balance it instead of bang-bang on the limit (ringing).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position_error_limit_m: Option<f64>,
+    /// Start-up blend of each agent's reference, a_S, m/s² (docs/deviations.md D19; paper: none). When
+    /// set, the slot P_d + Delta_i0 each agent tracks is offset at start-up by e(t) = e_0 h_0(t/T), e_0
+    /// the agent's initial position relative to its slot and h_0 the minimum-jerk shape, so that the
+    /// reference starts at the agent and reaches the slot at rest relative to it after
+    /// T = sqrt(c_0 |e_0| / a_S) (c_0 = 10/sqrt(3)), its acceleration never above a_S. Every agent
+    /// blends its neighbours' slots the same way from their first shared state, so the consensus
+    /// errors start at zero. Ours: absent (off), also in `paper.toml` — the measured effect depends
+    /// on a_S non-monotonically (docs/tuning.md, section 8).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub startup_blend_accel_m_s2: Option<f64>,
     /// Largest horizontal norm of U_iP, m/s². Paper: none (infinite). Ours: 3.0 (D5).
     pub max_horizontal_accel_m_s2: f64,
     /// Largest upward U_i3P, m/s². Paper: none. Ours: 4.0 (D5).

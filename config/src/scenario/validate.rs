@@ -862,6 +862,9 @@ fn check_adaptive_and_auxiliary(s: &Scenario, c: &mut Collector) {
     if let Some(l) = ctl.position.position_error_limit_m {
         c.positive("controller.position.position_error_limit_m", l, CTRL);
     }
+    if let Some(a) = ctl.position.startup_blend_accel_m_s2 {
+        c.positive("controller.position.startup_blend_accel_m_s2", a, CTRL);
+    }
     let aux = &ctl.auxiliary;
     for (name, val) in [
         ("controller.auxiliary.k1_e", aux.k1_e),
