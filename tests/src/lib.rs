@@ -43,4 +43,21 @@ pub fn formation_in(runs: &std::path::Path, args: &[&str]) -> std::process::Outp
         .expect("formation starts")
 }
 
+/// CPUs in a `Cpus_allowed_list` line of /proc/<pid>/status (e.g. `0-1,3`).
+pub fn cpus_allowed(pid: u32) -> Vec<usize> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+    let list = status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+        .unwrap_or("")
+        .trim()
+        .to_string();
+    let mut out = Vec::new();
+    for part in list.split(',').filter(|p| !p.is_empty()) {
+        let (a, b) = part.split_once('-').unwrap_or((part, part));
+        out.extend(a.parse::<usize>().unwrap()..=b.parse::<usize>().unwrap());
+    }
+    out
+}
+
 pub mod run;

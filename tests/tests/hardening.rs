@@ -9,7 +9,7 @@
 //! another uid, as in CI's container); they say so and pass vacuously otherwise.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, formation_in as formation, temp_dir};
+use formation_tests::{bin, cpus_allowed, formation_in as formation, temp_dir};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -271,7 +271,7 @@ fn sigkill_of_the_orchestrator_leaves_no_iceoryx2_file_no_child_and_a_readable_c
 
 #[test]
 fn runs_started_at_the_same_moment_put_their_plants_on_different_cpus() {
-    let allowed = formation_config_cpus();
+    let allowed = cpus_allowed(std::process::id()).len();
     if allowed < 2 {
         eprintln!("one CPU: nothing to rotate");
         return;
@@ -287,24 +287,6 @@ fn runs_started_at_the_same_moment_put_their_plants_on_different_cpus() {
     assert_ne!(ca, cb, "both plants on CPU {ca}");
     drop((a, b));
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// Number of CPUs this process may run on.
-fn formation_config_cpus() -> usize {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    let list = status
-        .lines()
-        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
-        .unwrap_or("")
-        .trim()
-        .to_string();
-    list.split(',')
-        .filter(|p| !p.is_empty())
-        .map(|p| {
-            let (a, b) = p.split_once('-').unwrap_or((p, p));
-            b.parse::<usize>().unwrap() - a.parse::<usize>().unwrap() + 1
-        })
-        .sum()
 }
 
 #[test]

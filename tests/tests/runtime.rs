@@ -3,7 +3,7 @@
 //! a dead child, keep concurrent runs apart, and leave nothing in /dev/shm or /tmp/iceoryx2.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, temp_dir};
+use formation_tests::{bin, cpus_allowed, temp_dir};
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -203,23 +203,6 @@ fn two_concurrent_runs_do_not_see_each_other() {
     assert!(residue(&pa).is_empty() && residue(&pb).is_empty());
     drop((a, b));
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// CPUs in a `Cpus_allowed_list` line of /proc/<pid>/status (e.g. `0-1,3`).
-fn cpus_allowed(pid: u32) -> Vec<usize> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
-    let list = status
-        .lines()
-        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
-        .unwrap_or("")
-        .trim()
-        .to_string();
-    let mut out = Vec::new();
-    for part in list.split(',').filter(|p| !p.is_empty()) {
-        let (a, b) = part.split_once('-').unwrap_or((part, part));
-        out.extend(a.parse::<usize>().unwrap()..=b.parse::<usize>().unwrap());
-    }
-    out
 }
 
 fn cmdline(pid: u32) -> String {

@@ -177,7 +177,13 @@ impl Metrics {
                 a.saturated_steps += 1;
             }
             if self.divergence.is_none() && first.is_none() {
-                first = non_finite_output(r, i, tr, cmd, e, self.margin)
+                let derived = Derived {
+                    error: e,
+                    attitude_norm: att,
+                    c1_bar,
+                    rate_norm: rate,
+                };
+                first = non_finite_output(r, i, tr, cmd, &derived)
                     .map(|name| format!("{name} is not finite"))
                     .or_else(|| {
                         divergence_cause(tr, e, self.divergence_position, self.divergence_tilt)
@@ -211,6 +217,18 @@ fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
+/// What [`Metrics::record`] has already derived for one agent at this step (written to the CSV too).
+struct Derived {
+    /// Formation error, m.
+    error: f64,
+    /// |attitude|, rad.
+    attitude_norm: f64,
+    /// The attitude constraint C-bar_i1 of this step, rad.
+    c1_bar: f64,
+    /// |body rate|, rad/s.
+    rate_norm: f64,
+}
+
 /// The first output of agent `i` at this step that is not a finite number, if any: every value
 /// `trajectory.csv` writes for it (state, reference, errors, commands, constraint bounds, barrier
 /// values, faults, estimates) and the rest of the controller's telemetry but the barrier widths
@@ -221,14 +239,13 @@ fn non_finite_output(
     i: usize,
     tr: &PlantTruth,
     cmd: &ControlCommand,
-    e: f64,
-    margin: f64,
+    d: &Derived,
 ) -> Option<&'static str> {
     let (st, tm) = (&tr.state, &cmd.telemetry);
     let one = |v: f64| [v];
-    let (error, thrust_cmd, thrust) = (one(e), one(cmd.thrust_n), one(tr.thrust_n));
-    let (att_norm, c1_bar) = (one(norm(st.attitude)), one(norm(tm.attitude_cmd) + margin));
-    let (rate_norm, alpha_norm) = (one(norm(st.rate)), one(norm(tm.alpha)));
+    let (error, thrust_cmd, thrust) = (one(d.error), one(cmd.thrust_n), one(tr.thrust_n));
+    let (att_norm, c1_bar) = (one(d.attitude_norm), one(d.c1_bar));
+    let (rate_norm, alpha_norm) = (one(d.rate_norm), one(norm(tm.alpha)));
     let (blf1, blf2) = (one(tm.blf1), one(tm.blf2));
     let (d_norm, d_hat) = (one(norm(tr.disturbance)), one(tm.d_hat));
     let (nn_norm, tau, model_dev) = (one(tm.nn_weight_norm), one(tm.tau_s), one(tm.model_hat_dev));
