@@ -15,6 +15,7 @@ use formation_config::protocol::wire::{
     ControlCommand, ControllerTelemetry, DelayInjection, NeighbourState, ReferenceFrame,
     VehicleState,
 };
+use formation_config::scenario::events::{Change, Event, Timeline};
 use formation_config::scenario::{DelaySpec, Scenario};
 use formation_config::Variant;
 use nalgebra::Vector3;
@@ -37,22 +38,39 @@ pub struct Agent {
     nn: Rbfnn,
     attitude_filter: CommandFilter,
     attitude: AttitudeLoop,
-    delay_override: Option<(u64, DelaySpec)>,
+    /// The fault timeline: which neighbour shares are delivered, the delay changes of this agent.
+    timeline: Timeline,
     /// Start-up blends (D19), index 0: this agent's, then one per neighbour; set at the first step.
     startup: Vec<Option<Blend>>,
     startup_set: bool,
 }
 
+/// The share an agent sends its neighbours for its state `s`.
+pub fn share_of(s: &VehicleState) -> NeighbourState {
+    NeighbourState {
+        step: s.step,
+        t: s.t,
+        agent: s.agent,
+        _pad: 0,
+        sent_ns: 0,
+        position: s.position,
+        velocity: s.velocity,
+    }
+}
+
 impl Agent {
     /// The controller of agent `id` (0-based) of a validated scenario.
     pub fn new(s: &Scenario, id: usize, variant: Variant) -> Agent {
-        Agent::from_params(AgentParams::from_scenario(s, id, variant))
+        let mut a = Agent::from_params(AgentParams::from_scenario(s, id, variant));
+        a.timeline = s.timeline();
+        a
     }
 
     /// The controller for explicit parameters.
     pub fn from_params(p: AgentParams) -> Agent {
-        // Room for tau_M plus a few steps of slack.
-        let capacity = (p.max_delay / p.dt).ceil() as usize + 4;
+        // Room for tau_M, the staleness window and a few steps of slack: a share the control may
+        // still use (at most tau_M + stale_after old) is never overwritten by a newer one.
+        let capacity = (p.max_delay / p.dt).ceil() as usize + p.stale_steps as usize + 4;
         let nn_spec = &p.gains.rbfnn;
         let seed = nn_spec.seed.wrapping_add(p.id as u64 * 7919);
         let amp = nn_spec.initial_weight_amplitude;
@@ -76,7 +94,7 @@ impl Agent {
             nn,
             attitude_filter,
             attitude,
-            delay_override: None,
+            timeline: Timeline::default(),
             startup: vec![None; n_nb + 1],
             startup_set: false,
             p,
@@ -101,15 +119,12 @@ impl Agent {
     /// Records the agent's own state of step k and returns the message to share with its neighbours.
     pub fn observe_own(&mut self, s: &VehicleState) -> NeighbourState {
         self.own.push(s.step, (s.position, s.velocity));
-        NeighbourState {
-            step: s.step,
-            t: s.t,
-            agent: self.p.id as u32,
-            _pad: 0,
-            sent_ns: 0,
-            position: s.position,
-            velocity: s.velocity,
-        }
+        share_of(s)
+    }
+
+    /// Steps of information the delay histories hold.
+    pub fn history_capacity(&self) -> usize {
+        self.own.capacity()
     }
 
     /// True when the own state of `step` has been observed (and is still held).
@@ -117,16 +132,66 @@ impl Agent {
         self.own.has(step)
     }
 
-    /// Records a neighbour's shared state (messages from non-neighbours are ignored).
+    /// Records a neighbour's shared state. Messages from non-neighbours are ignored, and so are those
+    /// the timeline says never arrived (a link down, a lost message, a sender that was down).
     pub fn observe_neighbour(&mut self, m: &NeighbourState) {
-        if let Some(idx) = self
-            .p
-            .neighbours
-            .iter()
-            .position(|(j, _)| *j == m.agent as usize)
-        {
-            self.neighbours[idx].push(m.step, (m.position, m.velocity));
+        let j = m.agent as usize;
+        if let Some(idx) = self.p.neighbours.iter().position(|(n, _)| *n == j) {
+            if self.timeline.delivered(j, self.p.id, m.step) {
+                self.neighbours[idx].push(m.step, (m.position, m.velocity));
+            }
         }
+    }
+
+    /// The timeline this agent follows.
+    pub fn timeline(&self) -> &Timeline {
+        &self.timeline
+    }
+
+    /// The timeline, to add the events of a live run (before any process reaches their step).
+    pub fn timeline_mut(&mut self) -> &mut Timeline {
+        &mut self.timeline
+    }
+
+    /// Adds an event of a live run to the timeline (before any process reaches its step).
+    pub fn add_event(&mut self, e: &Event) {
+        self.timeline.add(e);
+    }
+
+    /// Marks agent j down from step `from` (a process that died or hung outside the timeline).
+    pub fn set_down(&mut self, j: usize, from: u64) {
+        self.timeline.set_down(
+            j,
+            from,
+            formation_config::scenario::events::EventKind::Crash,
+        );
+    }
+
+    /// Agent j's new process takes over at step `at`.
+    pub fn set_up_again(&mut self, j: usize, at: u64) {
+        self.timeline.set_up_again(j, at);
+    }
+
+    /// The step of the share of neighbour `idx` the control of delayed step `kd` uses: the newest
+    /// step in [kd - stale_after, kd] whose share is delivered, or `None` (the edge is dropped from
+    /// the consensus terms until fresh data returns).
+    fn usable_step(&self, idx: usize, kd: u64) -> Option<u64> {
+        if self.timeline.is_empty() {
+            return Some(kd);
+        }
+        let j = self.p.neighbours[idx].0;
+        let oldest = kd.saturating_sub(self.p.stale_steps);
+        (oldest..=kd)
+            .rev()
+            .find(|&m| self.timeline.delivered(j, self.p.id, m))
+    }
+
+    /// The neighbours whose shares the control of step k uses (the rest are dropped as stale).
+    pub fn active_neighbours(&self, step: u64) -> usize {
+        let kd = self.delayed_step(step);
+        (0..self.neighbours.len())
+            .filter(|&idx| self.usable_step(idx, kd).is_some())
+            .count()
     }
 
     /// Records the part of a reference frame this agent needs (P_d and the offsets of itself and its
@@ -150,23 +215,46 @@ impl Agent {
     /// Replaces the delay profile from the injection's step on.
     pub fn set_delay(&mut self, inj: &DelayInjection) {
         if inj.agent as usize == self.p.id {
-            self.delay_override = Some((
-                inj.step,
-                DelaySpec {
-                    base_s: inj.base_s,
-                    amplitude_s: inj.amplitude_s,
-                    angular_rate_rad_s: inj.angular_rate_rad_s,
-                },
-            ));
+            self.timeline.push_change(Change::Delay {
+                step: inj.step,
+                agent: self.p.id,
+                base_s: inj.base_s,
+                amplitude_s: inj.amplitude_s,
+                angular_rate_rad_s: inj.angular_rate_rad_s,
+            });
         }
     }
 
-    /// tau_i at step k, s, clamped to [0, tau_M].
+    /// tau_i at step k, s, clamped to [0, tau_M]: the profile of the latest delay change of this
+    /// agent at or before k (the last one given wins a tie), else the scenario's.
     pub fn delay_at(&self, step: u64) -> f64 {
         let t = step as f64 * self.p.dt;
-        match &self.delay_override {
-            Some((from, d)) if step >= *from => d.tau(t, self.p.max_delay),
-            _ => self.p.delay_at(t),
+        let mut latest: Option<(u64, DelaySpec)> = None;
+        for c in self.timeline.changes() {
+            if let Change::Delay {
+                step: from,
+                agent,
+                base_s,
+                amplitude_s,
+                angular_rate_rad_s,
+            } = *c
+            {
+                if agent == self.p.id && from <= step && latest.as_ref().is_none_or(|l| from >= l.0)
+                {
+                    latest = Some((
+                        from,
+                        DelaySpec {
+                            base_s,
+                            amplitude_s,
+                            angular_rate_rad_s,
+                        },
+                    ));
+                }
+            }
+        }
+        match latest {
+            Some((_, d)) => d.tau(t, self.p.max_delay),
+            None => self.p.delay_at(t),
         }
     }
 
@@ -184,7 +272,70 @@ impl Agent {
             && self.own.has(kd)
             && self.leader.has(kd)
             && self.offsets.iter().all(|h| h.has(kd))
-            && self.neighbours.iter().all(|h| h.has(kd))
+            && self
+                .neighbours
+                .iter()
+                .enumerate()
+                .all(|(idx, h)| self.usable_step(idx, kd).is_none_or(|m| h.has(m)))
+    }
+
+    /// The controller state without its parameters and timeline, serialised (serde + bincode): what
+    /// a restarted process restores with [`Agent::restore`].
+    pub fn checkpoint(&self) -> Result<Vec<u8>, crate::checkpoint::CheckpointError> {
+        crate::checkpoint::encode(&(
+            self.p.id as u64,
+            &self.own,
+            &self.neighbours,
+            &self.leader,
+            &self.offsets,
+            &self.nn,
+            &self.attitude_filter,
+            &self.attitude,
+            &self.startup,
+            self.startup_set,
+        ))
+    }
+
+    /// Restores a [`Agent::checkpoint`] of this agent into this controller (parameters and
+    /// timeline stay as they are).
+    pub fn restore(&mut self, bytes: &[u8]) -> Result<(), crate::checkpoint::CheckpointError> {
+        type State = (
+            u64,
+            StepHistory<Kinematic>,
+            Vec<StepHistory<Kinematic>>,
+            StepHistory<LeaderInfo>,
+            Vec<StepHistory<Offsets>>,
+            Rbfnn,
+            CommandFilter,
+            AttitudeLoop,
+            Vec<Option<Blend>>,
+            bool,
+        );
+        let (id, own, neighbours, leader, offsets, nn, filter, attitude, startup, set): State =
+            crate::checkpoint::decode(bytes)?;
+        if id != self.p.id as u64
+            || neighbours.len() != self.neighbours.len()
+            || offsets.len() != self.offsets.len()
+            || own.capacity() != self.own.capacity()
+        {
+            return Err(crate::checkpoint::CheckpointError::Decode(format!(
+                "a checkpoint of agent {} with {} neighbours, for agent {} with {}",
+                id + 1,
+                neighbours.len(),
+                self.p.id + 1,
+                self.neighbours.len()
+            )));
+        }
+        self.own = own;
+        self.neighbours = neighbours;
+        self.leader = leader;
+        self.offsets = offsets;
+        self.nn = nn;
+        self.attitude_filter = filter;
+        self.attitude = attitude;
+        self.startup = startup;
+        self.startup_set = set;
+        Ok(())
     }
 
     /// Computes the command of step k from the current attitude and rate in `own` and the delayed
@@ -234,23 +385,30 @@ impl Agent {
             off_v: off[1],
             off_a: off[2],
         };
-        let neighbours = self.p.neighbours.iter().enumerate().map(|(idx, (_, a))| {
-            let (p, v) = self.neighbours[idx].at_or_before(kd).unwrap_or((p_d, v_d));
-            let o = blend(
-                idx + 1,
-                self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero),
-            );
-            (
-                *a,
-                Member {
-                    p,
-                    v,
-                    off: o[0],
-                    off_v: o[1],
-                    off_a: o[2],
-                },
-            )
-        });
+        let neighbours = self
+            .p
+            .neighbours
+            .iter()
+            .enumerate()
+            .filter_map(|(idx, (_, a))| {
+                // A neighbour without a usable share (stale beyond stale_after) is dropped.
+                let m = self.usable_step(idx, kd)?;
+                let (p, v) = self.neighbours[idx].at_or_before(m).unwrap_or((p_d, v_d));
+                let o = blend(
+                    idx + 1,
+                    self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero),
+                );
+                Some((
+                    *a,
+                    Member {
+                        p,
+                        v,
+                        off: o[0],
+                        off_v: o[1],
+                        off_a: o[2],
+                    },
+                ))
+            });
         let (ep, ev) = consensus_errors(&me, neighbours, self.p.leader_weight, &leader);
 
         // RBFNN (11) and its update (15).

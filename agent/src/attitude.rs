@@ -24,7 +24,7 @@ use formation_plant::kinematics::AttitudeTrig;
 use nalgebra::{Matrix3, Vector3};
 
 /// Internal states of the attitude loop.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct AttitudeLoop {
     rate_filter: CommandFilter,
     /// Auxiliary state E_i1 (35).

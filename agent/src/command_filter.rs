@@ -5,7 +5,7 @@
 use formation_config::scenario::CommandFilterSpec;
 
 /// Three-channel command filter.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct CommandFilter {
     w: f64,
     xi: f64,

@@ -1,7 +1,7 @@
 //! History buffer keyed by simulation step: agent i reads information stamped t - tau_i(t).
 
 /// A ring of (step, value) pairs with a capacity fixed at construction.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct StepHistory<T: Copy> {
     slots: Vec<Option<(u64, T)>>,
     newest: Option<u64>,

@@ -31,7 +31,7 @@ use nalgebra::Vector3;
 pub const SATURATION_GUARD: f64 = 0.9;
 
 /// What the identifier holds about one step whose outcome (the next rate) is not yet known.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 struct Pending {
     u: Vector3<f64>,
     w: Vector3<f64>,
@@ -40,15 +40,18 @@ struct Pending {
 }
 
 /// Probe generator and per-channel identifier.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct FaultIdentifier {
     period: usize,
     amplitude: Vector3<f64>,
     alpha_gamma: f64,
     alpha_delta: f64,
     excitation: Vector3<f64>,
+    #[serde(with = "crate::checkpoint::array")]
     ring_s: [f64; MAX_PROBE_PERIOD_STEPS],
+    #[serde(with = "crate::checkpoint::array")]
     ring_u: [[f64; 3]; MAX_PROBE_PERIOD_STEPS],
+    #[serde(with = "crate::checkpoint::array")]
     ring_y: [[f64; 3]; MAX_PROBE_PERIOD_STEPS],
     head: usize,
     filled: usize,

@@ -11,6 +11,7 @@
 pub mod agent;
 pub mod attitude;
 pub mod blf;
+pub mod checkpoint;
 pub mod command_filter;
 pub mod conversion;
 pub mod delay;
@@ -18,6 +19,7 @@ pub mod fault_id;
 pub mod params;
 pub mod position;
 pub mod rbfnn;
+pub mod restart;
 pub mod startup;
 
 /// The role process around the library: its ports, its event loop (lockstep and realtime).

@@ -41,6 +41,9 @@ pub struct AgentParams {
     pub delay: DelaySpec,
     /// All controller gains.
     pub gains: Controller,
+    /// A neighbour share older than the delayed step by more than this many steps is not used
+    /// (`runtime.stale_after_s`).
+    pub stale_steps: u64,
 }
 
 impl AgentParams {
@@ -64,6 +67,7 @@ impl AgentParams {
             initial_attitude: s.agents[id].initial_attitude_rad,
             delay: s.agents[id].delay.clone(),
             gains: s.controller.clone(),
+            stale_steps: s.runtime.stale_steps(s.simulation.dt_s),
         }
     }
 

@@ -20,7 +20,7 @@ pub struct Member {
 }
 
 /// Delayed leader information: P_d and its derivatives.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LeaderInfo {
     /// P_d, m.
     pub p: [f64; 3],

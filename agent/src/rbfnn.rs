@@ -8,18 +8,22 @@
 pub const MAX_NEURONS: usize = 64;
 
 /// Three RBF networks (one per axis) with their weights W-hat_ik.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Rbfnn {
     l: usize,
+    #[serde(with = "crate::checkpoint::array")]
     centres: [f64; MAX_NEURONS],
+    #[serde(with = "crate::checkpoint::array")]
     vel_centres: [f64; MAX_NEURONS],
     n_v: usize,
     inv_spread_sq: f64,
     inv_pos_span: f64,
     inv_vel_span: f64,
     /// W-hat_ik, axis-major.
+    #[serde(with = "crate::checkpoint::rows")]
     weights: [[f64; MAX_NEURONS]; 3],
     /// Psi_ik of the last evaluation.
+    #[serde(with = "crate::checkpoint::rows")]
     psi: [[f64; MAX_NEURONS]; 3],
 }
 

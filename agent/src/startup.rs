@@ -7,7 +7,7 @@
 const C0: f64 = 5.773_502_691_896_258;
 
 /// The blend of one agent.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Blend {
     e0: [f64; 3],
     t0: f64,

@@ -9,6 +9,7 @@
 //!   benchmarks, generated scenarios of any N, parameter sweeps.
 //! * [`schema`]: `formation schema`, the service table for outside clients and docs/services.md.
 //! * [`rng`]: the seeded generator of generated graphs and sweeps.
+//! * [`history`]: the recorded states a restarted agent rebuilds from.
 //! * [`cli`], [`cpus`]: shared command-line plumbing and CPU sets.
 
 pub mod bench;
@@ -16,6 +17,7 @@ pub mod check;
 pub mod cli;
 pub mod closed_loop;
 pub mod cpus;
+pub mod history;
 pub mod live;
 pub mod out_lock;
 pub mod plot;

@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod dynamics;
+pub mod fallback;
 pub mod faults;
 pub mod kinematics;
 pub mod perturbations;

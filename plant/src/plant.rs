@@ -18,6 +18,8 @@ struct Vehicle {
     delta: Vector3<f64>,
     /// Time-only terms of eq. (2) at the start of the current step (the end of the previous one).
     terms_now: TimeTerms,
+    /// The last command its controller sent (held by the fallback while the controller is down).
+    last_command: ControlCommand,
     /// True once [`Plant::advance_vehicle`] has integrated this quadrotor over the current step:
     /// `state` and `terms_now` then already belong to step k + 1.
     advanced: bool,
@@ -68,6 +70,10 @@ impl Plant {
                     gamma,
                     delta,
                     terms_now: TimeTerms::at(a, 0.0),
+                    last_command: ControlCommand {
+                        thrust_n: body.mass * body.gravity,
+                        ..ControlCommand::default()
+                    },
                     advanced: false,
                 }
             })
@@ -126,6 +132,34 @@ impl Plant {
     /// Sets the inputs of quadrotor `i` for the current step from its command: the thrust is clamped
     /// to [0, T_max], the torque goes through the faults (4) and the saturation (3).
     pub fn apply(&mut self, i: usize, cmd: &ControlCommand) {
+        self.vehicles[i].last_command = *cmd;
+        self.set_input(i, cmd);
+    }
+
+    /// Flies quadrotor `i` on its fallback at the current step, its controller down for
+    /// `since_steps` steps (`fallback::command`): returns the command applied.
+    pub fn apply_fallback(
+        &mut self,
+        i: usize,
+        since_steps: u64,
+        rt: &formation_config::scenario::events::Runtime,
+    ) -> ControlCommand {
+        let veh = &self.vehicles[i];
+        let body = &self.body;
+        let cmd = crate::fallback::command(
+            rt,
+            &veh.last_command,
+            since_steps,
+            self.dt,
+            self.step,
+            i,
+            || crate::fallback::level_hover(rt, body.mass, body.gravity, &body.inertia, &veh.state),
+        );
+        self.set_input(i, &cmd);
+        cmd
+    }
+
+    fn set_input(&mut self, i: usize, cmd: &ControlCommand) {
         debug_assert!(
             !self.vehicles[i].advanced,
             "quadrotor {i} is already at step k + 1"

@@ -8,6 +8,7 @@ mod early_references;
 mod neighbour_delay;
 mod ports;
 mod realtime;
+mod rejoin;
 mod telemetry;
 
 use crate::Agent;
@@ -28,17 +29,32 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     let mut agent = Agent::new(&b.scenario, i, b.variant);
     let neighbours: Vec<usize> = agent.neighbour_ids().collect();
     let ports = ports::Ports::open(&b.node, i, &neighbours)?;
+    // A new process taking over rebuilds its controller before it says hello (the plant sends it
+    // nothing before that); its references come from the mission itself, which is what the leader
+    // computes, because the leader's stream of the steps it missed is gone.
+    let (start, local_mission) = match b.args.rejoin_at {
+        Some(r) => {
+            rejoin::rebuild(&b, i, &mut agent, r)?;
+            (
+                r,
+                Some(formation_leader::Mission::from_scenario(&b.scenario)),
+            )
+        }
+        None => (0, None),
+    };
     let _greeting = hello(&b.node, Role::Agent, i as u32)?;
     if b.args.realtime {
         return realtime::run(&b, i, agent, &ports);
     }
+    let checkpoints = rejoin::Checkpoints::new(&b, i, start);
+    let mut local_reference = formation_config::protocol::wire::ReferenceFrame::default();
     let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);
     let mut refs = early_references::EarlyReferences::default();
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut own: Option<VehicleState> = None;
     let mut observed = false;
     let mut share_later: Option<NeighbourState> = None;
-    let mut k: u64 = 0;
+    let mut k: u64 = start;
     let mut sampler = telemetry::Sampler::new(&b.scenario, i);
     tracing::info!(
         agent = i + 1,
@@ -70,7 +86,8 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 fresh = true;
             }
         }
-        if must_read_slow_inputs(fresh, refs.missing(k), k) {
+        let reference_missing = local_mission.is_none() && refs.missing(k);
+        if must_read_slow_inputs(fresh, reference_missing, k) {
             while let Some(c) = ports.control.receive()? {
                 if c.kind == CONTROL_STOP {
                     tracing::info!(
@@ -92,14 +109,31 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 delays.observe(&d);
                 pending_delays.push(*d);
             }
+            while let Some(e) = ports.events.receive()? {
+                e.apply(agent.timeline_mut());
+            }
             while let Some(r) = ports.reference.receive()? {
-                refs.push(&r)?;
+                if local_mission.is_none() {
+                    refs.push(&r)?;
+                }
             }
         }
-        refs.take_due(k, |r| {
-            agent.observe_reference(r);
-            sampler.observe_reference(r);
-        });
+        match &local_mission {
+            None => refs.take_due(k, |r| {
+                agent.observe_reference(r);
+                sampler.observe_reference(r);
+            }),
+            Some(m) if !observed => {
+                m.reference(
+                    k,
+                    k as f64 * b.scenario.simulation.dt_s,
+                    &mut local_reference,
+                );
+                agent.observe_reference(&local_reference);
+                sampler.observe_reference(&local_reference);
+            }
+            Some(_) => {}
+        }
         pending_delays.retain(|d| {
             if d.step <= k {
                 agent.set_delay(d);
@@ -124,10 +158,15 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 // this agent's next step, which cannot start before the command is in (a neighbour
                 // whose delayed step is this one is also woken). Otherwise it goes out after the
                 // command, off the critical path of the step.
-                if share_before_command(
-                    (0..ports.neighbours_wake.len())
-                        .map(|idx| delays.needed_before_next_step(idx, k)),
-                ) {
+                // Before a down window the share goes out first: the process may be killed any time
+                // after its last command.
+                let last_before_down = !agent.timeline().up(i, k + 1);
+                if last_before_down
+                    || share_before_command(
+                        (0..ports.neighbours_wake.len())
+                            .map(|idx| delays.needed_before_next_step(idx, k)),
+                    )
+                {
                     send(&ports.share_out, share)?;
                 } else {
                     share_later = Some(share);
@@ -140,6 +179,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 observed = true;
             }
             if agent.ready(k) {
+                checkpoints.before_step(&agent, k);
                 let sample = sampler.due(k);
                 let started = sample.then(std::time::Instant::now);
                 let cmd = agent.step(&s);

@@ -4,7 +4,7 @@ use formation_config::node::error::NodeError;
 use formation_config::node::ports::{
     notifier, publisher, subscriber, Input, Output, RunNode, Svc, Wake,
 };
-use formation_config::protocol::messages::RunControl;
+use formation_config::protocol::messages::{RunControl, RuntimeEvent};
 use formation_config::protocol::services;
 use formation_config::protocol::wire::{
     AgentTelemetry, ControlCommand, DelayInjection, NeighbourState, ReferenceFrame, VehicleState,
@@ -15,6 +15,8 @@ use iceoryx2::port::notifier::Notifier;
 pub struct Ports {
     pub control: Input<RunControl>,
     pub delays: Input<DelayInjection>,
+    /// Runtime events (crashes, hangs, links, losses, agents taken down or taking over).
+    pub events: Input<RuntimeEvent>,
     pub reference: Input<ReferenceFrame>,
     pub state: Input<VehicleState>,
     /// One per neighbour, in `neighbours` order.
@@ -35,6 +37,7 @@ impl Ports {
         Ok(Ports {
             control: subscriber(node, &services::CONTROL.named())?,
             delays: subscriber(node, &services::DELAY_INJECTION.named())?,
+            events: subscriber(node, &services::RUNTIME_EVENTS.named())?,
             reference: subscriber(node, &services::REFERENCE.named())?,
             state: subscriber(node, &services::VEHICLE_STATE.at(i))?,
             shares_in: neighbours

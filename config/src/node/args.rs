@@ -22,6 +22,8 @@ pub struct ChildArgs {
     pub spin_us: u32,
     /// Realtime mode: `SCHED_FIFO` priority of plant and agents (0: normal policy).
     pub rt_priority: u32,
+    /// Agents: a new process taking over at this step (it rebuilds from `DIR/checkpoints/`).
+    pub rejoin_at: Option<u64>,
 }
 
 impl ChildArgs {
@@ -40,6 +42,10 @@ impl ChildArgs {
         v.push(self.variant.clone().into());
         v.push("--run-dir".into());
         v.push(self.run_dir.clone().into_os_string());
+        if let Some(r) = self.rejoin_at {
+            v.push("--rejoin-at".into());
+            v.push(r.to_string().into());
+        }
         if self.realtime {
             v.push("--mode".into());
             v.push("realtime".into());
@@ -64,6 +70,7 @@ impl ChildArgs {
             realtime: false,
             spin_us: 0,
             rt_priority: 0,
+            rejoin_at: None,
         };
         let mut it = args.into_iter();
         while let Some(flag) = it.next() {
@@ -77,6 +84,12 @@ impl ChildArgs {
                     out.agent =
                         Some(text.parse().map_err(|_| {
                             NodeError::Args(format!("--agent: not an index: {text}"))
+                        })?)
+                }
+                "--rejoin-at" => {
+                    out.rejoin_at =
+                        Some(text.parse().map_err(|_| {
+                            NodeError::Args(format!("--rejoin-at: not a step: {text}"))
                         })?)
                 }
                 "--run-id" => out.run_id = text,
@@ -131,6 +144,7 @@ mod tests {
             realtime: false,
             spin_us: 0,
             rt_priority: 0,
+            rejoin_at: Some(20_500),
         };
         assert_eq!(ChildArgs::parse(a.to_args()).unwrap(), a);
         let rt = ChildArgs {

@@ -16,5 +16,6 @@ pub mod logging;
 pub mod members;
 pub mod ports;
 pub mod process;
+pub mod restart;
 pub mod sched;
 pub mod timing;

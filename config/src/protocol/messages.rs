@@ -155,3 +155,151 @@ pub struct InjectRequest {
     /// Delay angular rate, rad/s.
     pub angular_rate_rad_s: f64,
 }
+
+/// [`RuntimeEvent::kind`]: agent `agent` crashes at `step` for `down_steps` (a timeline `crash`).
+pub const EVENT_CRASH: u32 = 1;
+/// [`RuntimeEvent::kind`]: agent `agent` hangs at `step` for `down_steps`.
+pub const EVENT_HANG: u32 = 2;
+/// [`RuntimeEvent::kind`]: the edge {agent, other} carries nothing from `step` on.
+pub const EVENT_LINK_DOWN: u32 = 3;
+/// [`RuntimeEvent::kind`]: the edge {agent, other} carries shares again from `step` on.
+pub const EVENT_LINK_UP: u32 = 4;
+/// [`RuntimeEvent::kind`]: shares agent -> other (both [`EVENT_ANY`]: every edge) are lost with
+/// `probability` from `step` for `down_steps` steps (u64::MAX: to the end).
+pub const EVENT_MESSAGE_LOSS: u32 = 5;
+/// [`RuntimeEvent::kind`], plant -> all: agent `agent`'s process died or hung outside the timeline;
+/// it is down from `step` (its shares from `step` on are not delivered).
+pub const EVENT_DOWN: u32 = 6;
+/// [`RuntimeEvent::kind`], orchestrator -> all: agent `agent`'s new process takes over at `step`.
+pub const EVENT_UP_AGAIN: u32 = 7;
+/// [`RuntimeEvent::kind`], orchestrator -> plant: agent `agent`'s new process for step `step` has
+/// its ports (the plant may send it the states of that step).
+pub const EVENT_JOINED: u32 = 8;
+/// [`RuntimeEvent::kind`], orchestrator -> plant: agent `agent`'s process is gone; take it down at
+/// the first step whose command is missing and say so with [`EVENT_DOWN`].
+pub const EVENT_DOWN_REQUEST: u32 = 9;
+/// [`RuntimeEvent::other`] when no second agent is named.
+pub const EVENT_ANY: u32 = u32::MAX;
+
+/// A runtime event of the fault timeline or of the supervision (`docs/failures.md`): published
+/// ahead of its step by the orchestrator (live injections, restarts) or by the plant (the step a
+/// dead process is taken down at), so every process adds it to its timeline before it matters.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.RuntimeEvent")
+)]
+pub struct RuntimeEvent {
+    /// The step it applies at.
+    pub step: u64,
+    /// One of the `EVENT_*` kinds.
+    pub kind: u32,
+    /// Agent index (0-based).
+    pub agent: u32,
+    /// Second agent index (0-based) of a link or loss, or [`EVENT_ANY`].
+    pub other: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Crash, hang: steps down; message loss: steps it lasts (u64::MAX: to the end).
+    pub down_steps: u64,
+    /// Message loss: probability per share.
+    pub probability: f64,
+    /// Message loss: seed of the pattern.
+    pub seed: u64,
+}
+
+impl RuntimeEvent {
+    /// The timeline event of a crash, hang, link or loss event (`None` for the supervision kinds),
+    /// for a step `dt`.
+    pub fn to_event(&self, dt: f64) -> Option<crate::scenario::events::Event> {
+        use crate::scenario::events::{Event, EventKind as K};
+        let kind = match self.kind {
+            EVENT_CRASH => K::Crash,
+            EVENT_HANG => K::Hang,
+            EVENT_LINK_DOWN => K::LinkDown,
+            EVENT_LINK_UP => K::LinkUp,
+            EVENT_MESSAGE_LOSS => K::MessageLoss,
+            _ => return None,
+        };
+        let mut e = Event::new(self.step as f64 * dt, kind);
+        let one = |i: u32| (i != EVENT_ANY).then_some(i as usize + 1);
+        let secs = |n: u64| (n != u64::MAX).then_some(n as f64 * dt);
+        match kind {
+            K::Crash | K::Hang => {
+                e.agent = one(self.agent);
+                e.down_s = secs(self.down_steps);
+            }
+            K::LinkDown | K::LinkUp => {
+                e.agents = Some([self.agent as usize + 1, self.other as usize + 1])
+            }
+            _ => {
+                e.from = one(self.agent);
+                e.to = one(self.other);
+                e.probability = Some(self.probability);
+                e.seed = Some(self.seed);
+                e.duration_s = secs(self.down_steps);
+            }
+        }
+        Some(e)
+    }
+
+    /// The runtime event of a timeline crash, hang, link or loss event (`None` for fault and
+    /// delay, which have messages of their own), for a step `dt`.
+    pub fn from_event(e: &crate::scenario::events::Event, dt: f64) -> Option<RuntimeEvent> {
+        use crate::scenario::events::EventKind as K;
+        let idx = |a: Option<usize>| a.map_or(EVENT_ANY, |a| a.saturating_sub(1) as u32);
+        let steps = |s: Option<f64>| s.map_or(u64::MAX, |s| (s / dt).round().max(1.0) as u64);
+        let mut r = RuntimeEvent {
+            step: e.step(dt),
+            ..RuntimeEvent::default()
+        };
+        match e.kind {
+            K::Crash | K::Hang => {
+                r.kind = if e.kind == K::Crash {
+                    EVENT_CRASH
+                } else {
+                    EVENT_HANG
+                };
+                r.agent = idx(e.agent);
+                r.other = EVENT_ANY;
+                r.down_steps = steps(e.down_s);
+            }
+            K::LinkDown | K::LinkUp => {
+                r.kind = if e.kind == K::LinkDown {
+                    EVENT_LINK_DOWN
+                } else {
+                    EVENT_LINK_UP
+                };
+                let [a, b] = e.agents?;
+                r.agent = a.saturating_sub(1) as u32;
+                r.other = b.saturating_sub(1) as u32;
+            }
+            K::MessageLoss => {
+                r.kind = EVENT_MESSAGE_LOSS;
+                r.agent = idx(e.from);
+                r.other = idx(e.to);
+                r.probability = e.probability.unwrap_or(0.0);
+                r.seed = e.seed.unwrap_or(0);
+                r.down_steps = steps(e.duration_s);
+            }
+            K::Fault | K::Delay => return None,
+        }
+        Some(r)
+    }
+
+    /// Applies it to a timeline (the supervision kinds DOWN and UP_AGAIN included).
+    pub fn apply(&self, t: &mut crate::scenario::events::Timeline) {
+        use crate::scenario::events::EventKind;
+        match self.kind {
+            EVENT_DOWN => t.set_down(self.agent as usize, self.step, EventKind::Crash),
+            EVENT_UP_AGAIN => t.set_up_again(self.agent as usize, self.step),
+            _ => {
+                if let Some(e) = self.to_event(t.dt()) {
+                    t.add(&e);
+                }
+            }
+        }
+    }
+}

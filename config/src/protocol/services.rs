@@ -10,7 +10,7 @@
 //! Names are relative to the run's iceoryx2 prefix ([`run_prefix`]), so concurrent runs never see
 //! each other. Per-agent names carry the 0-based agent index (`formation/agent/0/state` is agent 1's).
 
-use super::messages::{Hello, InjectRequest, RunControl, RunProgress, StepEntry};
+use super::messages::{Hello, InjectRequest, RunControl, RunProgress, RuntimeEvent, StepEntry};
 use super::pacing::{
     CONTROL_BUFFER, LOCKSTEP_BUFFER, REALTIME_STEPS_BUFFER, REFERENCE_BUFFER, STEPS_BUFFER,
 };
@@ -53,6 +53,7 @@ messages!(
     Hello,
     StepEntry,
     InjectRequest,
+    RuntimeEvent,
 );
 
 /// The iceoryx2 type name of a message (its `#[type_name("formation.vN.X")]`): what an outside
@@ -340,6 +341,19 @@ pub static PROGRESS: Topic<RunProgress> = Topic {
     _message: PhantomData,
 };
 
+/// Orchestrator and plant -> every role process: runtime events of the timeline and of the
+/// supervision (crashes, hangs, links, losses, a process taken down, a new one taking over).
+pub static RUNTIME_EVENTS: Topic<RuntimeEvent> = Topic {
+    pattern: "formation/run/events",
+    scope: Scope::Run,
+    publishers: &[Orchestrator, Plant],
+    subscribers: &[Plant, Agent, Orchestrator, Clients],
+    history: 0,
+    doc: "runtime events: crash, hang, link, loss, an agent taken down or taking over (docs/failures.md)",
+    limits: |s| s.limits(2, s.n + 2 + s.clients, CONTROL_BUFFER),
+    _message: PhantomData,
+};
+
 /// Role processes -> orchestrator: all my ports exist.
 pub static HELLO: Topic<Hello> = Topic {
     pattern: "formation/run/hello",
@@ -488,6 +502,7 @@ pub fn visit<V: Visitor>(sizing: &Sizing, v: &mut V) -> Result<(), V::Error> {
     v.topic(CONTROL.named(), CONTROL.limits(s))?;
     v.topic(PROGRESS.named(), PROGRESS.limits(s))?;
     v.topic(HELLO.named(), HELLO.limits(s))?;
+    v.topic(RUNTIME_EVENTS.named(), RUNTIME_EVENTS.limits(s))?;
     v.slices(STEPS.named(), STEPS.limits(s))?;
     v.topic(INJECT_REQUEST.named(), INJECT_REQUEST.limits(s))?;
     v.event(WAKE_ORCHESTRATOR.named(), WAKE_ORCHESTRATOR.limits(s))?;

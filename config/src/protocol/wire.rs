@@ -22,7 +22,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Plant -> agent i: the state of quadrotor i at step k (eq. (1)-(2) states).
 #[repr(C)]
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),

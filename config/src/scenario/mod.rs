@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+pub mod events;
 pub mod graph;
 pub mod validate;
 pub mod variant;
@@ -37,8 +38,15 @@ pub struct Scenario {
     pub vehicle: Vehicle,
     /// Controller gains (NTDPC, AFTAC, adaptive laws, command filters, auxiliary systems).
     pub controller: Controller,
+    /// Supervision, checkpoints and fallbacks (`[runtime]`; defaults: no restarts).
+    #[serde(default)]
+    pub runtime: events::Runtime,
     /// Per-agent initial state, delay, fault, uncertainty and disturbance.
     pub agents: Vec<AgentSpec>,
+    /// The fault timeline (`[[events]]`): faults, delays, crashes, hangs, link faults, message loss,
+    /// each at a step; the same in `sim` and `run` (`events::Timeline`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub events: Vec<events::Event>,
 }
 
 /// Integration and output settings.
@@ -678,6 +686,11 @@ impl Scenario {
     /// Number of integration steps of the whole run.
     pub fn n_steps(&self) -> u64 {
         (self.simulation.duration_s / self.simulation.dt_s).round() as u64
+    }
+
+    /// The fault timeline of the scenario's `[[events]]`.
+    pub fn timeline(&self) -> events::Timeline {
+        events::Timeline::new(&self.events, self.simulation.dt_s)
     }
 
     /// Steps between two rows of `trajectory.csv`.

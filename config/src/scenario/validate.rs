@@ -143,6 +143,10 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     for (i, a) in s.agents.iter().enumerate() {
         check_agent(s, i, a, &mut c);
     }
+    check_runtime(s, &mut c);
+    for (k, e) in s.events.iter().enumerate() {
+        check_event(s, &format!("events[{k}]"), e, &mut c);
+    }
     if c.0.is_empty() {
         Ok(())
     } else {
@@ -893,4 +897,167 @@ fn check_adaptive_and_auxiliary(s: &Scenario, c: &mut Collector) {
         ctl.unconstrained.command_rate_limit_rad_s,
         CTRL,
     );
+}
+
+/// The runtime policy: supervision, checkpoints, fallbacks (docs/failures.md).
+pub const RUNTIME: &str = "the failure model (docs/failures.md): periods and timeouts are positive, the fallback gains stabilise (> 0)";
+/// The fault timeline.
+pub const TIMELINE: &str = "the fault timeline (docs/failures.md): an event names existing agents, a graph edge, and happens inside the run";
+
+fn check_runtime(s: &Scenario, c: &mut Collector) {
+    let r = &s.runtime;
+    c.positive("runtime.checkpoint_every_s", r.checkpoint_every_s, RUNTIME);
+    c.non_negative("runtime.hold_s", r.hold_s, RUNTIME);
+    c.positive(
+        "runtime.fallback_attitude_gain",
+        r.fallback_attitude_gain,
+        RUNTIME,
+    );
+    c.positive("runtime.fallback_rate_gain", r.fallback_rate_gain, RUNTIME);
+    c.non_negative("runtime.stale_after_s", r.stale_after_s, RUNTIME);
+}
+
+/// Validates one event against a (valid) scenario: what `formation inject` and `--events FILE`
+/// check before an event joins a run's timeline.
+pub fn validate_event(
+    s: &Scenario,
+    path: &str,
+    e: &crate::scenario::events::Event,
+) -> Result<(), ValidationErrors> {
+    let mut c = Collector(Vec::new());
+    check_event(s, path, e, &mut c);
+    if c.0.is_empty() {
+        Ok(())
+    } else {
+        Err(ValidationErrors(c.0))
+    }
+}
+
+/// One event of the timeline: the fields its kind needs, in range.
+fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: &mut Collector) {
+    use crate::scenario::events::EventKind as K;
+    let n = s.n_agents();
+    if !(e.at_s >= 0.0 && e.at_s < s.simulation.duration_s) {
+        c.push(
+            format!("{path}.at_s"),
+            TIMELINE,
+            format!(
+                "must be in [0, {}) s (the run), got {}",
+                s.simulation.duration_s, e.at_s
+            ),
+        );
+    }
+    let agent_ok = |c: &mut Collector, field: &str, a: Option<usize>, required: bool| match a {
+        Some(a) if a == 0 || a > n => c.push(
+            format!("{path}.{field}"),
+            TIMELINE,
+            format!("agent ids are 1-based, 1..={n}; got {a}"),
+        ),
+        None if required => c.push(
+            format!("{path}.{field}"),
+            TIMELINE,
+            format!("a `{}` event needs `{field}`", e.kind.name()),
+        ),
+        _ => {}
+    };
+    match e.kind {
+        K::Fault => {
+            agent_ok(c, "agent", e.agent, true);
+            match e.gamma {
+                Some(g) => {
+                    for (k, g) in g.iter().enumerate() {
+                        if !(*g > 0.0 && *g <= 1.0) {
+                            c.push(
+                                format!("{path}.gamma[{k}]"),
+                                "eq. (4): Gamma_i in (0, 1] (a partial loss of effectiveness)",
+                                format!("must be in (0, 1], got {g}"),
+                            );
+                        }
+                    }
+                }
+                None => c.push(
+                    format!("{path}.gamma"),
+                    TIMELINE,
+                    "a `fault` event needs `gamma`",
+                ),
+            }
+        }
+        K::Delay => {
+            agent_ok(c, "agent", e.agent, true);
+            let tau_m = s.simulation.max_delay_s;
+            let base = e.base_s.unwrap_or(f64::NAN);
+            let amp = e.amplitude_s.unwrap_or(0.0);
+            if !(base >= 0.0 && base + amp.abs() <= tau_m) {
+                c.push(
+                    format!("{path}.base_s"),
+                    "Assumption 2: 0 <= tau_i(t) <= tau_M",
+                    format!("base {base} + |amplitude| {amp} must be in [0, tau_M = {tau_m}] s"),
+                );
+            }
+        }
+        K::Crash | K::Hang => {
+            agent_ok(c, "agent", e.agent, true);
+            match e.down_s {
+                Some(d) if d >= s.simulation.dt_s => {}
+                Some(d) => c.push(
+                    format!("{path}.down_s"),
+                    TIMELINE,
+                    format!(
+                        "must be at least one step ({} s), got {d}",
+                        s.simulation.dt_s
+                    ),
+                ),
+                None => c.push(
+                    format!("{path}.down_s"),
+                    TIMELINE,
+                    format!("a `{}` event needs `down_s`", e.kind.name()),
+                ),
+            }
+        }
+        K::LinkDown | K::LinkUp => match e.agents {
+            Some([a, b]) => {
+                agent_ok(c, "agents[0]", Some(a), true);
+                agent_ok(c, "agents[1]", Some(b), true);
+                let edge = s
+                    .graph
+                    .edges
+                    .iter()
+                    .any(|x| (x.a, x.b) == (a, b) || (x.a, x.b) == (b, a));
+                if a != 0 && b != 0 && a <= n && b <= n && !edge {
+                    c.push(
+                        format!("{path}.agents"),
+                        TIMELINE,
+                        format!("{a}-{b} is not an edge of the graph"),
+                    );
+                }
+            }
+            None => c.push(
+                format!("{path}.agents"),
+                TIMELINE,
+                format!("a `{}` event needs `agents = [i, j]`", e.kind.name()),
+            ),
+        },
+        K::MessageLoss => {
+            agent_ok(c, "from", e.from, false);
+            agent_ok(c, "to", e.to, false);
+            if e.from.is_some() != e.to.is_some() {
+                c.push(
+                    format!("{path}.to"),
+                    TIMELINE,
+                    "give both `from` and `to`, or neither (every edge)",
+                );
+            }
+            match e.probability {
+                Some(p) if (0.0..=1.0).contains(&p) => {}
+                p => c.push(
+                    format!("{path}.probability"),
+                    TIMELINE,
+                    format!("must be in [0, 1], got {p:?}"),
+                ),
+            }
+            if let Some(d) = e.duration_s {
+                c.positive(&format!("{path}.duration_s"), d, TIMELINE);
+            }
+        }
+    }
 }

@@ -91,6 +91,63 @@ const SUPERVISE_EVERY: Duration = Duration::from_millis(50);
 /// Longest wait for every role process to be ready.
 const START_TIMEOUT: Duration = Duration::from_secs(30);
 
+/// Watches children, Ctrl-C and the progress of the run: a dead agent is handled by the
+/// supervision (`takeover`), and so is one found stopped once the run has made no progress for the
+/// stall timeout; returns the reason to stop, if any.
+#[allow(clippy::too_many_arguments)] // the supervision's inputs, each its own kind
+fn supervise(
+    children: &mut [RoleProcess],
+    interrupted: &AtomicBool,
+    takeover: &mut super::takeover::Takeover,
+    stall: Option<Duration>,
+    since_progress: Duration,
+    since_check: Duration,
+    recorded: u64,
+    node: &RunNode,
+) -> Option<Outcome> {
+    if interrupted.load(Ordering::SeqCst) {
+        return Some(Outcome::Interrupted);
+    }
+    let mut death = spawn::check_indexed(children).map(|(idx, line)| (idx, line, since_check));
+    if death.is_none() {
+        if let Some(limit) = stall.filter(|l| since_progress >= *l) {
+            let hung = (0..children.len()).find(|&idx| {
+                let expected = idx >= 2 && takeover.expects_gone(idx - 2);
+                !expected && children[idx].is_stopped()
+            });
+            match hung {
+                Some(idx) => {
+                    let line = format!(
+                        "{} (pid {}) made no progress for {} ms (stopped)",
+                        children[idx].label,
+                        children[idx].pid(),
+                        since_progress.as_millis()
+                    );
+                    children[idx].kill_and_reap();
+                    death = Some((idx, line, limit));
+                }
+                None => {
+                    let line = format!(
+                        "the run made no progress for {} ms at step {recorded} and no role process is stopped; stopping the run",
+                        since_progress.as_millis()
+                    );
+                    eprintln!("error: {line}");
+                    return Some(Outcome::Died(line));
+                }
+            }
+        }
+    }
+    let (idx, line, seen) = death?;
+    match takeover.on_death(idx, line, seen, recorded, node, children) {
+        Ok(()) => None,
+        Err(line) => {
+            // Said at once, before the other processes are stopped (which takes up to STOP_GRACE).
+            eprintln!("error: {line}");
+            Some(Outcome::Died(line))
+        }
+    }
+}
+
 /// Watches children and Ctrl-C; returns the reason to stop, if any.
 fn watch(children: &mut [RoleProcess], interrupted: &AtomicBool) -> Option<Outcome> {
     if interrupted.load(Ordering::SeqCst) {
@@ -147,7 +204,12 @@ pub fn drive(
     children: &mut [RoleProcess],
     interrupted: &AtomicBool,
     step_timing: &mut super::step_timing::StepTiming,
+    takeover: &mut super::takeover::Takeover,
+    node: &RunNode,
 ) -> (Outcome, u64) {
+    let stall = super::takeover::stall_timeout(&scenario.runtime);
+    let mut last_progress = Instant::now();
+    let mut hellos: Vec<u32> = Vec::new();
     let n = scenario.n_agents();
     let steps = scenario.n_steps();
     let dt = scenario.simulation.dt_s;
@@ -186,6 +248,7 @@ pub fn drive(
                 *t = e.truth;
                 *c = e.command;
             }
+            takeover.on_record(k, entries);
             drop(s);
             got += 1;
             mission.reference(k, k as f64 * dt, &mut reference);
@@ -201,6 +264,17 @@ pub fn drive(
         }
         if got > 0 {
             step_timing.on_recorded(Instant::now(), recorded);
+            last_progress = Instant::now();
+        }
+        hellos.clear();
+        while let Ok(Some(h)) = ports.hello.receive() {
+            if h.role == formation_config::protocol::messages::Role::Agent as u32 {
+                hellos.push(h.agent);
+            }
+        }
+        if let Err(e) = takeover.poll(recorded, &hellos, node, children) {
+            eprintln!("error: {e}");
+            return (Outcome::Died(e), recorded);
         }
         if recorded >= steps {
             progress.finish(recorded);
@@ -217,8 +291,18 @@ pub fn drive(
             }
         }
         if last_check.elapsed() >= SUPERVISE_EVERY {
+            let since_check = last_check.elapsed();
             last_check = Instant::now();
-            if let Some(o) = watch(children, interrupted) {
+            if let Some(o) = supervise(
+                children,
+                interrupted,
+                takeover,
+                stall,
+                last_progress.elapsed(),
+                since_check,
+                recorded,
+                node,
+            ) {
                 progress.finish(recorded);
                 return (o, recorded);
             }

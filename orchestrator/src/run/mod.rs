@@ -14,6 +14,8 @@ mod progress;
 mod services;
 mod spawn;
 pub(crate) mod step_timing;
+pub(crate) mod supervise;
+pub(crate) mod takeover;
 mod timing;
 
 use crate::cli;
@@ -293,6 +295,7 @@ fn run(
             timing::WaitMode::SpinBlock => mode.spin_us,
         },
         rt_priority: mode.rt_priority,
+        rejoin_at: None,
     };
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(spawn::spawn(
@@ -371,6 +374,15 @@ fn run(
         injections: injections::Injections::open(&node, scenario, &run_dir)?,
         registration,
     };
+    let mut takeover = takeover::Takeover::open(
+        &node,
+        scenario,
+        variant,
+        exe.clone(),
+        child_args(None),
+        (0..n).map(|i| placement.map(|p| p.agent(i))).collect(),
+        formation_config::protocol::pacing::PLANT_LEAD + injections::SLACK,
+    )?;
     let mut step_timing = step_timing::StepTiming::default();
     // The wall time of the run is that of its steps: from every role process ready (after any
     // start-up) to the last step recorded.
@@ -388,6 +400,8 @@ fn run(
                 &mut children.0,
                 interrupted,
                 &mut step_timing,
+                &mut takeover,
+                &node,
             );
             wall = start.elapsed();
             result

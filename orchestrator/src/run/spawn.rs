@@ -27,6 +27,36 @@ impl RoleProcess {
     pub fn pid(&self) -> u32 {
         self.child.id()
     }
+
+    /// SIGKILLs the process (if it is still running) and reaps it.
+    pub fn kill_and_reap(&mut self) {
+        if self.status.is_none() {
+            let _ = self.child.kill();
+            if let Ok(st) = self.child.wait() {
+                self.status = Some(st);
+            }
+        }
+    }
+
+    /// Sends `signal` (SIGSTOP for a timeline hang) to the running process.
+    pub fn signal(&self, signal: i32) {
+        if self.status.is_none() {
+            // SAFETY: kill(2) on our own child's pid, which is not reaped yet (no reuse).
+            unsafe {
+                libc::kill(self.child.id() as libc::pid_t, signal);
+            }
+        }
+    }
+
+    /// Whether the process is stopped (state `T` in /proc/<pid>/stat: SIGSTOP, a debugger).
+    pub fn is_stopped(&self) -> bool {
+        let stat =
+            std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap_or_default();
+        // The state follows the parenthesised command name.
+        stat.rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().next())
+            .is_some_and(|st| st == "T" || st == "t")
+    }
 }
 
 /// Starts `formation node <role> <args>` (shown by `ps` as `fm-<role>[-<id>]`), pinned to `cpu` if given; it gets SIGTERM when the orchestrator
@@ -87,19 +117,22 @@ fn describe(status: ExitStatus) -> String {
 /// Reaps the children that have exited; returns a one-line description of the first one found
 /// dead that had not been reported.
 pub fn check(children: &mut [RoleProcess]) -> Option<String> {
+    check_indexed(children).map(|(_, line)| line)
+}
+
+/// [`check`], with the index of that child.
+pub fn check_indexed(children: &mut [RoleProcess]) -> Option<(usize, String)> {
     let mut first = None;
-    for c in children.iter_mut() {
+    for (idx, c) in children.iter_mut().enumerate() {
         if c.status.is_some() {
             continue;
         }
         if let Ok(Some(st)) = c.child.try_wait() {
             c.status = Some(st);
             if first.is_none() {
-                first = Some(format!(
-                    "{} (pid {}) {}",
-                    c.label,
-                    c.child.id(),
-                    describe(st)
+                first = Some((
+                    idx,
+                    format!("{} (pid {}) {}", c.label, c.child.id(), describe(st)),
                 ));
             }
         }

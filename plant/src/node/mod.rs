@@ -6,8 +6,10 @@
 mod lockstep;
 mod ports;
 mod realtime;
+mod roster;
 
 use lockstep::{Lockstep, States};
+use roster::{Reaction, Roster};
 
 use crate::Plant;
 use formation_config::node::boot::{boot, hello};
@@ -30,7 +32,10 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     }
     let mut arrived = vec![false; n];
     let mut entries = vec![StepEntry::default(); n];
-    let mut faults: Vec<FaultInjection> = Vec::new();
+    // The scenario's fault events go the way of the live injections.
+    let mut faults: Vec<FaultInjection> = scenario_faults(&b.scenario);
+    let mut roster = Roster::new(n, b.scenario.timeline());
+    let runtime = b.scenario.runtime.clone();
     let mut pace = Lockstep::new(n, steps);
     // Reading fewer subscribers per wake-up keeps the plant, which is on the critical path of every
     // step, short (docs/runtime.md, "Cost of a step"): the commands still missing on every wake-up;
@@ -67,8 +72,20 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 fresh += 1;
             }
         }
-        // A wake-up without a command came from the orchestrator (progress, stop) or the timeout.
+        // A wake-up without a command came from the orchestrator (progress, stop, a runtime event)
+        // or the timeout.
         let idle = fresh == 0;
+        if idle {
+            let mut step = Step {
+                plant: &mut plant,
+                roster: &mut roster,
+                runtime: &runtime,
+                arrived: &mut arrived,
+                entries: &mut entries,
+                pace: &mut pace,
+            };
+            step.drain_events(&ports)?;
+        }
         if idle {
             while let Some(c) = ports.control.receive()? {
                 if c.kind == CONTROL_STOP {
@@ -91,18 +108,28 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 while let Some(f) = ports.faults.receive()? {
                     faults.push(*f);
                 }
+                let mut step = Step {
+                    plant: &mut plant,
+                    roster: &mut roster,
+                    runtime: &runtime,
+                    arrived: &mut arrived,
+                    entries: &mut entries,
+                    pace: &mut pace,
+                };
+                step.drain_events(&ports)?;
             }
+            let awaited = roster.awaited(k);
             match pace.states() {
-                States::Send => {
-                    // Each agent is woken right after its state is out: the first ones start
-                    // while the plant still publishes to the others.
-                    for (i, (state, wake)) in
-                        ports.states.iter().zip(&ports.agents_wake).enumerate()
-                    {
-                        send(state, plant.vehicle_state(i))?;
-                        poke(wake);
+                States::Send if awaited.is_some() => {
+                    // A new agent process takes over at k: its neighbours' shares of k must reach
+                    // its subscribers, so no state of k goes out before it has joined. The record
+                    // of k - 1 (which it rebuilds from) goes out meanwhile.
+                    if pace.take_record().is_some() {
+                        ports.publish_step(&entries)?;
                     }
-                    pace.on_states_sent();
+                    poke(&ports.orchestrator_wake);
+                }
+                States::Send => {
                     // Injections of step k act from its first command on.
                     faults.retain(|f| {
                         if f.step <= k {
@@ -120,6 +147,31 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                             true
                         }
                     });
+                    // A quadrotor whose controller is down flies its fallback, its entry written
+                    // at once: the record of k - 1 must go out before that.
+                    if (0..n).any(|i| roster.down_for(i, k).is_some()) {
+                        if let Some(wake_orchestrator) = pace.take_record() {
+                            ports.publish_step(&entries)?;
+                            if wake_orchestrator {
+                                poke(&ports.orchestrator_wake);
+                            }
+                        }
+                    }
+                    // Each agent is woken right after its state is out: the first ones start
+                    // while the plant still publishes to the others.
+                    for (i, (state, wake)) in
+                        ports.states.iter().zip(&ports.agents_wake).enumerate()
+                    {
+                        if roster.down_for(i, k).is_some() {
+                            fly_fallback(&mut plant, &roster, &runtime, i, k, &mut entries);
+                            arrived[i] = true;
+                            pace.on_command();
+                            continue;
+                        }
+                        send(state, plant.vehicle_state(i))?;
+                        poke(wake);
+                    }
+                    pace.on_states_sent();
                 }
                 States::TellBlocked => {
                     poke(&ports.orchestrator_wake);
@@ -143,5 +195,84 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
             pace.on_advance();
         }
         ports.wake.wait(CHILD_WAIT)?;
+    }
+}
+
+/// Flies quadrotor i on its fallback at step k (its controller down) and integrates it.
+fn fly_fallback(
+    plant: &mut Plant,
+    roster: &Roster,
+    runtime: &formation_config::scenario::events::Runtime,
+    i: usize,
+    k: u64,
+    entries: &mut [StepEntry],
+) {
+    let since = roster.down_for(i, k).unwrap_or(0);
+    let command = plant.apply_fallback(i, since, runtime);
+    entries[i] = StepEntry {
+        truth: plant.truth(i),
+        command,
+    };
+    plant.advance_vehicle(i);
+}
+
+/// The fault events of the scenario's timeline as injections.
+fn scenario_faults(s: &formation_config::Scenario) -> Vec<FaultInjection> {
+    use formation_config::scenario::events::Change;
+    s.timeline()
+        .changes()
+        .iter()
+        .filter_map(|c| match *c {
+            Change::Fault {
+                step,
+                agent,
+                gamma,
+                delta,
+            } => Some(FaultInjection {
+                step,
+                t: step as f64 * s.simulation.dt_s,
+                agent: agent as u32,
+                mode: 1,
+                gamma,
+                delta,
+            }),
+            Change::Delay { .. } => None,
+        })
+        .collect()
+}
+
+/// The parts of the plant's loop a runtime event may change.
+struct Step<'a> {
+    plant: &'a mut Plant,
+    roster: &'a mut Roster,
+    runtime: &'a formation_config::scenario::events::Runtime,
+    arrived: &'a mut [bool],
+    entries: &'a mut [StepEntry],
+    pace: &'a mut Lockstep,
+}
+
+impl Step<'_> {
+    /// Takes in every pending runtime event; a take-down request takes the agent down at the
+    /// first step whose command is missing (this one unless it is in), says so to everyone, and
+    /// flies the quadrotor on its fallback at once if the plant is waiting for that command.
+    fn drain_events(&mut self, ports: &ports::Ports) -> Result<(), NodeError> {
+        let k = self.pace.k();
+        while let Some(e) = ports.events.receive()? {
+            if let Reaction::TakeDown(i) = self.roster.on_event(&e) {
+                let from = if self.arrived[i] { k + 1 } else { k };
+                send(&ports.events_out, self.roster.take_down(i, from))?;
+                tracing::warn!(
+                    agent = i + 1,
+                    step = from,
+                    "agent taken down: its process is gone"
+                );
+                if !self.arrived[i] && !self.pace.states_pending() {
+                    fly_fallback(self.plant, self.roster, self.runtime, i, k, self.entries);
+                    self.arrived[i] = true;
+                    self.pace.on_command();
+                }
+            }
+        }
+        Ok(())
     }
 }

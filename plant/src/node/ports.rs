@@ -4,7 +4,7 @@ use formation_config::node::error::{NodeError, PortError, PortErrorKind};
 use formation_config::node::ports::{
     notifier, publisher, slice_publisher, subscriber, Input, Output, Pub, RunNode, Svc, Wake,
 };
-use formation_config::protocol::messages::{RunControl, RunProgress, StepEntry};
+use formation_config::protocol::messages::{RunControl, RunProgress, RuntimeEvent, StepEntry};
 use formation_config::protocol::services;
 use formation_config::protocol::wire::{ControlCommand, FaultInjection, VehicleState};
 use iceoryx2::port::notifier::Notifier;
@@ -14,6 +14,9 @@ pub struct Ports {
     pub control: Input<RunControl>,
     pub progress: Input<RunProgress>,
     pub faults: Input<FaultInjection>,
+    /// Runtime events in (crashes, hangs, joins, take-down requests) and out (take-downs).
+    pub events: Input<RuntimeEvent>,
+    pub events_out: Output<RuntimeEvent>,
     pub commands: Vec<Input<ControlCommand>>,
     pub states: Vec<Output<VehicleState>>,
     pub steps: Pub<[StepEntry]>,
@@ -29,6 +32,8 @@ impl Ports {
             control: subscriber(node, &services::CONTROL.named())?,
             progress: subscriber(node, &services::PROGRESS.named())?,
             faults: subscriber(node, &services::FAULT_INJECTION.named())?,
+            events: subscriber(node, &services::RUNTIME_EVENTS.named())?,
+            events_out: publisher(node, &services::RUNTIME_EVENTS.named())?,
             commands: (0..n)
                 .map(|i| subscriber(node, &services::CONTROL_COMMAND.at(i)))
                 .collect::<Result<_, _>>()?,

@@ -1,0 +1,324 @@
+//! The supervision of a lockstep run's agents as a state machine (`docs/failures.md`): when to
+//! kill or stop an agent process for a timeline crash or hang, when to start the process that
+//! takes over, what to do when one dies or hangs outside the timeline. Every decision is a pure
+//! function of what the driver tells it (steps recorded, deaths, hellos, the plant's take-downs);
+//! the driver carries the actions out. No iceoryx2, no processes.
+
+use formation_config::protocol::messages::{RuntimeEvent, EVENT_ANY, EVENT_UP_AGAIN};
+use formation_config::scenario::events::{
+    DownWindow, EventKind, RestartPolicy, RestartState, Runtime, Timeline,
+};
+
+/// What the driver must do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// SIGKILL agent i's process (a timeline crash; its last command is in) and reap it.
+    Kill(usize),
+    /// SIGSTOP agent i's process (a timeline hang).
+    Stop(usize),
+    /// Start the process that takes over agent i at `plan.rejoin_at` (after SIGKILLing a stopped
+    /// one), rebuilding from the recorded states.
+    Respawn(Plan),
+    /// Agent i's new process has its ports: the plant may send it the states of `step`.
+    Joined {
+        /// Agent index.
+        agent: usize,
+        /// Its first step.
+        step: u64,
+    },
+    /// Agent i's process is gone: ask the plant to take it down.
+    TakeDown(usize),
+    /// Tell every process that agent i's new process takes over at `step` (published ahead).
+    Announce(RuntimeEvent),
+    /// Stop the run with this message (exit 1).
+    Fail(String),
+}
+
+/// The takeover of one agent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Plan {
+    /// Agent index.
+    pub agent: usize,
+    /// First step the old process did not compute.
+    pub down_from: u64,
+    /// First step the new process computes.
+    pub rejoin_at: u64,
+    /// Restore the last checkpoint (a hang always resumes warm).
+    pub warm: bool,
+    /// A timeline event (not a restart under the policy).
+    pub scheduled: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Slot {
+    /// The process computes its steps.
+    Running,
+    /// Killed or stopped for a timeline window; waiting for its end.
+    Parked(DownWindow),
+    /// Died outside the timeline; the plant has been asked to take it down.
+    Dead,
+    /// Taken down from `from`; its successor takes over at `rejoin_at`.
+    Down { from: u64, rejoin_at: u64 },
+    /// A new process was started for `rejoin_at` and has not said hello yet.
+    Spawned { rejoin_at: u64 },
+}
+
+/// The supervisor of N agents.
+#[derive(Debug, Clone)]
+pub struct Supervisor {
+    runtime: Runtime,
+    /// Steps ahead of the recorder that an announcement must be (the plant's lead plus slack).
+    lead: u64,
+    timeline: Timeline,
+    slots: Vec<Slot>,
+    restarts: Vec<u32>,
+}
+
+impl Supervisor {
+    /// The supervisor of `n` agents on `timeline`, announcing `lead` steps ahead.
+    pub fn new(n: usize, timeline: Timeline, runtime: Runtime, lead: u64) -> Supervisor {
+        Supervisor {
+            runtime,
+            lead,
+            timeline,
+            slots: vec![Slot::Running; n],
+            restarts: vec![0; n],
+        }
+    }
+
+    /// Restarts under the policy, per agent.
+    pub fn restarts(&self) -> &[u32] {
+        &self.restarts
+    }
+
+    /// The timeline as the supervisor knows it.
+    pub fn timeline(&self) -> &Timeline {
+        &self.timeline
+    }
+
+    /// A runtime event added to the run (a live injection).
+    pub fn add_event(&mut self, e: &RuntimeEvent) {
+        e.apply(&mut self.timeline);
+    }
+
+    /// Whether agent i's process is expected to be gone (killed or stopped by the timeline).
+    pub fn expects_gone(&self, i: usize) -> bool {
+        matches!(self.slots[i], Slot::Parked(_))
+    }
+
+    /// Steps 0..recorded are recorded.
+    pub fn on_recorded(&mut self, recorded: u64) -> Vec<Action> {
+        let mut out = Vec::new();
+        for i in 0..self.slots.len() {
+            match self.slots[i] {
+                Slot::Running => {
+                    // Its last command before the window is in once the step before it is recorded.
+                    let due = self.timeline.down_windows().iter().copied().find(|w| {
+                        w.agent == i
+                            && w.kind.takes_agent_down()
+                            && w.to != u64::MAX
+                            && w.from <= recorded
+                            && w.to > recorded
+                    });
+                    if let Some(w) = due {
+                        self.slots[i] = Slot::Parked(w);
+                        out.push(if w.kind == EventKind::Hang {
+                            Action::Stop(i)
+                        } else {
+                            Action::Kill(i)
+                        });
+                    }
+                }
+                Slot::Parked(w) if recorded >= w.to => {
+                    self.slots[i] = Slot::Spawned { rejoin_at: w.to };
+                    out.push(Action::Respawn(Plan {
+                        agent: i,
+                        down_from: w.from,
+                        rejoin_at: w.to,
+                        warm: w.kind == EventKind::Hang
+                            || self.runtime.restart_state == RestartState::Warm,
+                        scheduled: true,
+                    }));
+                }
+                Slot::Down { from, rejoin_at } if recorded >= rejoin_at => {
+                    self.slots[i] = Slot::Spawned { rejoin_at };
+                    out.push(Action::Respawn(Plan {
+                        agent: i,
+                        down_from: from,
+                        rejoin_at,
+                        warm: self.runtime.restart_state == RestartState::Warm,
+                        scheduled: false,
+                    }));
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+
+    /// Agent i said hello.
+    pub fn on_hello(&mut self, i: usize) -> Option<Action> {
+        match self.slots.get(i) {
+            Some(Slot::Spawned { rejoin_at }) => {
+                let step = *rejoin_at;
+                self.slots[i] = Slot::Running;
+                Some(Action::Joined { agent: i, step })
+            }
+            _ => None,
+        }
+    }
+
+    /// Agent i's process died (or was declared hung and killed) outside the timeline; `line`
+    /// names it. `None`: the timeline killed it (expected).
+    pub fn on_death(&mut self, i: usize, line: &str) -> Option<Action> {
+        Some(self.decide_death(i, line)).filter(|_| !self.expects_gone(i))
+    }
+
+    fn decide_death(&mut self, i: usize, line: &str) -> Action {
+        match self.slots[i] {
+            Slot::Parked(_) => return Action::Fail(String::new()),
+            Slot::Running | Slot::Spawned { .. } => {}
+            Slot::Dead | Slot::Down { .. } => {
+                return Action::Fail(format!("{line} while it was being replaced"))
+            }
+        }
+        if self.runtime.restart == RestartPolicy::Never {
+            return Action::Fail(line.to_string());
+        }
+        if self.restarts[i] >= self.runtime.max_restarts {
+            return Action::Fail(format!(
+                "{line}; agent {} was restarted {} times already (runtime.max_restarts)",
+                i + 1,
+                self.restarts[i]
+            ));
+        }
+        self.restarts[i] += 1;
+        self.slots[i] = Slot::Dead;
+        Action::TakeDown(i)
+    }
+
+    /// The plant took agent i down from step `from` (`recorded` steps are recorded): its
+    /// successor takes over far enough ahead that every process knows before the plant gets there.
+    pub fn on_taken_down(&mut self, i: usize, from: u64, recorded: u64) -> Option<Action> {
+        if self.slots.get(i) != Some(&Slot::Dead) {
+            return None;
+        }
+        let rejoin_at = (from + 1).max(recorded + self.lead);
+        self.timeline.set_down(i, from, EventKind::Crash);
+        self.timeline.set_up_again(i, rejoin_at);
+        self.slots[i] = Slot::Down { from, rejoin_at };
+        Some(Action::Announce(RuntimeEvent {
+            step: rejoin_at,
+            kind: EVENT_UP_AGAIN,
+            agent: i as u32,
+            other: EVENT_ANY,
+            ..RuntimeEvent::default()
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_config::scenario::events::Event;
+
+    fn crash(agent: usize, at_s: f64, down_s: f64, kind: EventKind) -> Timeline {
+        let mut e = Event::new(at_s, kind);
+        e.agent = Some(agent);
+        e.down_s = Some(down_s);
+        Timeline::new(&[e], 0.001)
+    }
+
+    #[test]
+    fn a_timeline_crash_kills_after_its_last_command_and_respawns_once_the_window_is_recorded() {
+        let mut s = Supervisor::new(
+            5,
+            crash(3, 20.0, 0.5, EventKind::Crash),
+            Runtime::default(),
+            68,
+        );
+        assert!(s.on_recorded(19_999).is_empty());
+        assert_eq!(s.on_recorded(20_000), vec![Action::Kill(2)]);
+        assert!(s.expects_gone(2));
+        assert_eq!(
+            s.on_death(2, "agent 3 was killed"),
+            None,
+            "the timeline killed it"
+        );
+        assert!(s.on_recorded(20_499).is_empty(), "killed once");
+        let plan = match s.on_recorded(20_500).as_slice() {
+            [Action::Respawn(p)] => *p,
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(
+            (plan.agent, plan.down_from, plan.rejoin_at, plan.warm),
+            (2, 20_000, 20_500, true)
+        );
+        assert_eq!(
+            s.on_hello(2),
+            Some(Action::Joined {
+                agent: 2,
+                step: 20_500
+            })
+        );
+        assert_eq!(s.on_hello(2), None, "only the awaited hello counts");
+        assert_eq!(
+            s.restarts()[2],
+            0,
+            "a timeline crash is not a restart under the policy"
+        );
+    }
+
+    #[test]
+    fn a_timeline_hang_stops_the_process_and_always_resumes_warm() {
+        let rt = Runtime {
+            restart_state: RestartState::Cold,
+            ..Runtime::default()
+        };
+        let mut s = Supervisor::new(5, crash(1, 1.0, 0.2, EventKind::Hang), rt, 68);
+        assert_eq!(s.on_recorded(1000), vec![Action::Stop(0)]);
+        match s.on_recorded(1200).as_slice() {
+            [Action::Respawn(p)] => assert!(p.warm),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_death_outside_the_timeline_stops_the_run_unless_the_policy_restarts_and_counts_it() {
+        let mut never = Supervisor::new(3, Timeline::new(&[], 0.001), Runtime::default(), 68);
+        assert!(matches!(
+            never.on_death(1, "agent 2 was killed"),
+            Some(Action::Fail(_))
+        ));
+        let rt = Runtime {
+            restart: RestartPolicy::OnFailure,
+            max_restarts: 1,
+            ..Runtime::default()
+        };
+        let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
+        assert_eq!(
+            s.on_death(1, "agent 2 was killed"),
+            Some(Action::TakeDown(1))
+        );
+        let up = s.on_taken_down(1, 5000, 4990).expect("announced");
+        assert_eq!(
+            up,
+            Action::Announce(RuntimeEvent {
+                step: 5058,
+                kind: EVENT_UP_AGAIN,
+                agent: 1,
+                other: EVENT_ANY,
+                ..RuntimeEvent::default()
+            })
+        );
+        assert!(s.on_recorded(5057).is_empty());
+        assert!(
+            matches!(s.on_recorded(5058).as_slice(), [Action::Respawn(p)] if !p.scheduled && p.down_from == 5000)
+        );
+        s.on_hello(1);
+        assert_eq!(s.restarts(), &[0, 1, 0]);
+        assert!(
+            matches!(s.on_death(1, "agent 2 was killed"), Some(Action::Fail(m)) if m.contains("max_restarts"))
+        );
+    }
+}

@@ -1,0 +1,380 @@
+//! The orchestrator's side of crashes, hangs and restarts in a lockstep run (`docs/failures.md`):
+//! it keeps the recorded states a new agent process rebuilds from, carries out the
+//! [`Supervisor`]'s actions on the processes (SIGKILL, SIGSTOP, respawn) and on the runtime-event
+//! service, and logs what happened when, for `summary.json`.
+
+use super::spawn::{self, RoleProcess};
+use super::supervise::{Action, Plan, Supervisor};
+use crate::history::{self, History};
+use formation_config::node::args::ChildArgs;
+use formation_config::node::ports::{
+    notifier, poke, publisher, send, subscriber, Input, Output, RunNode, Svc,
+};
+use formation_config::node::restart::{self, Checkpoint, RejoinFile};
+use formation_config::protocol::messages::{
+    Role, RuntimeEvent, StepEntry, EVENT_ANY, EVENT_DOWN, EVENT_DOWN_REQUEST, EVENT_JOINED,
+};
+use formation_config::protocol::services;
+use formation_config::scenario::events::Runtime;
+use formation_config::Scenario;
+use iceoryx2::port::notifier::Notifier;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Index of agent i among the children (plant, leader, then the agents).
+const FIRST_AGENT: usize = 2;
+
+/// One handled incident, for `summary.json` (`events`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Incident {
+    /// `crash`, `hang` (timeline), `died`, `hung` (detected).
+    pub kind: &'static str,
+    /// Agent index (0-based).
+    pub agent: usize,
+    /// First step the agent was down.
+    pub down_from: Option<u64>,
+    /// Step its new process took over.
+    pub rejoin_at: Option<u64>,
+    /// Detected death or stall: wall ms from the last time the process was seen working.
+    pub detected_after_ms: Option<f64>,
+    /// Wall ms from the kill (or detection) to the new process's hello.
+    pub restarted_after_ms: Option<f64>,
+    started: Instant,
+}
+
+/// Everything the takeover of agents needs.
+pub struct Takeover {
+    supervisor: Supervisor,
+    history: History,
+    /// Every runtime event published or received so far (a new process's timeline).
+    published: Vec<RuntimeEvent>,
+    events_in: Input<RuntimeEvent>,
+    events_out: Output<RuntimeEvent>,
+    plant_wake: Notifier<Svc>,
+    agent_wakes: Vec<Notifier<Svc>>,
+    exe: PathBuf,
+    args: ChildArgs,
+    pins: Vec<Option<usize>>,
+    n: usize,
+    capacity: usize,
+    /// What happened, in order.
+    pub incidents: Vec<Incident>,
+}
+
+impl Takeover {
+    /// Opens the ports; `args` is an agent's command line (its index and rejoin step are set per
+    /// process), `pins` each agent's CPU.
+    #[allow(clippy::too_many_arguments)] // the run's parts, each its own kind
+    pub fn open(
+        node: &RunNode,
+        scenario: &Scenario,
+        variant: formation_config::Variant,
+        exe: PathBuf,
+        args: ChildArgs,
+        pins: Vec<Option<usize>>,
+        lead: u64,
+    ) -> Result<Takeover, String> {
+        let n = scenario.n_agents();
+        let timeline = scenario.timeline();
+        let dt = scenario.simulation.dt_s;
+        let capacity = formation_agent::Agent::new(scenario, 0, variant).history_capacity();
+        // A restart under the policy is down for about the announcement lead plus the detection
+        // time; keep ten seconds of steps for it at least.
+        let longest = history::longest_down(&timeline).max((10.0 / dt) as u64);
+        let len = history::len(&scenario.runtime, dt, capacity, longest);
+        let mut agent_wakes = Vec::with_capacity(n);
+        for i in 0..n {
+            agent_wakes.push(notifier(node, &services::WAKE_AGENT.at(i))?);
+        }
+        Ok(Takeover {
+            supervisor: Supervisor::new(n, timeline, scenario.runtime.clone(), lead),
+            history: History::new(n, len),
+            published: Vec::new(),
+            events_in: subscriber(node, &services::RUNTIME_EVENTS.named())?,
+            events_out: publisher(node, &services::RUNTIME_EVENTS.named())?,
+            plant_wake: notifier(node, &services::WAKE_PLANT.named())?,
+            agent_wakes,
+            exe,
+            args,
+            pins,
+            n,
+            capacity,
+            incidents: Vec::new(),
+        })
+    }
+
+    /// Restarts under the policy, per agent.
+    pub fn restarts(&self) -> &[u32] {
+        self.supervisor.restarts()
+    }
+
+    /// Keeps step k's record.
+    pub fn on_record(&mut self, k: u64, entries: &[StepEntry]) {
+        for (i, e) in entries.iter().enumerate() {
+            self.history.set_state(k, i, e.truth.state);
+            self.history
+                .set_command(k, i, (e.command.thrust_n, e.command.torque_nm));
+        }
+    }
+
+    /// Publishes a runtime event to every process (a live injection, an announcement).
+    pub fn publish(&mut self, e: RuntimeEvent) -> Result<(), String> {
+        send(&self.events_out, e)?;
+        self.published.push(e);
+        self.supervisor.add_event(&e);
+        poke(&self.plant_wake);
+        self.agent_wakes.iter().for_each(poke);
+        Ok(())
+    }
+
+    /// After a batch of records (`recorded` steps): reads the plant's take-downs and the hellos of
+    /// new processes, and carries out what is due. `Err`: the run must stop (named on stderr).
+    pub fn poll(
+        &mut self,
+        recorded: u64,
+        hellos: &[u32],
+        node: &RunNode,
+        children: &mut [RoleProcess],
+    ) -> Result<(), String> {
+        while let Ok(Some(e)) = self.events_in.receive() {
+            let e = *e;
+            if e.kind != EVENT_DOWN {
+                continue;
+            }
+            self.published.push(e);
+            if let Some(a) = self
+                .supervisor
+                .on_taken_down(e.agent as usize, e.step, recorded)
+            {
+                if let Some(inc) = self
+                    .incidents
+                    .iter_mut()
+                    .rev()
+                    .find(|x| x.agent == e.agent as usize)
+                {
+                    inc.down_from = Some(e.step);
+                }
+                self.carry(a, recorded, node, children)?;
+            }
+        }
+        for &agent in hellos {
+            if let Some(a) = self.supervisor.on_hello(agent as usize) {
+                self.carry(a, recorded, node, children)?;
+            }
+        }
+        for a in self.supervisor.on_recorded(recorded) {
+            self.carry(a, recorded, node, children)?;
+        }
+        Ok(())
+    }
+
+    /// A child exited or died (`idx` among the children, `line` naming it): `Ok` when the run goes
+    /// on (the timeline killed it, or it is being replaced), `Err` with the line to print.
+    pub fn on_death(
+        &mut self,
+        idx: usize,
+        line: String,
+        since_seen: Duration,
+        recorded: u64,
+        node: &RunNode,
+        children: &mut [RoleProcess],
+    ) -> Result<(), String> {
+        let Some(i) = idx.checked_sub(FIRST_AGENT) else {
+            return Err(format!(
+                "{line}; stopping the run (plant and leader are not restarted)"
+            ));
+        };
+        match self.supervisor.on_death(i, &line) {
+            None => Ok(()),
+            Some(Action::Fail(m)) => Err(format!("{m}; stopping the run")),
+            Some(a) => {
+                eprintln!("error: {line}; restarting it (runtime.restart = on-failure)");
+                self.incidents.push(Incident {
+                    kind: if line.contains("made no progress") {
+                        "hung"
+                    } else {
+                        "died"
+                    },
+                    agent: i,
+                    down_from: None,
+                    rejoin_at: None,
+                    detected_after_ms: Some(since_seen.as_secs_f64() * 1e3),
+                    restarted_after_ms: None,
+                    started: Instant::now(),
+                });
+                self.carry(a, recorded, node, children)
+            }
+        }
+    }
+
+    /// Whether agent i's process is stopped or gone on purpose (a timeline hang or crash).
+    pub fn expects_gone(&self, i: usize) -> bool {
+        self.supervisor.expects_gone(i)
+    }
+
+    fn carry(
+        &mut self,
+        a: Action,
+        recorded: u64,
+        node: &RunNode,
+        children: &mut [RoleProcess],
+    ) -> Result<(), String> {
+        match a {
+            Action::Kill(i) | Action::Stop(i) => {
+                let stop = matches!(a, Action::Stop(_));
+                let c = &mut children[FIRST_AGENT + i];
+                if stop {
+                    c.signal(libc::SIGSTOP);
+                } else {
+                    c.kill_and_reap();
+                    node.try_cleanup_dead_nodes();
+                }
+                tracing::info!(
+                    agent = i + 1,
+                    recorded,
+                    stop,
+                    "timeline: agent process {}",
+                    if stop { "stopped" } else { "killed" }
+                );
+                self.incidents.push(Incident {
+                    kind: if stop { "hang" } else { "crash" },
+                    agent: i,
+                    down_from: None,
+                    rejoin_at: None,
+                    detected_after_ms: None,
+                    restarted_after_ms: None,
+                    started: Instant::now(),
+                });
+                Ok(())
+            }
+            Action::Respawn(plan) => self.respawn(plan, node, children),
+            Action::Joined { agent, step } => {
+                if let Some(inc) = self.incidents.iter_mut().rev().find(|x| x.agent == agent) {
+                    inc.restarted_after_ms = Some(inc.started.elapsed().as_secs_f64() * 1e3);
+                }
+                tracing::info!(agent = agent + 1, step, "new agent process joined");
+                send(
+                    &self.events_out,
+                    RuntimeEvent {
+                        step,
+                        kind: EVENT_JOINED,
+                        agent: agent as u32,
+                        other: EVENT_ANY,
+                        ..RuntimeEvent::default()
+                    },
+                )?;
+                poke(&self.plant_wake);
+                Ok(())
+            }
+            Action::TakeDown(i) => {
+                send(
+                    &self.events_out,
+                    RuntimeEvent {
+                        step: u64::MAX,
+                        kind: EVENT_DOWN_REQUEST,
+                        agent: i as u32,
+                        other: EVENT_ANY,
+                        ..RuntimeEvent::default()
+                    },
+                )?;
+                poke(&self.plant_wake);
+                // Whatever is left of it is gone before its successor opens its ports.
+                children[FIRST_AGENT + i].kill_and_reap();
+                node.try_cleanup_dead_nodes();
+                Ok(())
+            }
+            Action::Announce(e) => self.publish(e),
+            Action::Fail(m) => Err(m),
+        }
+    }
+
+    fn respawn(
+        &mut self,
+        plan: Plan,
+        node: &RunNode,
+        children: &mut [RoleProcess],
+    ) -> Result<(), String> {
+        let i = plan.agent;
+        // A stopped process (a hang) is replaced like a dead one.
+        children[FIRST_AGENT + i].kill_and_reap();
+        node.try_cleanup_dead_nodes();
+        let run_dir = self.args.run_dir.clone();
+        let mut checkpoint = None;
+        if plan.warm {
+            match restart::read::<Checkpoint>(&restart::checkpoint_path(&run_dir, i)) {
+                Ok(c) if c.step < plan.down_from && c.step >= self.history.oldest() => {
+                    checkpoint = Some(c.step)
+                }
+                Ok(c) => eprintln!(
+                    "warning: agent {}: checkpoint of step {} is outside the recorded window; restarting cold",
+                    i + 1,
+                    c.step
+                ),
+                Err(e) => eprintln!("warning: agent {}: no checkpoint ({e}); restarting cold", i + 1),
+            }
+        }
+        let window = formation_agent::restart::Rejoin {
+            checkpoint,
+            down_from: plan.down_from,
+            rejoin_at: plan.rejoin_at,
+        };
+        let first = window
+            .first_needed(self.capacity as u64)
+            .max(self.history.oldest());
+        let file = RejoinFile {
+            agent: i,
+            checkpoint,
+            down_from: plan.down_from,
+            rejoin_at: plan.rejoin_at,
+            first,
+            n: self.n,
+            states: (first..plan.rejoin_at)
+                .flat_map(|k| (0..self.n).map(move |j| (k, j)))
+                .map(|(k, j)| self.history.state(k, j))
+                .collect(),
+            commands: (first..plan.down_from.max(first))
+                .map(|k| self.history.command(k, i))
+                .collect(),
+            events: self.published.clone(),
+        };
+        let path = restart::rejoin_path(&run_dir, i);
+        restart::write_atomic(&path, &file)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        let args = ChildArgs {
+            agent: Some(i),
+            rejoin_at: Some(plan.rejoin_at),
+            ..self.args.clone()
+        };
+        let child = spawn::spawn(
+            &self.exe,
+            Role::Agent,
+            format!("agent {} (--agent {i})", i + 1),
+            &args,
+            self.pins.get(i).copied().flatten(),
+        )?;
+        eprintln!(
+            "formation run: agent {} taken over at step {} (t = {:.3} s) by pid {} ({}, down from step {})",
+            i + 1,
+            plan.rejoin_at,
+            plan.rejoin_at as f64 * self.args_dt(),
+            child.pid(),
+            if checkpoint.is_some() { "warm" } else { "cold" },
+            plan.down_from
+        );
+        if let Some(inc) = self.incidents.iter_mut().rev().find(|x| x.agent == i) {
+            inc.down_from = Some(plan.down_from);
+            inc.rejoin_at = Some(plan.rejoin_at);
+        }
+        children[FIRST_AGENT + i] = child;
+        Ok(())
+    }
+
+    fn args_dt(&self) -> f64 {
+        self.supervisor.timeline().dt()
+    }
+}
+
+/// The runtime policy's stall timeout (None: disabled).
+pub fn stall_timeout(rt: &Runtime) -> Option<Duration> {
+    (rt.stall_timeout_ms > 0).then(|| Duration::from_millis(rt.stall_timeout_ms))
+}
