@@ -277,14 +277,122 @@ pub struct RunnerArgs {
     /// `--set 'agents[*].delay.base_s=0.04'` (every agent); repeatable.
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
+    /// Add the events of FILE to the scenario's timeline: a TOML file of `[[events]]`, or the
+    /// `events.jsonl` of a live run (record and replay: a lockstep run replays it bit for bit).
+    #[arg(long, value_name = "FILE")]
+    pub events: Option<std::path::PathBuf>,
+    /// What to do when an agent process dies or hangs (`runtime.restart`): never (stop the run)
+    /// or on-failure (start a new one; plant and leader are never restarted).
+    #[arg(long, value_enum)]
+    pub restart: Option<RestartArg>,
+    /// Most restarts of one agent (`runtime.max_restarts`).
+    #[arg(long, value_parser = crate::cli::whole_number::<u32>, allow_negative_numbers = true)]
+    pub max_restarts: Option<u32>,
+    /// A run without progress for this long has a hung process, ms (`runtime.stall_timeout_ms`;
+    /// 0 disables).
+    #[arg(long, value_parser = crate::cli::whole_number::<u64>, allow_negative_numbers = true)]
+    pub stall_timeout_ms: Option<u64>,
+    /// What a restarted agent starts from (`runtime.restart_state`).
+    #[arg(long, value_enum)]
+    pub restart_state: Option<RestartStateArg>,
+}
+
+/// `--restart`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy)]
+pub enum RestartArg {
+    /// Stop the run.
+    Never,
+    /// Start a new agent process.
+    OnFailure,
+}
+
+/// `--restart-state`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy)]
+pub enum RestartStateArg {
+    /// The last checkpoint, replayed.
+    Warm,
+    /// A fresh controller.
+    Cold,
 }
 
 impl RunnerArgs {
-    /// The validated scenario (after the overrides) and the variant; exit code 2 with clear errors.
+    /// The validated scenario (after the overrides, the runtime flags and the events file) and the
+    /// variant; exit code 2 with clear errors.
     pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {
-        let scenario = load_with_overrides(self.scenario.as_deref(), &self.sets)?;
+        use formation_config::scenario::events::{RestartPolicy, RestartState};
+        let mut scenario = load_with_overrides(self.scenario.as_deref(), &self.sets)?;
+        let rt = &mut scenario.runtime;
+        if let Some(r) = self.restart {
+            rt.restart = match r {
+                RestartArg::Never => RestartPolicy::Never,
+                RestartArg::OnFailure => RestartPolicy::OnFailure,
+            };
+        }
+        if let Some(m) = self.max_restarts {
+            rt.max_restarts = m;
+        }
+        if let Some(t) = self.stall_timeout_ms {
+            rt.stall_timeout_ms = t;
+        }
+        if let Some(s) = self.restart_state {
+            rt.restart_state = match s {
+                RestartStateArg::Warm => RestartState::Warm,
+                RestartStateArg::Cold => RestartState::Cold,
+            };
+        }
+        if let Some(path) = &self.events {
+            match read_events(path) {
+                Ok(mut e) => scenario.events.append(&mut e),
+                Err(e) => {
+                    eprintln!("error: --events {}: {e}", path.display());
+                    return Err(ExitCode::from(EXIT_INVALID));
+                }
+            }
+        }
+        if let Err(errs) = validate(&scenario) {
+            eprintln!("error: the scenario with its runtime settings and events is invalid:");
+            for e in &errs.0 {
+                eprintln!("  {e}");
+            }
+            return Err(ExitCode::from(EXIT_INVALID));
+        }
         Ok((scenario, parse_variant(&self.variant)?))
     }
+}
+
+/// The events of a file: TOML with `[[events]]`, or JSON lines (a live run's `events.jsonl`, whose
+/// accepted injections carry their event as `"scenario_event"`; other lines are skipped), or JSON
+/// lines of bare events.
+pub fn read_events(
+    path: &std::path::Path,
+) -> Result<Vec<formation_config::scenario::events::Event>, String> {
+    use formation_config::scenario::events::Event;
+    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+    let is_toml = path.extension().is_some_and(|x| x == "toml");
+    if is_toml {
+        #[derive(serde::Deserialize)]
+        struct File {
+            events: Vec<Event>,
+        }
+        return toml::from_str::<File>(&text)
+            .map(|f| f.events)
+            .map_err(|e| e.to_string());
+    }
+    let mut out = Vec::new();
+    for (k, line) in text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
+        let v: serde_json::Value =
+            serde_json::from_str(line).map_err(|e| format!("line {}: {e}", k + 1))?;
+        let ev = v.get("scenario_event").cloned().unwrap_or(v);
+        if ev.get("at_s").is_none() {
+            continue;
+        }
+        out.push(serde_json::from_value::<Event>(ev).map_err(|e| format!("line {}: {e}", k + 1))?);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -342,12 +342,16 @@ mod tests {
         let s = crash_scenario(RestartState::Cold);
         let mut l = ClosedLoop::new(&s, Variant::Proposed);
         let mut held = 0;
+        let mut last = (0.0, [0.0; 3]);
         for k in 0..s.n_steps() {
             l.observe();
             l.act();
+            if k == 2299 {
+                last = (l.commands()[2].thrust_n, l.commands()[2].torque_nm);
+            }
             if (2300..2500).contains(&k) {
                 // Within hold_s the last command of step 2299 is held.
-                held += (l.commands()[2].telemetry.tau_s == 0.0) as usize;
+                held += (l.commands()[2].thrust_n == last.0) as usize;
             }
             l.advance();
         }

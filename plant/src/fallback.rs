@@ -29,7 +29,9 @@ pub fn level_hover(
 }
 
 /// The command of step `step` (time `t`) for agent `agent`, down for `since_steps` steps of `dt`:
-/// `last` (the last command its controller sent) while within `hold_s`, then [`level_hover`].
+/// `last` (the last command its controller sent, with its telemetry) while within `hold_s`, then
+/// [`level_hover`], whose telemetry carries only its attitude target (level, heading `yaw`) so the
+/// constraint metrics measure the quadrotor against what it is asked to do.
 #[allow(clippy::too_many_arguments)] // the step, the vehicle and the policy, each its own kind
 pub fn command(
     rt: &Runtime,
@@ -38,21 +40,26 @@ pub fn command(
     dt: f64,
     step: u64,
     agent: usize,
+    yaw: f64,
     hover: impl FnOnce() -> (f64, [f64; 3]),
 ) -> ControlCommand {
-    let (thrust_n, torque_nm) = if (since_steps as f64) * dt < rt.hold_s {
-        (last.thrust_n, last.torque_nm)
+    let mut cmd = if (since_steps as f64) * dt < rt.hold_s {
+        *last
     } else {
-        hover()
+        let (thrust_n, torque_nm) = hover();
+        let mut c = ControlCommand {
+            thrust_n,
+            torque_nm,
+            ..ControlCommand::default()
+        };
+        c.telemetry.attitude_cmd = [0.0, 0.0, yaw];
+        c
     };
-    ControlCommand {
-        step,
-        t: step as f64 * dt,
-        agent: agent as u32,
-        thrust_n,
-        torque_nm,
-        ..ControlCommand::default()
-    }
+    cmd.step = step;
+    cmd.t = step as f64 * dt;
+    cmd.agent = agent as u32;
+    cmd.sent_ns = 0;
+    cmd
 }
 
 #[cfg(test)]
@@ -75,10 +82,15 @@ mod tests {
         };
         let j = Vector3::new(0.02, 0.02, 0.04);
         let hover = || level_hover(&rt, 1.0, 9.81, &j, &x);
-        let held = command(&rt, &last, 10, 0.001, 100, 2, hover);
+        let held = command(&rt, &last, 10, 0.001, 100, 2, 0.5, hover);
         assert_eq!((held.thrust_n, held.torque_nm), (9.0, [0.1, 0.0, 0.0]));
         assert_eq!((held.step, held.agent), (100, 2));
-        let late = command(&rt, &last, 1000, 0.001, 100, 2, hover);
+        let late = command(&rt, &last, 1000, 0.001, 100, 2, 0.5, hover);
+        assert_eq!(
+            late.telemetry.attitude_cmd,
+            [0.0, 0.0, 0.5],
+            "its target: level"
+        );
         assert!(
             late.thrust_n > 9.81,
             "compensates the tilt: {}",

@@ -153,6 +153,7 @@ impl Plant {
             self.dt,
             self.step,
             i,
+            veh.state.a[2],
             || crate::fallback::level_hover(rt, body.mass, body.gravity, &body.inertia, &veh.state),
         );
         self.set_input(i, &cmd);

@@ -123,6 +123,14 @@ pub struct StepEntry {
 pub const INJECT_FAULT: u32 = 1;
 /// [`InjectRequest::kind`]: a delay profile (to the agents).
 pub const INJECT_DELAY: u32 = 2;
+/// [`InjectRequest::kind`]: a crash of an agent process for `down_s` (SIGKILL, then a new one).
+pub const INJECT_CRASH: u32 = 3;
+/// [`InjectRequest::kind`]: a hang of an agent process for `down_s` (SIGSTOP, then a new one).
+pub const INJECT_HANG: u32 = 4;
+/// [`InjectRequest::kind`]: the edge {agent, other} goes down.
+pub const INJECT_LINK_DOWN: u32 = 5;
+/// [`InjectRequest::kind`]: the edge {agent, other} comes back.
+pub const INJECT_LINK_UP: u32 = 6;
 /// [`InjectRequest::at_step`] when no step was asked for: "as soon as deterministically possible".
 pub const INJECT_ASAP: u64 = u64::MAX;
 
@@ -133,7 +141,7 @@ pub const INJECT_ASAP: u64 = u64::MAX;
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v1.InjectRequest")
+    type_name("formation.v2.InjectRequest")
 )]
 pub struct InjectRequest {
     /// Random id chosen by the client; echoed in `events.jsonl`.
@@ -154,6 +162,12 @@ pub struct InjectRequest {
     pub amplitude_s: f64,
     /// Delay angular rate, rad/s.
     pub angular_rate_rad_s: f64,
+    /// Link: the other agent index (0-based).
+    pub other: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// Crash, hang: how long the agent is down, s.
+    pub down_s: f64,
 }
 
 /// [`RuntimeEvent::kind`]: agent `agent` crashes at `step` for `down_steps` (a timeline `crash`).

@@ -7,7 +7,8 @@ use super::validate;
 use crate::cli::EXIT_INVALID;
 use formation_config::node::ports::{notifier, poke, publisher, send};
 use formation_config::protocol::messages::{
-    InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT,
+    InjectRequest, INJECT_ASAP, INJECT_CRASH, INJECT_DELAY, INJECT_FAULT, INJECT_HANG,
+    INJECT_LINK_DOWN, INJECT_LINK_UP,
 };
 use formation_config::protocol::services;
 use std::process::ExitCode;
@@ -28,6 +29,55 @@ pub enum InjectWhat {
     Fault(FaultArgs),
     /// Communication delay profile of one agent: tau(t), within [0, tau_M] of the run.
     Delay(DelayArgs),
+    /// Crash of one agent's process: killed at a step, a new one takes over `--down` s later.
+    Crash(DownArgs),
+    /// Hang of one agent's process: stopped at a step, replaced `--down` s later.
+    Hang(DownArgs),
+    /// A communication link (a graph edge) goes down or comes back.
+    Link(LinkArgs),
+}
+
+/// Arguments of `formation inject crash|hang`.
+#[derive(clap::Args, Debug)]
+pub struct DownArgs {
+    /// Agent id, 1-based (1..=N).
+    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    pub agent: usize,
+    /// How long the agent is down, s of simulation time.
+    #[arg(long, allow_negative_numbers = true)]
+    pub down: f64,
+    /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
+    #[arg(long, allow_negative_numbers = true)]
+    pub at: Option<f64>,
+    /// Run id (see `formation ps`); may be omitted when exactly one run is running.
+    #[arg(long)]
+    pub run: Option<String>,
+}
+
+/// `formation inject link --state`.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkState {
+    /// The edge carries nothing.
+    Down,
+    /// The edge carries shares again.
+    Up,
+}
+
+/// Arguments of `formation inject link`.
+#[derive(clap::Args, Debug)]
+pub struct LinkArgs {
+    /// The edge, 1-based agent ids, e.g. 2,3.
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub agents: Vec<usize>,
+    /// Down or up.
+    #[arg(long, value_enum)]
+    pub state: LinkState,
+    /// Simulation time to apply at, s (if still ahead of the run; else a few steps from now).
+    #[arg(long, allow_negative_numbers = true)]
+    pub at: Option<f64>,
+    /// Run id (see `formation ps`); may be omitted when exactly one run is running.
+    #[arg(long)]
+    pub run: Option<String>,
 }
 
 /// Arguments of `formation inject fault`.
@@ -89,6 +139,12 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
     let (run_id, agent, at) = match what {
         InjectWhat::Fault(a) => (a.run.as_deref(), a.agent, a.at),
         InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
+        InjectWhat::Crash(a) | InjectWhat::Hang(a) => (a.run.as_deref(), a.agent, a.at),
+        InjectWhat::Link(a) => (
+            a.run.as_deref(),
+            a.agents.first().copied().unwrap_or(0),
+            a.at,
+        ),
     };
     if let Some(t) = at {
         // What can be checked without the run is checked before looking for it.
@@ -126,6 +182,34 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
             r.amplitude_s = d.amplitude_s;
             r.angular_rate_rad_s = d.angular_rate_rad_s;
         }
+        InjectWhat::Crash(a) | InjectWhat::Hang(a) => {
+            r.kind = if matches!(what, InjectWhat::Crash(_)) {
+                INJECT_CRASH
+            } else {
+                INJECT_HANG
+            };
+            r.down_s = a.down;
+        }
+        InjectWhat::Link(a) => {
+            let [_, b] = <[usize; 2]>::try_from(a.agents.as_slice())
+                .map_err(|_| "--agents: expected two comma-separated agent ids".to_string())?;
+            validate::agent(b, run.n_agents)?;
+            r.kind = if a.state == LinkState::Down {
+                INJECT_LINK_DOWN
+            } else {
+                INJECT_LINK_UP
+            };
+            r.other = (b - 1) as u32;
+        }
+    }
+    // The run checks the rest against its scenario and graph (the edge, down_s).
+    if matches!(
+        r.kind,
+        INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP
+    ) {
+        let e = super::super::run::injections::event_of(&r, s.simulation.dt_s, 0);
+        formation_config::scenario::validate::validate_event(&s, "inject", &e)
+            .map_err(|e| e.to_string())?;
     }
     Ok((run, r))
 }

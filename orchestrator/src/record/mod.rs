@@ -7,6 +7,7 @@
 pub mod coverage;
 pub mod csv;
 pub mod metrics;
+pub mod recovery;
 pub mod separation;
 pub mod summary;
 pub mod table;
@@ -29,6 +30,16 @@ pub struct Recorder {
     mode: &'static str,
     dt: f64,
     timing: Option<serde_json::Value>,
+    /// Per-step worst formation error and violations, for the events' recovery.
+    series: recovery::Series,
+    /// The scenario's events and graph.
+    events: Vec<formation_config::scenario::events::Event>,
+    timeline: formation_config::scenario::events::Timeline,
+    topology: formation_config::scenario::graph::Topology,
+    /// What a live run added: runtime events, the supervision's incidents, restarts per agent.
+    runtime_events: Vec<formation_config::protocol::messages::RuntimeEvent>,
+    incidents: Vec<recovery::Mark>,
+    restarts: Vec<u32>,
 }
 
 impl Recorder {
@@ -70,6 +81,13 @@ impl Recorder {
             mode,
             dt: s.simulation.dt_s,
             timing: None,
+            series: recovery::Series::with_capacity(s.n_steps() as usize),
+            events: s.events.clone(),
+            timeline: s.timeline(),
+            topology: formation_config::scenario::graph::Topology::from_scenario(s),
+            runtime_events: Vec::new(),
+            incidents: Vec::new(),
+            restarts: vec![0; s.n_agents()],
         })
     }
 
@@ -82,6 +100,17 @@ impl Recorder {
         commands: &[ControlCommand],
     ) -> std::io::Result<Option<Divergence>> {
         let div = self.metrics.record(step, reference, truths, commands);
+        let (worst, violations) = self
+            .metrics
+            .agents
+            .iter()
+            .fold((0.0f64, 0u64), |(w, v), a| {
+                (
+                    w.max(a.last_error),
+                    v + a.attitude_violations + a.rate_violations,
+                )
+            });
+        self.series.push(worst, violations);
         if let Some(csv) = &mut self.csv {
             if step.is_multiple_of(self.decimation) || div.is_some() {
                 csv.write_step(reference, truths, commands, &self.metrics)?;
@@ -93,6 +122,22 @@ impl Recorder {
     /// Sets the `timing` object of `summary.json` (realtime runs).
     pub fn set_timing(&mut self, timing: serde_json::Value) {
         self.timing = Some(timing);
+    }
+
+    /// What a live run added to its timeline: runtime events (live crashes, hangs, links, losses,
+    /// agents taken down), the supervision's incidents, restarts per agent under the policy.
+    pub fn set_runtime(
+        &mut self,
+        events: Vec<formation_config::protocol::messages::RuntimeEvent>,
+        incidents: Vec<recovery::Mark>,
+        restarts: Vec<u32>,
+    ) {
+        for e in &events {
+            e.apply(&mut self.timeline);
+        }
+        self.runtime_events = events;
+        self.incidents = incidents;
+        self.restarts = restarts;
     }
 
     /// Flushes the CSV written so far (used when a run is interrupted).
@@ -118,6 +163,19 @@ impl Recorder {
             wall_time_s,
         );
         summary.timing = self.timing.take();
+        let marks = recovery::marks(&self.events, &self.runtime_events, &self.incidents, self.dt);
+        summary.events = self.series.measure(&marks, self.dt);
+        if !self.timeline.is_empty() {
+            summary.connectivity = Some(recovery::connectivity(
+                &self.topology,
+                &self.timeline,
+                steps,
+                self.dt,
+            ));
+        }
+        for (a, r) in summary.agents.iter_mut().zip(&self.restarts) {
+            a.restarts = *r;
+        }
         summary.write(&self.out_dir.join("summary.json"))?;
         Ok(summary)
     }

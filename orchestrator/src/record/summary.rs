@@ -58,6 +58,8 @@ pub struct AgentSummary {
     pub min_rate_margin_rad_s: Option<f64>,
     /// Share of steps with a torque channel at its limit.
     pub torque_saturation_fraction: f64,
+    /// Times its process was restarted under `runtime.restart = "on-failure"`.
+    pub restarts: u32,
 }
 
 /// The whole summary.
@@ -95,6 +97,12 @@ pub struct Summary {
     /// (steady-state wall time per step); absent for `formation sim`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub timing: Option<serde_json::Value>,
+    /// Each event of the timeline and each incident of the supervision, with how the formation
+    /// came through it (docs/failures.md).
+    pub events: Vec<super::recovery::EventSummary>,
+    /// Whether Assumption 1 held at every step (only when the timeline can break it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub connectivity: Option<super::recovery::Connectivity>,
 }
 
 fn finite(v: f64) -> Option<f64> {
@@ -164,9 +172,12 @@ impl Summary {
                     } else {
                         0.0
                     },
+                    restarts: 0,
                 })
                 .collect(),
             timing: None,
+            events: Vec::new(),
+            connectivity: None,
         }
     }
 
@@ -229,6 +240,35 @@ impl Summary {
             )
             }
             None => println!("separation: - (fewer than two quadrotors)"),
+        }
+        for e in &self.events {
+            let who = match (e.agent, e.agents) {
+                (_, Some([a, b])) => format!(" {a}-{b}"),
+                (Some(a), None) => format!(" agent {a}"),
+                (None, None) => String::new(),
+            };
+            let recovered = e
+                .recovered_after_s
+                .map_or("not recovered".to_string(), |r| {
+                    format!("recovered after {r:.3} s")
+                });
+            let restarted = e
+                .restarted_after_ms
+                .map_or(String::new(), |r| format!(", new process after {r:.0} ms"));
+            println!(
+                "event {}{who} at t = {:.3} s: {recovered} (under {:.2} m), peak error {:.3} m, {} violations{restarted}",
+                e.kind, e.at_s, e.recovery_threshold_m, e.peak_error_m, e.violations_during
+            );
+        }
+        if let Some(c) = &self.connectivity {
+            match (c.assumption1_held, c.first_violated_at_s, c.last_violated_at_s) {
+                (true, _, _) => println!("connectivity: Assumption 1 held at every step"),
+                (false, Some(a), Some(b)) => println!(
+                    "connectivity: Assumption 1 broken at {} steps, from t = {a:.3} s to {b:.3} s (graph of the agents and links that are up not connected, or no pinned agent up)",
+                    c.steps_violated
+                ),
+                _ => {}
+            }
         }
         if let Some(d) = &self.divergence {
             println!(

@@ -281,8 +281,15 @@ pub fn drive(
             return (Outcome::Completed, recorded);
         }
         // Injections are forwarded before the progress that lets the plant move on.
-        if let Err(e) = live.injections.poll(recorded) {
-            return (Outcome::Failed(e.to_string()), recorded);
+        match live.injections.poll(recorded) {
+            Ok(events) => {
+                for e in events {
+                    if let Err(e) = takeover.publish(e) {
+                        return (Outcome::Failed(e), recorded);
+                    }
+                }
+            }
+            Err(e) => return (Outcome::Failed(e.to_string()), recorded),
         }
         live.registration.update(recorded);
         if got > 0 {

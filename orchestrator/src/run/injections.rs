@@ -11,11 +11,13 @@ use crate::live::registry::unix_now;
 use crate::live::validate::{self, DelayProfile};
 use formation_config::node::ports::{publisher, send, subscriber, Input, Output, RunNode};
 use formation_config::protocol::messages::{
-    InjectRequest, INJECT_ASAP, INJECT_DELAY, INJECT_FAULT,
+    InjectRequest, RuntimeEvent, INJECT_ASAP, INJECT_CRASH, INJECT_DELAY, INJECT_FAULT,
+    INJECT_HANG, INJECT_LINK_DOWN, INJECT_LINK_UP,
 };
 use formation_config::protocol::pacing::PLANT_LEAD;
 use formation_config::protocol::services;
 use formation_config::protocol::wire::{DelayInjection, FaultInjection};
+use formation_config::scenario::events::{Event, EventKind};
 use formation_config::Scenario;
 use serde_json::json;
 use std::fs::File;
@@ -50,13 +52,17 @@ impl Injections {
         })
     }
 
-    /// Handles every pending request; call it before announcing `recorded` as progress.
-    pub fn poll(&mut self, recorded: u64) -> Result<(), String> {
+    /// Handles every pending request; call it before announcing `recorded` as progress. Returns
+    /// the runtime events to publish (crashes, hangs, links).
+    pub fn poll(&mut self, recorded: u64) -> Result<Vec<RuntimeEvent>, String> {
+        let mut out = Vec::new();
         while let Ok(Some(r)) = self.requests.receive() {
             let r = *r;
-            self.handle(&r, recorded)?;
+            if let Some(e) = self.handle(&r, recorded)? {
+                out.push(e);
+            }
         }
-        Ok(())
+        Ok(out)
     }
 
     fn check(&self, r: &InjectRequest) -> Result<(), String> {
@@ -64,18 +70,25 @@ impl Injections {
         match r.kind {
             INJECT_FAULT => validate::fault(&self.scenario, r.gamma, r.delta),
             INJECT_DELAY => validate::delay(&self.scenario, &profile(r)),
+            INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP => {
+                let e = event_of(r, self.scenario.simulation.dt_s, 0);
+                formation_config::scenario::validate::validate_event(&self.scenario, "inject", &e)
+                    .map_err(|e| e.to_string())
+            }
             k => Err(format!("unknown injection kind {k}")),
         }
     }
 
-    fn handle(&mut self, r: &InjectRequest, recorded: u64) -> Result<(), String> {
+    fn handle(&mut self, r: &InjectRequest, recorded: u64) -> Result<Option<RuntimeEvent>, String> {
         let wall = unix_now();
         if let Err(e) = self.check(r) {
             tracing::warn!(nonce = r.nonce, "injection rejected: {e}");
-            return self.log(json!({
-                "wall_time_unix_s": wall, "event": "rejected", "nonce": r.nonce,
-                "recorded_step": recorded, "error": e,
-            }));
+            return self
+                .log(json!({
+                    "wall_time_unix_s": wall, "event": "rejected", "nonce": r.nonce,
+                    "recorded_step": recorded, "error": e,
+                }))
+                .map(|_| None);
         }
         let earliest = recorded + PLANT_LEAD + SLACK;
         let step = if r.at_step != INJECT_ASAP && r.at_step >= earliest {
@@ -88,6 +101,23 @@ impl Injections {
         let requested = (r.at_step != INJECT_ASAP).then_some(r.at_step);
         let after_end = step >= self.scenario.n_steps();
         let agent = r.agent as usize + 1;
+        let event = event_of(r, dt, step);
+        let scenario_event = serde_json::to_value(&event).unwrap_or_default();
+        if let Some(rt) = RuntimeEvent::from_event(&event, dt) {
+            tracing::info!(
+                agent,
+                step,
+                t,
+                kind = event.kind.name(),
+                "runtime event accepted"
+            );
+            self.log(json!({
+                "wall_time_unix_s": wall, "event": event.kind.name(), "nonce": r.nonce, "agent": agent,
+                "step": step, "t": t, "requested_step": requested, "recorded_step": recorded,
+                "after_end": after_end, "scenario_event": scenario_event,
+            }))?;
+            return Ok(Some(rt));
+        }
         if r.kind == INJECT_FAULT {
             send(
                 &self.faults,
@@ -105,7 +135,9 @@ impl Injections {
                 "wall_time_unix_s": wall, "event": "fault", "nonce": r.nonce, "agent": agent,
                 "step": step, "t": t, "requested_step": requested, "recorded_step": recorded,
                 "after_end": after_end, "gamma": r.gamma, "delta": r.delta,
+                "scenario_event": scenario_event,
             }))
+            .map(|_| None)
         } else {
             let d = profile(r);
             send(
@@ -133,8 +165,9 @@ impl Injections {
                 "wall_time_unix_s": wall, "event": "delay", "nonce": r.nonce, "agent": agent,
                 "step": step, "t": t, "requested_step": requested, "recorded_step": recorded,
                 "after_end": after_end, "base_s": d.base_s, "amplitude_s": d.amplitude_s,
-                "angular_rate_rad_s": d.angular_rate_rad_s,
+                "angular_rate_rad_s": d.angular_rate_rad_s, "scenario_event": scenario_event,
             }))
+            .map(|_| None)
         }
     }
 
@@ -151,4 +184,37 @@ fn profile(r: &InjectRequest) -> DelayProfile {
         amplitude_s: r.amplitude_s,
         angular_rate_rad_s: r.angular_rate_rad_s,
     }
+}
+
+/// The timeline event of a request applied at `step` (agent ids 1-based, as in a scenario).
+pub fn event_of(r: &InjectRequest, dt: f64, step: u64) -> Event {
+    let kind = match r.kind {
+        INJECT_FAULT => EventKind::Fault,
+        INJECT_DELAY => EventKind::Delay,
+        INJECT_CRASH => EventKind::Crash,
+        INJECT_HANG => EventKind::Hang,
+        INJECT_LINK_DOWN => EventKind::LinkDown,
+        _ => EventKind::LinkUp,
+    };
+    let mut e = Event::new(step as f64 * dt, kind);
+    let a = r.agent as usize + 1;
+    match kind {
+        EventKind::Fault => {
+            e.agent = Some(a);
+            e.gamma = Some(r.gamma);
+            e.delta = Some(r.delta);
+        }
+        EventKind::Delay => {
+            e.agent = Some(a);
+            e.base_s = Some(r.base_s);
+            e.amplitude_s = Some(r.amplitude_s);
+            e.angular_rate_rad_s = Some(r.angular_rate_rad_s);
+        }
+        EventKind::Crash | EventKind::Hang => {
+            e.agent = Some(a);
+            e.down_s = Some(r.down_s);
+        }
+        _ => e.agents = Some([a, r.other as usize + 1]),
+    }
+    e
 }

@@ -8,7 +8,7 @@
 
 mod cleanup;
 mod driver;
-mod injections;
+pub(crate) mod injections;
 pub(crate) mod placement;
 mod progress;
 mod services;
@@ -423,6 +423,21 @@ fn run(
     } else if let Some(t) = step_timing.summary() {
         recorder.set_timing(t);
     }
+    // The live timeline: runtime events (less the supervision's own) and the incidents.
+    let runtime_events = takeover
+        .published()
+        .iter()
+        .filter(|e| {
+            e.to_event(scenario.simulation.dt_s).is_some()
+                || e.kind == formation_config::protocol::messages::EVENT_DOWN
+        })
+        .copied()
+        .collect();
+    recorder.set_runtime(
+        runtime_events,
+        takeover.marks(),
+        takeover.restarts().to_vec(),
+    );
     let summary = recorder
         .finish(recorded, wall.as_secs_f64())
         .map_err(|e| format!("cannot write {}/summary.json: {e}", out.display()))?;

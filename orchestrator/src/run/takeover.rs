@@ -108,6 +108,28 @@ impl Takeover {
         self.supervisor.restarts()
     }
 
+    /// Every runtime event published or received (live injections, take-downs, announcements).
+    pub fn published(&self) -> &[RuntimeEvent] {
+        &self.published
+    }
+
+    /// The incidents as marks for the recorder.
+    pub fn marks(&self) -> Vec<crate::record::recovery::Mark> {
+        self.incidents
+            .iter()
+            .filter_map(|x| {
+                Some(crate::record::recovery::Mark {
+                    kind: x.kind.to_string(),
+                    agent: Some(x.agent),
+                    agents: None,
+                    step: x.down_from?,
+                    detected_after_ms: x.detected_after_ms,
+                    restarted_after_ms: x.restarted_after_ms,
+                })
+            })
+            .collect()
+    }
+
     /// Keeps step k's record.
     pub fn on_record(&mut self, k: u64, entries: &[StepEntry]) {
         for (i, e) in entries.iter().enumerate() {

@@ -261,6 +261,8 @@ impl Step<'_> {
             if let Reaction::TakeDown(i) = self.roster.on_event(&e) {
                 let from = if self.arrived[i] { k + 1 } else { k };
                 send(&ports.events_out, self.roster.take_down(i, from))?;
+                // Neighbours waiting for its shares learn it now, not at their next timeout.
+                ports.agents_wake.iter().for_each(poke);
                 tracing::warn!(
                     agent = i + 1,
                     step = from,

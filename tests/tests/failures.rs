@@ -1,0 +1,422 @@
+//! End to end: the resilient runtime (docs/failures.md). Timeline crashes, hangs, link faults and
+//! message loss are steps, so a lockstep `formation run` that really kills, stops and respawns
+//! agent processes writes the same trajectory as `formation sim`; agents that die or hang outside
+//! the timeline are detected, named and replaced under `--restart on-failure`; a dead plant or
+//! leader ends the run, named; nothing is left in /dev/shm.
+
+use formation_tests::run::RunningRun;
+use formation_tests::{bin, temp_dir};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+const RUN_TIMEOUT: Duration = Duration::from_secs(240);
+
+/// The paper scenario of `duration_s` with `events` (TOML `[[events]]` tables) appended.
+fn scenario_with(dir: &Path, name: &str, duration_s: f64, events: &str) -> PathBuf {
+    let mut text = formation_config::scenario::PAPER_TOML
+        .replace("duration_s = 60.0", &format!("duration_s = {duration_s}"));
+    assert!(text.contains(&format!("duration_s = {duration_s}")));
+    text.push('\n');
+    text.push_str(events);
+    let path = dir.join(format!("{name}.toml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn formation(args: &[&str]) -> std::process::Output {
+    Command::new(bin("formation"))
+        .args(args)
+        .env_remove("CARGO")
+        .output()
+        .expect("formation starts")
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+fn same_file(a: &Path, b: &Path) -> bool {
+    std::fs::read(a).unwrap() == std::fs::read(b).unwrap()
+}
+
+fn residue_of(run: &RunningRun) -> Vec<PathBuf> {
+    run.prefix()
+        .map(|p| formation_config::node::ipc::residue(&p).unwrap())
+        .unwrap_or_default()
+}
+
+/// Runs `formation run` to its end; returns (exit code, stderr).
+fn run_to_end(args: &[&str], out: &Path) -> (i32, String, RunningRun) {
+    let mut run = RunningRun::start(args, out);
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    (st.code().unwrap_or(-1), run.stderr(), run)
+}
+
+fn wait_stepping(run: &RunningRun) {
+    let csv = run.out.join("trajectory.csv");
+    let start = Instant::now();
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 64 * 1024 {
+        assert!(
+            start.elapsed() < RUN_TIMEOUT,
+            "no progress: {}",
+            run.stderr()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_beats_a_cold_restart() {
+    let dir = temp_dir("crash-warm");
+    let s = scenario_with(
+        &dir,
+        "crash",
+        24.0,
+        "[[events]]\nat_s = 20.0\nkind = \"crash\"\nagent = 3\ndown_s = 0.5\n",
+    );
+    let s = s.to_str().unwrap();
+    let sim = dir.join("sim");
+    let out = formation(&["sim", s, "--out", sim.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (code, stderr, run) = run_to_end(&[s], &dir.join("run"));
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("agent 3 taken over at step 20500") && stderr.contains("warm"),
+        "the crash really replaced the process: {stderr}"
+    );
+    assert!(
+        same_file(&sim.join("trajectory.csv"), &dir.join("run/trajectory.csv")),
+        "lockstep run with a crash differs from sim"
+    );
+    let log = std::fs::read_to_string(dir.join("run/logs/agent-3.log")).unwrap();
+    assert!(
+        log.contains("replayed=500") || log.contains("mismatches=0"),
+        "{log}"
+    );
+    assert!(
+        log.contains("mismatches=0"),
+        "the replay reproduced every command: {log}"
+    );
+    let warm = &summary(&dir.join("run"))["events"][0];
+    assert_eq!(warm["kind"], "crash");
+    let warm_recovery = warm["recovered_after_s"].as_f64().expect("recovered");
+    assert!(warm_recovery <= 5.0, "{warm}");
+    assert!(warm["restarted_after_ms"].as_f64().is_some(), "{warm}");
+    let cold_dir = dir.join("cold");
+    let out = formation(&[
+        "sim",
+        s,
+        "--restart-state",
+        "cold",
+        "--out",
+        cold_dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let cold = &summary(&cold_dir)["events"][0];
+    let peak = |e: &serde_json::Value| e["peak_error_m"].as_f64().unwrap();
+    assert!(
+        warm_recovery <= cold["recovered_after_s"].as_f64().unwrap_or(f64::INFINITY)
+            && peak(warm) < peak(cold),
+        "warm {warm} vs cold {cold}"
+    );
+    assert!(residue_of(&run).is_empty());
+}
+
+#[test]
+fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends_with_exit_0() {
+    let dir = temp_dir("kill-agent");
+    let out = dir.join("run");
+    let mut run = RunningRun::start(
+        &[
+            "--set",
+            "simulation.duration_s=30",
+            "--restart",
+            "on-failure",
+        ],
+        &out,
+    );
+    wait_stepping(&run);
+    let pid = run.agent_pid(1).expect("agent 2 runs");
+    // SAFETY: a pid of this run's agent 2, just read.
+    unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    let stderr = run.stderr();
+    assert_eq!(st.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "agent 2 (--agent 1) (pid {pid}) was killed (SIGKILL); restarting it"
+        )),
+        "{stderr}"
+    );
+    let s = summary(&out);
+    assert_eq!(s["agents"][1]["restarts"], 1);
+    let died = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["kind"] == "died")
+        .expect("the death is an event");
+    assert_eq!(died["agent"], 2);
+    assert!(died["recovered_after_s"].as_f64().is_some(), "{died}");
+    assert!(died["restarted_after_ms"].as_f64().is_some(), "{died}");
+    assert_eq!(s["diverged"], false);
+    assert!(residue_of(&run).is_empty());
+}
+
+#[test]
+fn a_killed_plant_or_leader_ends_the_run_with_a_non_zero_exit_naming_it_even_under_on_failure() {
+    for (role, name) in [("plant", "fm-plant"), ("leader", "fm-leader")] {
+        let dir = temp_dir(&format!("kill-{role}"));
+        let mut run = RunningRun::start(
+            &[
+                "--set",
+                "simulation.duration_s=600",
+                "--restart",
+                "on-failure",
+            ],
+            &dir.join("run"),
+        );
+        wait_stepping(&run);
+        let pid = run
+            .role_processes()
+            .into_iter()
+            .find(|p| {
+                std::fs::read_to_string(format!("/proc/{p}/comm")).is_ok_and(|c| c.trim() == name)
+            })
+            .expect("the role process runs");
+        // SAFETY: a pid of this run's role process, just read.
+        unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+        let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+        let stderr = run.stderr();
+        assert_eq!(st.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains(&format!("{role} (pid {pid}) was killed (SIGKILL)"))
+                && stderr.contains("not restarted"),
+            "{stderr}"
+        );
+        std::thread::sleep(Duration::from_millis(300));
+        assert!(run.role_processes().is_empty(), "no orphan");
+        assert!(residue_of(&run).is_empty());
+    }
+}
+
+#[test]
+fn a_stopped_agent_is_named_within_1_5_s_replaced_and_the_run_completes() {
+    let dir = temp_dir("stop-agent");
+    let out = dir.join("run");
+    let mut run = RunningRun::start(
+        &[
+            "--set",
+            "simulation.duration_s=30",
+            "--restart",
+            "on-failure",
+            "--stall-timeout-ms",
+            "1000",
+        ],
+        &out,
+    );
+    wait_stepping(&run);
+    let pid = run.agent_pid(2).expect("agent 3 runs");
+    // SAFETY: a pid of this run's agent 3, just read.
+    unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
+    let stopped = Instant::now();
+    let line = run
+        .wait_for_line("made no progress", Duration::from_secs(10))
+        .expect("the hang is named");
+    let named_after = stopped.elapsed();
+    assert!(
+        line.contains(&format!("agent 3 (--agent 2) (pid {pid})")),
+        "{line}"
+    );
+    assert!(
+        named_after < Duration::from_millis(1500),
+        "named after {named_after:?}"
+    );
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    assert_eq!(st.code(), Some(0), "{}", run.stderr());
+    let s = summary(&out);
+    assert_eq!(s["agents"][2]["restarts"], 1);
+    assert!(s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|e| e["kind"] == "hung"));
+    assert!(residue_of(&run).is_empty());
+}
+
+#[test]
+fn link_faults_and_message_loss_are_flagged_survived_and_identical_in_run_and_sim() {
+    let dir = temp_dir("links");
+    let link = scenario_with(
+        &dir,
+        "link",
+        14.0,
+        "[[events]]\nat_s = 5.0\nkind = \"link_down\"\nagents = [2, 3]\n\n[[events]]\nat_s = 10.0\nkind = \"link_up\"\nagents = [2, 3]\n",
+    );
+    let loss = scenario_with(
+        &dir,
+        "loss",
+        14.0,
+        "[[events]]\nat_s = 0.0\nkind = \"message_loss\"\nprobability = 0.2\nseed = 7\n",
+    );
+    let clean = scenario_with(&dir, "clean", 14.0, "");
+    for (name, s) in [("link", &link), ("loss", &loss), ("clean", &clean)] {
+        let out = dir.join(format!("sim-{name}"));
+        let o = formation(&["sim", s.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        assert!(
+            o.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let l = summary(&dir.join("sim-link"));
+    assert_eq!(
+        l["connectivity"]["assumption1_held"], false,
+        "the path 1-2-3-4-5 is cut"
+    );
+    assert_eq!(l["connectivity"]["first_violated_at_s"], 5.0);
+    assert_eq!(l["diverged"], false);
+    let rms = |v: &serde_json::Value| {
+        v["agents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|a| a["rms_formation_error_m"]["whole"].as_f64().unwrap())
+            .fold(0.0, f64::max)
+    };
+    let lossy = summary(&dir.join("sim-loss"));
+    let clean = summary(&dir.join("sim-clean"));
+    assert_eq!(lossy["diverged"], false);
+    eprintln!(
+        "worst whole-run RMS: loss-free {:.4} m, 20 % loss {:.4} m, link 2-3 down 5 s {:.4} m",
+        rms(&clean),
+        rms(&lossy),
+        rms(&l)
+    );
+    assert!(rms(&lossy) < 2.0 * rms(&clean), "loss costs little");
+    for (name, s) in [("link", &link), ("loss", &loss)] {
+        let (code, stderr, run) =
+            run_to_end(&[s.to_str().unwrap()], &dir.join(format!("run-{name}")));
+        assert_eq!(code, 0, "{stderr}");
+        assert!(
+            same_file(
+                &dir.join(format!("sim-{name}/trajectory.csv")),
+                &dir.join(format!("run-{name}/trajectory.csv"))
+            ),
+            "{name}: lockstep run differs from sim"
+        );
+        assert!(residue_of(&run).is_empty());
+    }
+}
+
+#[test]
+fn a_live_run_with_injected_fault_and_crash_replayed_from_its_events_jsonl_is_byte_identical() {
+    let dir = temp_dir("replay");
+    let out = dir.join("live");
+    let mut run = RunningRun::start(&["--set", "simulation.duration_s=20"], &out);
+    wait_stepping(&run);
+    let id = run
+        .wait_for_line("formation run: id ", Duration::from_secs(5))
+        .and_then(|l| {
+            l.split("id ")
+                .nth(1)
+                .map(|r| r.split(',').next().unwrap_or("").to_string())
+        })
+        .expect("the run says its id");
+    let inject = |args: &[&str]| {
+        let o = Command::new(bin("formation"))
+            .arg("inject")
+            .args(args)
+            .args(["--run", &id])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    inject(&[
+        "fault",
+        "--agent",
+        "2",
+        "--gamma",
+        "0.6,0.6,0.6",
+        "--delta",
+        "0,0,0.1",
+    ]);
+    inject(&["crash", "--agent", "4", "--down", "0.4"]);
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    assert_eq!(st.code(), Some(0), "{}", run.stderr());
+    assert!(
+        run.stderr().contains("agent 4 taken over"),
+        "{}",
+        run.stderr()
+    );
+    let events = out.join("events.jsonl");
+    let replay = dir.join("replay");
+    let o = formation(&[
+        "sim",
+        "--set",
+        "simulation.duration_s=20",
+        "--events",
+        events.to_str().unwrap(),
+        "--out",
+        replay.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        same_file(&out.join("trajectory.csv"), &replay.join("trajectory.csv")),
+        "the replay of the live run's events differs"
+    );
+    assert!(residue_of(&run).is_empty());
+}
+
+/// VmRSS of a process, kB.
+fn rss_kb(pid: u32) -> u64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .unwrap_or_default()
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        .unwrap_or(0)
+}
+
+#[test]
+fn ten_restarts_of_one_agent_keep_the_orchestrators_memory_flat_and_leave_no_residue() {
+    let dir = temp_dir("ten-restarts");
+    let events: String = (0..10)
+        .map(|k| {
+            format!(
+                "[[events]]\nat_s = {}.0\nkind = \"crash\"\nagent = 2\ndown_s = 0.2\n\n",
+                2 + 2 * k
+            )
+        })
+        .collect();
+    let s = scenario_with(&dir, "ten", 23.0, &events);
+    let mut run = RunningRun::start(&[s.to_str().unwrap()], &dir.join("run"));
+    let mut after_second = None;
+    let mut last = 0;
+    let start = Instant::now();
+    while run.wait(Duration::from_millis(20)).is_none() {
+        assert!(start.elapsed() < RUN_TIMEOUT);
+        let taken = run.stderr().matches("agent 2 taken over").count();
+        let rss = rss_kb(run.pid());
+        if taken >= 2 && after_second.is_none() && rss > 0 {
+            after_second = Some(rss);
+        }
+        if taken >= 10 && rss > 0 {
+            last = rss;
+        }
+    }
+    let stderr = run.stderr();
+    assert_eq!(stderr.matches("agent 2 taken over").count(), 10, "{stderr}");
+    let first = after_second.expect("sampled after the second restart");
+    assert!(last > 0, "sampled after the tenth restart");
+    assert!(
+        last <= first + 4096,
+        "orchestrator VmRSS {first} kB after 2 restarts, {last} kB after 10"
+    );
+    assert!(residue_of(&run).is_empty());
+}
