@@ -61,3 +61,48 @@ pub fn cpus_allowed(pid: u32) -> Vec<usize> {
 }
 
 pub mod run;
+
+/// The workspace root (the parent of this crate's directory).
+pub fn workspace_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ lives in the workspace")
+        .to_path_buf()
+}
+
+/// The Python interpreter with the iceoryx2 0.10 binding (`$FORMATION_PYTHON`, set by `.ci/run` to
+/// its venv `target/pyenv`), or why there is none. Callers skip with the reason, unless
+/// `FORMATION_REQUIRE_PYTHON=1` (set by `.ci/run`): then they must fail ([`python_or_skip`]).
+pub fn python_with_iceoryx2() -> Result<PathBuf, String> {
+    let py = std::env::var_os("FORMATION_PYTHON")
+        .filter(|p| !p.is_empty())
+        .map(PathBuf::from)
+        .ok_or("FORMATION_PYTHON is not set (a Python with `pip install iceoryx2==0.10.0`)")?;
+    let o = std::process::Command::new(&py)
+        .args(["-c", "import iceoryx2"])
+        .output()
+        .map_err(|e| format!("cannot start {}: {e}", py.display()))?;
+    if !o.status.success() {
+        return Err(format!(
+            "{} cannot import iceoryx2: {}",
+            py.display(),
+            String::from_utf8_lossy(&o.stderr).trim()
+        ));
+    }
+    Ok(py)
+}
+
+/// `Some(interpreter)` from [`python_with_iceoryx2`]; `None` after printing why the calling test
+/// is skipped; a panic instead when `FORMATION_REQUIRE_PYTHON=1`.
+pub fn python_or_skip(test: &str) -> Option<PathBuf> {
+    match python_with_iceoryx2() {
+        Ok(py) => Some(py),
+        Err(why) if std::env::var("FORMATION_REQUIRE_PYTHON").as_deref() == Ok("1") => {
+            panic!("{test}: FORMATION_REQUIRE_PYTHON=1 but {why}")
+        }
+        Err(why) => {
+            eprintln!("{test}: skipped: {why}");
+            None
+        }
+    }
+}

@@ -123,7 +123,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn realtime_sampling_takes_the_first_answered_step_of_each_period_even_when_steps_are_skipped() {
+    fn realtime_sampling_takes_the_first_answered_step_of_each_period_even_when_steps_are_skipped()
+    {
         let mut s = Sampler::new(&Scenario::paper(), 0);
         let every = s.every;
         assert!(every > 1, "the default period spans several steps");
