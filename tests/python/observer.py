@@ -2,7 +2,9 @@
 (clients/python) to agent 2's telemetry, to the states of agents 1 and 2 (extra subscribers next
 to the agents' own), to agent 1's wake-up event (a listener next to the agent's own) and to the
 run control, and prints one JSON line per sample until the run publishes its stop:
-{"telemetry": {...}}, {"state": {...}}, then {"end": {"stop_step": k, "wakeups": w}}.
+{"telemetry": {...}}, {"state": {...}} (each with "raw": the sample's bytes in hex, which the test
+reads back into the Rust struct: exact floats, whatever a JSON parser rounds), then
+{"end": {"stop_step": k, "wakeups": w}}.
 
 usage: python observer.py RUN_ID
 """
@@ -25,10 +27,10 @@ deadline = time.monotonic() + 600
 while time.monotonic() < deadline:
     wakeups += wake.wait(0.001)
     while (s := run.receive(telemetry)) is not None:
-        print(json.dumps({"telemetry": fc.to_dict(s)}), flush=True)
+        print(json.dumps({"telemetry": fc.to_dict(s), "raw": bytes(s).hex()}), flush=True)
     for sub in states:
         while (s := run.receive(sub)) is not None:
-            print(json.dumps({"state": fc.to_dict(s)}), flush=True)
+            print(json.dumps({"state": fc.to_dict(s), "raw": bytes(s).hex()}), flush=True)
     c = run.receive(control)
     if c is not None and c.kind == 1:
         print(json.dumps({"end": {"stop_step": c.step, "wakeups": wakeups}}), flush=True)

@@ -91,6 +91,35 @@ fn applies_at(o: &Output) -> u64 {
         .expect("a step number")
 }
 
+/// The first telemetry sample of `agent` (1-based) at or after simulation time `t_min`.
+fn sample_from(runs: &Path, run: &RunningRun, agent: usize, t_min: f64) -> Value {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = inspect(runs, agent).filter(|s| s["t"].as_f64().unwrap_or(0.0) >= t_min) {
+            return s;
+        }
+        assert!(start.elapsed() < TIMEOUT, "no telemetry: {}", run.stderr());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Injects Gamma = 0.5 on every axis of agent 2 with the additive fault `delta`; the apply step.
+fn inject_half_gamma_into_agent_2(runs: &Path, delta: &str) -> u64 {
+    applies_at(&formation(
+        runs,
+        &[
+            "inject",
+            "fault",
+            "--agent",
+            "2",
+            "--gamma",
+            "0.5,0.5,0.5",
+            "--delta",
+            delta,
+        ],
+    ))
+}
+
 #[test]
 fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     let dir = temp_dir("inspect-live");
@@ -116,14 +145,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
 
     // Wait until agent 2's estimator has settled a little (t >= 4 s): the scenario's own additive
     // fault has then built up delta-hat, which the injection below removes.
-    let start = Instant::now();
-    let before = loop {
-        if let Some(s) = inspect(&runs, 2).filter(|s| s["t"].as_f64().unwrap_or(0.0) >= 4.0) {
-            break s;
-        }
-        assert!(start.elapsed() < TIMEOUT, "no telemetry: {}", run.stderr());
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let before = sample_from(&runs, &run, 2, 4.0);
     assert_eq!(before["agent"], 2);
     for key in [
         "step",
@@ -138,19 +160,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     let gamma_before = vec3(&before, "gamma_hat");
     let delta_before = vec3(&before, "delta_hat");
 
-    let fault_step = applies_at(&formation(
-        &runs,
-        &[
-            "inject",
-            "fault",
-            "--agent",
-            "2",
-            "--gamma",
-            "0.5,0.5,0.5",
-            "--delta",
-            "0.15,0.1,0.5",
-        ],
-    ));
+    let fault_step = inject_half_gamma_into_agent_2(&runs, "0.15,0.1,0.5");
     let delay_step = applies_at(&formation(
         &runs,
         &["inject", "delay", "--agent", "3", "--tau", "0.03"],
@@ -502,13 +512,7 @@ fn inspect_answers_on_a_realtime_run_and_shows_an_injected_fault_in_gamma_hat() 
     // The first sample: the service keeps the latest one for a late subscriber, so `inspect`
     // answers at once (the time it took is printed; no timing assertion on a shared machine).
     let start = Instant::now();
-    let first = loop {
-        if let Some(s) = inspect(&runs, 2) {
-            break s;
-        }
-        assert!(start.elapsed() < TIMEOUT, "no telemetry: {}", run.stderr());
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let first = sample_from(&runs, &run, 2, 0.0);
     eprintln!(
         "first realtime sample of agent 2 after {:.3} s: step {}",
         start.elapsed().as_secs_f64(),
@@ -524,27 +528,9 @@ fn inspect_answers_on_a_realtime_run_and_shows_an_injected_fault_in_gamma_hat() 
     assert!(again["step"].as_u64() >= first["step"].as_u64());
 
     // Let the estimator settle (t >= 4 s), then inject Gamma = 0.5 on every axis of agent 2.
-    let before = loop {
-        if let Some(s) = inspect(&runs, 2).filter(|s| s["t"].as_f64().unwrap_or(0.0) >= 4.0) {
-            break s;
-        }
-        assert!(start.elapsed() < TIMEOUT, "no telemetry: {}", run.stderr());
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let before = sample_from(&runs, &run, 2, 4.0);
     let gamma_before = mean3(vec3(&before, "gamma_hat"));
-    let fault_step = applies_at(&formation(
-        &runs,
-        &[
-            "inject",
-            "fault",
-            "--agent",
-            "2",
-            "--gamma",
-            "0.5,0.5,0.5",
-            "--delta",
-            "0,0,0",
-        ],
-    ));
+    let fault_step = inject_half_gamma_into_agent_2(&runs, "0,0,0");
     assert!(fault_step > before["step"].as_u64().unwrap());
     // Gamma-hat moves towards 0.5 while the run flies on: a later sample is well below the value
     // before the injection.

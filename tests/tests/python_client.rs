@@ -12,6 +12,7 @@
 //! the test is skipped with the reason, unless `FORMATION_REQUIRE_PYTHON=1` (CI).
 
 use formation::record::table::Trajectory;
+use formation_config::protocol::wire::{AgentTelemetry, VehicleState};
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, formation_in, python_or_skip, temp_dir, workspace_root};
 use serde_json::Value;
@@ -46,6 +47,23 @@ fn run_id(runs: &Path, run: &RunningRun) -> String {
         assert!(start.elapsed() < TIMEOUT, "never listed: {}", run.stderr());
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// The wire struct `T` whose bytes the observer printed in hex (`"raw"`).
+fn decode<T: Copy>(v: &Value) -> T {
+    let hex = v["raw"].as_str().expect("raw bytes");
+    let bytes: Vec<u8> = (0..hex.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).expect("hex"))
+        .collect();
+    assert_eq!(
+        bytes.len(),
+        size_of::<T>(),
+        "the Python struct has the Rust size"
+    );
+    // SAFETY: the length is checked; T is a #[repr(C)] wire struct of u32, u64 and f64 fields (and
+    // nested such structs), for which every bit pattern is a valid value.
+    unsafe { std::ptr::read_unaligned(bytes.as_ptr().cast::<T>()) }
 }
 
 fn f(v: &Value) -> f64 {
@@ -139,41 +157,42 @@ fn a_python_observer_reads_exactly_the_recorded_values_and_the_run_stays_byte_id
     };
     let (mut states, mut samples) = (0, 0);
     for v in &observed {
-        if let Some(s) = v.get("state") {
-            let agent = s["agent"].as_u64().unwrap() as usize + 1;
-            let Some(&r) = rows.get(&(agent, s["step"].as_u64().unwrap())) else {
+        if v.get("state").is_some() {
+            let s: VehicleState = decode(v);
+            let agent = s.agent as usize + 1;
+            let Some(&r) = rows.get(&(agent, s.step)) else {
                 continue; // a step between two rows
             };
-            for (key, cols) in [
-                ("position", ["px", "py", "pz"]),
-                ("velocity", ["vx", "vy", "vz"]),
-                ("attitude", ["phi", "theta", "psi"]),
-                ("rate", ["p", "q", "r"]),
+            for (values, cols) in [
+                (s.position, ["px", "py", "pz"]),
+                (s.velocity, ["vx", "vy", "vz"]),
+                (s.attitude, ["phi", "theta", "psi"]),
+                (s.rate, ["p", "q", "r"]),
             ] {
                 for (k, col) in cols.iter().enumerate() {
-                    assert_eq!(f(&s[key][k]), tr.value(r, col), "{key} of {s}");
+                    assert_eq!(
+                        values[k],
+                        tr.value(r, col),
+                        "{col} of agent {agent} at {}",
+                        s.step
+                    );
                 }
             }
             states += 1;
         }
-        if let Some(s) = v.get("telemetry") {
-            let step = s["step"].as_u64().unwrap();
-            let r = row(2, step);
-            let c = &s["controller"];
+        if v.get("telemetry").is_some() {
+            let s: AgentTelemetry = decode(v);
+            assert_eq!(s.agent, 1, "agent 2's telemetry");
+            let r = row(2, s.step);
+            let c = &s.controller;
             for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-                assert_eq!(
-                    f(&c["gamma_hat"][k]),
-                    tr.value(r, &format!("gamma_hat_{axis}"))
-                );
-                assert_eq!(
-                    f(&c["delta_hat"][k]),
-                    tr.value(r, &format!("delta_hat_{axis}"))
-                );
-                assert_eq!(f(&c["f_hat"][k]), tr.value(r, &format!("f_hat_{axis}")));
+                assert_eq!(c.gamma_hat[k], tr.value(r, &format!("gamma_hat_{axis}")));
+                assert_eq!(c.delta_hat[k], tr.value(r, &format!("delta_hat_{axis}")));
+                assert_eq!(c.f_hat[k], tr.value(r, &format!("f_hat_{axis}")));
             }
-            assert_eq!(f(&c["tau_s"]), tr.value(r, "tau"));
-            assert_eq!(f(&c["d_hat"]), tr.value(r, "d_hat"));
-            assert_eq!(f(&s["attitude"][0]), tr.value(r, "phi"));
+            assert_eq!(c.tau_s, tr.value(r, "tau"));
+            assert_eq!(c.d_hat, tr.value(r, "d_hat"));
+            assert_eq!(s.attitude[0], tr.value(r, "phi"));
             samples += 1;
         }
     }
@@ -214,6 +233,7 @@ fn a_python_observer_reads_exactly_the_recorded_values_and_the_run_stays_byte_id
         }
     }
     eprintln!("steps read by both inspect and the observer: {common}");
+    assert!(common > 0, "no step read by both inspect and the observer");
     assert!(
         !sdk_inspected.is_empty(),
         "python -m formation_client inspect answered"

@@ -111,36 +111,6 @@ class Wakeups:
         self.listener = listener
 
     def close(self):
-        """Detaches from the run. When the run is over and no other node of it is alive, also
-        removes the shared-memory file iceoryx2 leaves under the run's prefix (the run's own
-        clean-up leaves the files of a node still attached to that node)."""
-        node = getattr(self, "node", None)
-        if node is None:
-            return
-        config = self.config
-        for port in self._ports:
-            port.close()
-        self._ports = []
-        self.node = None
-        del node
-        import gc
-
-        gc.collect()
-        over = self.record is None or not _alive(self.record["processes"][0]["pid"])
-        if over and self.prefix and not self.iox2.Node.list(self.iox2.ServiceType.Ipc, config):
-            for f in Path("/dev/shm").glob(f"{self.prefix}*"):
-                try:
-                    f.unlink()
-                except OSError:
-                    pass
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-
-    def close(self):
         """Releases the listener and the service."""
         self.listener = self.service = None
 
