@@ -106,3 +106,32 @@ pub fn python_or_skip(test: &str) -> Option<PathBuf> {
         }
     }
 }
+
+/// Asserts that the run whose outputs are in `run_out` wrote byte for byte the `trajectory.csv`
+/// of `formation sim` with the same `args` (written to `sim_out`).
+pub fn assert_trajectory_is_sims(
+    run_out: &std::path::Path,
+    args: &[&str],
+    sim_out: &std::path::Path,
+) {
+    let o = std::process::Command::new(bin("formation"))
+        .arg("sim")
+        .arg("--quiet")
+        .args(args)
+        .arg("--out")
+        .arg(sim_out)
+        .output()
+        .expect("formation sim starts");
+    assert!(
+        o.status.success(),
+        "formation sim failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let a = std::fs::read(run_out.join("trajectory.csv")).expect("the run's trajectory.csv");
+    let b = std::fs::read(sim_out.join("trajectory.csv")).expect("sim's trajectory.csv");
+    assert!(
+        a == b,
+        "trajectory.csv of the run in {} differs from formation sim's",
+        run_out.display()
+    );
+}

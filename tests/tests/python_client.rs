@@ -14,7 +14,7 @@
 use formation::record::table::Trajectory;
 use formation_config::protocol::wire::{AgentTelemetry, VehicleState};
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, formation_in, python_or_skip, temp_dir, workspace_root};
+use formation_tests::{formation_in, python_or_skip, temp_dir, workspace_root};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -240,19 +240,7 @@ fn a_python_observer_reads_exactly_the_recorded_values_and_the_run_stays_byte_id
     );
 
     // Observers never disturb a lockstep run: byte for byte what `formation sim` writes.
-    let sim = dir.join("sim");
-    let o = Command::new(bin("formation"))
-        .args(["sim", "--quiet", "--set", DURATION, "--out"])
-        .arg(&sim)
-        .output()
-        .expect("formation sim starts");
-    assert!(o.status.success());
-    let a = std::fs::read(run.out.join("trajectory.csv")).unwrap();
-    let b = std::fs::read(sim.join("trajectory.csv")).unwrap();
-    assert!(
-        a == b,
-        "trajectory.csv of the observed run differs from formation sim"
-    );
+    formation_tests::assert_trajectory_is_sims(&run.out, &["--set", DURATION], &dir.join("sim"));
     drop(run);
     let _ = std::fs::remove_dir_all(&dir);
 }
