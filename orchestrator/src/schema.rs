@@ -1,8 +1,11 @@
 //! `formation schema [--json | --markdown] [--n N]`: every service of a run, read from the typed
 //! service table (`formation_config::protocol::services`) — name pattern, scope, message type
 //! (Rust and iceoryx2 names, size, alignment), who sends and receives, history, and the limits the
-//! orchestrator creates it with for N agents. `docs/services.md` is its `--markdown` output.
+//! orchestrator creates it with for N agents — and the per-field layout of every wire type (name,
+//! offset, size, type, unit; `formation_config::protocol::layout`). `docs/services.md` is its
+//! `--markdown` output.
 
+use formation_config::protocol::layout::{every_type, TypeLayout};
 use formation_config::protocol::services::{
     self, wire_type_name, Event, Limits, Message, Named, Party, Scope, Sizing, Slice, Topic,
     Visitor,
@@ -79,14 +82,74 @@ pub struct Service {
     pub doc: &'static str,
 }
 
+/// One field of a wire type.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct FieldRow {
+    /// Field name.
+    pub name: &'static str,
+    /// Byte offset from the start of the type.
+    pub offset: usize,
+    /// Size in bytes.
+    pub size: usize,
+    /// Rust type (`u32`, `u64`, `f64`, `[f64; 3]`, `[[f64; 3]; 128]` or another wire type).
+    #[serde(rename = "type")]
+    pub ty: &'static str,
+    /// Unit, `-` for none.
+    pub unit: &'static str,
+}
+
+/// The layout of one wire type.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct WireType {
+    /// Rust name.
+    pub name: &'static str,
+    /// iceoryx2 type name, for the types a service carries.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub iceoryx2: Option<&'static str>,
+    /// Size in bytes.
+    pub size: usize,
+    /// Alignment in bytes.
+    pub align: usize,
+    /// Fields in offset order.
+    pub fields: Vec<FieldRow>,
+}
+
 /// The services of a run of `n` agents, in the order the orchestrator creates them (run-wide ones
-/// first, then each per-agent service once, by its pattern).
+/// first, then each per-agent service once, by its pattern), and the wire types they carry.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Schema {
     /// Number of agents the limits are sized for.
     pub n: usize,
+    /// Outside observers the limits make room for (`formation run --observers`, default).
+    pub observers: usize,
     /// The services.
     pub services: Vec<Service>,
+    /// Every wire type, each after the types nested in it.
+    pub types: Vec<WireType>,
+}
+
+fn wire_type(t: &TypeLayout, services: &[Service]) -> WireType {
+    WireType {
+        name: t.name,
+        iceoryx2: services
+            .iter()
+            .filter_map(|s| s.message.as_ref())
+            .find(|m| m.rust.trim_matches(['[', ']']) == t.name)
+            .map(|m| m.iceoryx2),
+        size: t.size,
+        align: t.align,
+        fields: t
+            .fields
+            .iter()
+            .map(|f| FieldRow {
+                name: f.name,
+                offset: f.offset,
+                size: f.size,
+                ty: f.ty,
+                unit: f.unit,
+            })
+            .collect(),
+    }
 }
 
 fn scope_name(s: Scope) -> &'static str {
@@ -181,11 +244,39 @@ impl Visitor for Collect {
     }
 }
 
-/// The schema of a lockstep run of `n >= 1` agents with the default number of clients.
+/// The schema of a lockstep run of `n >= 1` agents with the default numbers of clients and
+/// observers.
 pub fn schema(n: usize) -> Schema {
     let mut c = Collect(Vec::new());
-    let Ok(()) = services::visit(&Sizing::run(n, false), &mut c);
-    Schema { n, services: c.0 }
+    let sizing = Sizing::run(n, false);
+    let Ok(()) = services::visit(&sizing, &mut c);
+    let types = every_type().iter().map(|t| wire_type(t, &c.0)).collect();
+    Schema {
+        n,
+        observers: sizing.observers,
+        services: c.0,
+        types,
+    }
+}
+
+const FIELD_HEADER: [&str; 5] = ["field", "offset", "size", "type", "unit"];
+
+fn field_cells(f: &FieldRow) -> Vec<String> {
+    vec![
+        f.name.to_string(),
+        f.offset.to_string(),
+        f.size.to_string(),
+        f.ty.to_string(),
+        f.unit.to_string(),
+    ]
+}
+
+/// One line introducing a wire type: name, iceoryx2 name, size, alignment.
+fn type_title(t: &WireType) -> String {
+    let iox = t
+        .iceoryx2
+        .map_or_else(String::new, |n| format!(", iceoryx2 `{n}`"));
+    format!("{}{iox}: {} bytes, align {}", t.name, t.size, t.align)
 }
 
 /// The cells of one row, in the order of [`HEADER`].
@@ -235,18 +326,15 @@ const HEADER: [&str; 14] = [
     "buffer",
 ];
 
-/// A plain-text table, columns padded to their widest cell.
-pub fn text(schema: &Schema) -> String {
-    let rows: Vec<Vec<String>> = std::iter::once(HEADER.iter().map(|h| h.to_string()).collect())
-        .chain(schema.services.iter().map(cells))
+/// Rows as plain text, columns padded to their widest cell.
+fn padded(header: &[&str], body: impl Iterator<Item = Vec<String>>) -> String {
+    let rows: Vec<Vec<String>> = std::iter::once(header.iter().map(|h| h.to_string()).collect())
+        .chain(body)
         .collect();
-    let widths: Vec<usize> = (0..HEADER.len())
+    let widths: Vec<usize> = (0..header.len())
         .map(|c| rows.iter().map(|r| r[c].chars().count()).max().unwrap_or(0))
         .collect();
-    let mut out = format!(
-        "services of a run of N = {} agents (names relative to the run prefix fm<run id>_; {{i}}: 0-based agent index)\n",
-        schema.n
-    );
+    let mut out = String::new();
     for r in &rows {
         let line: Vec<String> = r
             .iter()
@@ -255,6 +343,20 @@ pub fn text(schema: &Schema) -> String {
             .collect();
         out.push_str(line.join("  ").trim_end());
         out.push('\n');
+    }
+    out
+}
+
+/// A plain-text table of the services, then each wire type's fields.
+pub fn text(schema: &Schema) -> String {
+    let mut out = format!(
+        "services of a run of N = {} agents with room for {} observers (names relative to the run prefix fm<run id>_; {{i}}: 0-based agent index)\n",
+        schema.n, schema.observers
+    );
+    out += &padded(&HEADER, schema.services.iter().map(cells));
+    for t in &schema.types {
+        out += &format!("\n{}\n", type_title(t).replace('`', ""));
+        out += &padded(&FIELD_HEADER, t.fields.iter().map(field_cells));
     }
     out
 }
@@ -274,8 +376,15 @@ pub fn markdown(schema: &Schema) -> String {
     );
     out.push_str(&format!(
         "those the orchestrator creates a lockstep run of N = {} agents with (`formation schema --n N`\n\
-         prints them for another N; a realtime run has a deeper `formation/plant/steps` buffer).\n\n",
-        schema.n
+         prints them for another N; a realtime run has a deeper `formation/plant/steps` buffer).\n\n\
+         Every service has room for {} outside observers (`formation run --observers K`, default {}):\n\
+         K receivers (subscribers or listeners) and K nodes more than the run and its clients\n\
+         (`formation inspect`, `formation inject`) need, so a program the run does not know about can\n\
+         watch any state, command, telemetry, step record, event or wake-up. An observer never slows\n\
+         the run: publishers overwrite the oldest sample of a full subscriber buffer, and a listener\n\
+         only receives wake-ups. To see the end of a run, subscribe to `formation/run/control`: the\n\
+         orchestrator publishes `RunControl {{ kind: 1 }}` (stop) there when the run ends.\n\n",
+        schema.n, schema.observers, services::DEFAULT_OBSERVERS
     ));
     out.push_str(&format!("| {} | what |\n", HEADER.join(" | ")));
     out.push_str(&format!("|{}\n", "---|".repeat(HEADER.len() + 1)));
@@ -286,6 +395,25 @@ pub fn markdown(schema: &Schema) -> String {
             c[4] = format!("`{}`", c[4]);
         }
         out.push_str(&format!("| {} | {} |\n", c.join(" | "), s.doc));
+    }
+    out.push_str(
+        "\n## Wire layout\n\n\
+         Each type is `#[repr(C)]`, little-endian, fields in this order at these byte offsets (a\n\
+         `_pad` field is zero). A type in the type column is another wire type below, nested in\n\
+         place. The tables are kept next to the structs (`wire_fields!`) and checked against\n\
+         `offset_of!` by a unit test; `clients/python/formation_client` and\n\
+         `clients/c/formation_wire.h` are checked against `formation schema --json` by tests.\n",
+    );
+    for t in &schema.types {
+        out.push_str(&format!("\n### {}\n\n", type_title(t)));
+        out.push_str(&format!("| {} |\n", FIELD_HEADER.join(" | ")));
+        out.push_str(&format!("|{}\n", "---|".repeat(FIELD_HEADER.len())));
+        for f in &t.fields {
+            let mut c = field_cells(f);
+            c[0] = format!("`{}`", c[0]);
+            c[3] = format!("`{}`", c[3]);
+            out.push_str(&format!("| {} |\n", c.join(" | ")));
+        }
     }
     out
 }
@@ -320,6 +448,7 @@ pub fn main(args: SchemaArgs) -> ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formation_config::protocol::wire::AgentTelemetry;
 
     #[test]
     fn docs_services_md_is_the_generated_markdown_of_a_five_agent_run() {
@@ -378,9 +507,10 @@ mod tests {
                 .expect("share")
                 .limits
         };
-        assert_eq!(share(9).receivers, 9);
-        assert_eq!(share(9).nodes, 9 + 4 + services::MAX_CLIENTS);
-        assert_eq!(share(2).receivers, 2);
+        let k = services::DEFAULT_OBSERVERS;
+        assert_eq!(share(9).receivers, 9 + k);
+        assert_eq!(share(9).nodes, 9 + 4 + services::MAX_CLIENTS + k);
+        assert_eq!(share(2).receivers, 2 + k);
     }
 
     #[test]
@@ -400,5 +530,38 @@ mod tests {
             assert!(first.get(key).is_some(), "{key} in {first}");
         }
         assert_eq!(first["message"]["iceoryx2"], "formation.v1.ReferenceFrame");
+        let tel = v["types"]
+            .as_array()
+            .expect("types")
+            .iter()
+            .find(|t| t["name"] == "AgentTelemetry")
+            .expect("AgentTelemetry");
+        assert_eq!(tel["iceoryx2"], "formation.v1.AgentTelemetry");
+        assert_eq!(tel["size"], size_of::<AgentTelemetry>());
+        let loop_latency = tel["fields"]
+            .as_array()
+            .expect("fields")
+            .iter()
+            .find(|f| f["name"] == "loop_latency_us")
+            .expect("loop_latency_us");
+        assert_eq!(
+            loop_latency["offset"],
+            core::mem::offset_of!(AgentTelemetry, loop_latency_us)
+        );
+        assert_eq!(loop_latency["type"], "f64");
+        assert_eq!(loop_latency["unit"], "us");
+    }
+
+    #[test]
+    fn text_and_markdown_list_each_wire_types_fields_with_offset_and_unit() {
+        let s = schema(5);
+        let t = text(&s);
+        assert!(
+            t.contains("AgentTelemetry, iceoryx2 formation.v1.AgentTelemetry: 480 bytes, align 8")
+        );
+        assert!(t.lines().any(|l| l.split_whitespace().collect::<Vec<_>>()
+            == ["formation_error_m", "24", "8", "f64", "m"]));
+        let m = markdown(&s);
+        assert!(m.contains("| `formation_error_m` | 24 | 8 | `f64` | m |"));
     }
 }

@@ -61,3 +61,77 @@ pub fn cpus_allowed(pid: u32) -> Vec<usize> {
 }
 
 pub mod run;
+
+/// The workspace root (the parent of this crate's directory).
+pub fn workspace_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ lives in the workspace")
+        .to_path_buf()
+}
+
+/// The Python interpreter with the iceoryx2 0.10 binding (`$FORMATION_PYTHON`, set by `.ci/run` to
+/// its venv `target/pyenv`), or why there is none. Callers skip with the reason, unless
+/// `FORMATION_REQUIRE_PYTHON=1` (set by `.ci/run`): then they must fail ([`python_or_skip`]).
+pub fn python_with_iceoryx2() -> Result<PathBuf, String> {
+    let py = std::env::var_os("FORMATION_PYTHON")
+        .filter(|p| !p.is_empty())
+        .map(PathBuf::from)
+        .ok_or("FORMATION_PYTHON is not set (a Python with `pip install iceoryx2==0.10.0`)")?;
+    let o = std::process::Command::new(&py)
+        .args(["-c", "import iceoryx2"])
+        .output()
+        .map_err(|e| format!("cannot start {}: {e}", py.display()))?;
+    if !o.status.success() {
+        return Err(format!(
+            "{} cannot import iceoryx2: {}",
+            py.display(),
+            String::from_utf8_lossy(&o.stderr).trim()
+        ));
+    }
+    Ok(py)
+}
+
+/// `Some(interpreter)` from [`python_with_iceoryx2`]; `None` after printing why the calling test
+/// is skipped; a panic instead when `FORMATION_REQUIRE_PYTHON=1`.
+pub fn python_or_skip(test: &str) -> Option<PathBuf> {
+    match python_with_iceoryx2() {
+        Ok(py) => Some(py),
+        Err(why) if std::env::var("FORMATION_REQUIRE_PYTHON").as_deref() == Ok("1") => {
+            panic!("{test}: FORMATION_REQUIRE_PYTHON=1 but {why}")
+        }
+        Err(why) => {
+            eprintln!("{test}: skipped: {why}");
+            None
+        }
+    }
+}
+
+/// Asserts that the run whose outputs are in `run_out` wrote byte for byte the `trajectory.csv`
+/// of `formation sim` with the same `args` (written to `sim_out`).
+pub fn assert_trajectory_is_sims(
+    run_out: &std::path::Path,
+    args: &[&str],
+    sim_out: &std::path::Path,
+) {
+    let o = std::process::Command::new(bin("formation"))
+        .arg("sim")
+        .arg("--quiet")
+        .args(args)
+        .arg("--out")
+        .arg(sim_out)
+        .output()
+        .expect("formation sim starts");
+    assert!(
+        o.status.success(),
+        "formation sim failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let a = std::fs::read(run_out.join("trajectory.csv")).expect("the run's trajectory.csv");
+    let b = std::fs::read(sim_out.join("trajectory.csv")).expect("sim's trajectory.csv");
+    assert!(
+        a == b,
+        "trajectory.csv of the run in {} differs from formation sim's",
+        run_out.display()
+    );
+}

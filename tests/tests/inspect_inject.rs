@@ -91,6 +91,35 @@ fn applies_at(o: &Output) -> u64 {
         .expect("a step number")
 }
 
+/// The first telemetry sample of `agent` (1-based) at or after simulation time `t_min`.
+fn sample_from(runs: &Path, run: &RunningRun, agent: usize, t_min: f64) -> Value {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = inspect(runs, agent).filter(|s| s["t"].as_f64().unwrap_or(0.0) >= t_min) {
+            return s;
+        }
+        assert!(start.elapsed() < TIMEOUT, "no telemetry: {}", run.stderr());
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Injects Gamma = 0.5 on every axis of agent 2 with the additive fault `delta`; the apply step.
+fn inject_half_gamma_into_agent_2(runs: &Path, delta: &str) -> u64 {
+    applies_at(&formation(
+        runs,
+        &[
+            "inject",
+            "fault",
+            "--agent",
+            "2",
+            "--gamma",
+            "0.5,0.5,0.5",
+            "--delta",
+            delta,
+        ],
+    ))
+}
+
 #[test]
 fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     let dir = temp_dir("inspect-live");
@@ -116,14 +145,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
 
     // Wait until agent 2's estimator has settled a little (t >= 4 s): the scenario's own additive
     // fault has then built up delta-hat, which the injection below removes.
-    let start = Instant::now();
-    let before = loop {
-        if let Some(s) = inspect(&runs, 2).filter(|s| s["t"].as_f64().unwrap_or(0.0) >= 4.0) {
-            break s;
-        }
-        assert!(start.elapsed() < TIMEOUT, "no telemetry: {}", run.stderr());
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    let before = sample_from(&runs, &run, 2, 4.0);
     assert_eq!(before["agent"], 2);
     for key in [
         "step",
@@ -138,19 +160,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     let gamma_before = vec3(&before, "gamma_hat");
     let delta_before = vec3(&before, "delta_hat");
 
-    let fault_step = applies_at(&formation(
-        &runs,
-        &[
-            "inject",
-            "fault",
-            "--agent",
-            "2",
-            "--gamma",
-            "0.5,0.5,0.5",
-            "--delta",
-            "0.15,0.1,0.5",
-        ],
-    ));
+    let fault_step = inject_half_gamma_into_agent_2(&runs, "0.15,0.1,0.5");
     let delay_step = applies_at(&formation(
         &runs,
         &["inject", "delay", "--agent", "3", "--tau", "0.03"],
@@ -480,6 +490,63 @@ fn inspect_follow_into_a_pipe_prints_samples_without_escape_sequences() {
     );
     // One block per sample, separated by a blank line.
     assert!(String::from_utf8_lossy(&bytes).contains("\n\nrun "));
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Mean of the three components.
+fn mean3(v: [f64; 3]) -> f64 {
+    (v[0] + v[1] + v[2]) / 3.0
+}
+
+#[test]
+fn inspect_answers_on_a_realtime_run_and_shows_an_injected_fault_in_gamma_hat() {
+    let dir = temp_dir("inspect-realtime");
+    let runs = dir.join("runs");
+    let run = RunningRun::start_with_env(
+        &["--realtime", "--set", "simulation.duration_s=40"],
+        &dir.join("out"),
+        &[("FORMATION_RUNS_DIR", &runs)],
+    );
+    wait_listed(&runs, &run, 5);
+    // The first sample: the service keeps the latest one for a late subscriber, so `inspect`
+    // answers at once (the time it took is printed; no timing assertion on a shared machine).
+    let start = Instant::now();
+    let first = sample_from(&runs, &run, 2, 0.0);
+    eprintln!(
+        "first realtime sample of agent 2 after {:.3} s: step {}",
+        start.elapsed().as_secs_f64(),
+        first["step"]
+    );
+    assert_eq!(first["agent"], 2);
+    let timed = Instant::now();
+    let again = inspect(&runs, 2).expect("a second inspect answers");
+    eprintln!(
+        "inspect --agent 2 --json on a realtime run: {:.3} s",
+        timed.elapsed().as_secs_f64()
+    );
+    assert!(again["step"].as_u64() >= first["step"].as_u64());
+
+    // Let the estimator settle (t >= 4 s), then inject Gamma = 0.5 on every axis of agent 2.
+    let before = sample_from(&runs, &run, 2, 4.0);
+    let gamma_before = mean3(vec3(&before, "gamma_hat"));
+    let fault_step = inject_half_gamma_into_agent_2(&runs, "0,0,0");
+    assert!(fault_step > before["step"].as_u64().unwrap());
+    // Gamma-hat moves towards 0.5 while the run flies on: a later sample is well below the value
+    // before the injection.
+    let mut lowest = gamma_before;
+    while run.role_processes().len() == 7 && lowest > gamma_before - 0.1 {
+        if let Some(s) = inspect(&runs, 2) {
+            if s["step"].as_u64().unwrap() > fault_step {
+                lowest = lowest.min(mean3(vec3(&s, "gamma_hat")));
+            }
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    assert!(
+        lowest < gamma_before - 0.1,
+        "mean Gamma-hat of agent 2: {gamma_before} before the injection of 0.5, lowest after {lowest}"
+    );
     drop(run);
     let _ = std::fs::remove_dir_all(&dir);
 }

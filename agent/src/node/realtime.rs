@@ -7,9 +7,11 @@
 //! If several states are queued (the agent fell behind), all enter the history and only the newest
 //! is answered. Measures, per process: state hop (plant send stamp -> received), share hop
 //! (neighbour send stamp -> received) and the compute time of `Agent::step`; written at the stop
-//! to `<run dir>/timing/agent-<i>.json`.
+//! to `<run dir>/timing/agent-<i>.json`. Live telemetry for `formation inspect` goes out on the
+//! same service and with the same sim-time period as in lockstep ([`super::telemetry`]).
 
 use super::ports::Ports;
+use super::telemetry::Sampler;
 use crate::Agent;
 use formation_config::node::boot::Boot;
 use formation_config::node::clock::now_ns;
@@ -39,6 +41,7 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), No
     let mut refs: VecDeque<ReferenceFrame> = VecDeque::with_capacity(128);
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut latest: Option<VehicleState> = None;
+    let mut sampler = Sampler::new(&b.scenario, i);
     loop {
         while let Some(c) = ports.control.receive()? {
             if c.kind == CONTROL_STOP {
@@ -82,6 +85,7 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), No
             while refs.front().is_some_and(|r| r.step <= k) {
                 if let Some(r) = refs.pop_front() {
                     agent.observe_reference(&r);
+                    sampler.observe_reference(&r);
                 }
             }
             pending_delays.retain(|d| {
@@ -100,6 +104,11 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), No
                 cmd.sent_ns = t1;
                 send(&ports.command, cmd)?;
                 poke(&ports.plant_wake);
+                if sampler.due_once(k) {
+                    let latency = std::time::Duration::from_nanos(t1 - t0);
+                    // Best effort: a failed telemetry send never disturbs control.
+                    let _ = send(&ports.telemetry, sampler.sample(&s, &cmd, latency));
+                }
                 latest = None;
             }
         }

@@ -1,7 +1,9 @@
 //! Live telemetry of agent i for `formation inspect`: every `TELEMETRY_EVERY_S` of simulation
 //! time, one [`AgentTelemetry`] built from the command the controller just produced, its state and
 //! the reference of the same step. Sent without waiting; the service keeps the latest sample for
-//! late subscribers.
+//! late subscribers. Lockstep samples every step that is a multiple of the period
+//! ([`Sampler::due`]); realtime, where an agent that falls behind answers only the newest state,
+//! samples the first answered step of each period ([`Sampler::due_once`]).
 
 use formation_config::protocol::wire::{
     AgentTelemetry, ControlCommand, ReferenceFrame, VehicleState, TELEMETRY_EVERY_S,
@@ -17,6 +19,8 @@ pub struct Sampler {
     rate_limit: f64,
     /// P_d + Delta_i0 of the latest reference handed to the controller.
     target: [f64; 3],
+    /// Period index (`k / every`) of the latest sample taken by [`Sampler::due_once`].
+    last_period: Option<u64>,
     /// Samples sent and the wall time spent building and sending them (the overhead).
     sent: u64,
     send_time: Duration,
@@ -32,6 +36,7 @@ impl Sampler {
             margin: s.controller.attitude.attitude_margin_rad,
             rate_limit: s.controller.attitude.rate_limit_rad_s,
             target: [0.0; 3],
+            last_period: None,
             sent: 0,
             send_time: Duration::ZERO,
         }
@@ -46,6 +51,17 @@ impl Sampler {
     /// True when step `k` is sampled.
     pub fn due(&self, k: u64) -> bool {
         k.is_multiple_of(self.every)
+    }
+
+    /// True for the first step `k` of each sampling period that reaches it (steps only increase):
+    /// the same period as [`Sampler::due`] when steps are skipped (realtime).
+    pub fn due_once(&mut self, k: u64) -> bool {
+        let period = k / self.every;
+        if self.last_period.is_some_and(|p| p >= period) {
+            return false;
+        }
+        self.last_period = Some(period);
+        true
     }
 
     /// The sample of the step whose state is `s` and command `cmd`; `latency` is the wall time of
@@ -100,4 +116,22 @@ impl Sampler {
 
 fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn realtime_sampling_takes_the_first_answered_step_of_each_period_even_when_steps_are_skipped()
+    {
+        let mut s = Sampler::new(&Scenario::paper(), 0);
+        let every = s.every;
+        assert!(every > 1, "the default period spans several steps");
+        let taken: Vec<u64> = [0, 1, every - 1, every + 3, every + 4, 3 * every + 1]
+            .into_iter()
+            .filter(|&k| s.due_once(k))
+            .collect();
+        assert_eq!(taken, vec![0, every + 3, 3 * every + 1]);
+    }
 }

@@ -11,7 +11,7 @@
 //!   iceoryx2 root directory (`/tmp/iceoryx2`), even after a clean exit.
 
 use core::fmt::Debug;
-use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::node::{NodeCreationFailure, NodeView};
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::{event, publish_subscribe};
 use std::path::Path as StdPath;
@@ -148,6 +148,35 @@ pub fn remove_residue(prefix: &str) -> std::io::Result<usize> {
     let mut removed = remove_prefixed(StdPath::new(SHM_DIR), prefix, false)?;
     removed += remove_prefixed(StdPath::new(&root), prefix, true)?;
     Ok(removed)
+}
+
+/// A node under a prefix whose process is alive.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AliveNode {
+    /// Its name (not unique; empty when it has none).
+    pub name: String,
+    /// Its process id.
+    pub pid: i32,
+}
+
+/// The nodes under `prefix` whose processes are alive. Once every process of a run has exited
+/// and the orchestrator has dropped its node, these are outside nodes (an observer, `formation
+/// inspect`) that still use the run's files.
+pub fn alive_nodes(prefix: &str) -> Result<Vec<AliveNode>, IpcError> {
+    let cfg = config_for_prefix(prefix)?;
+    let mut out = Vec::new();
+    let listed = Node::<ipc::Service>::list(&cfg, |state| {
+        if let NodeState::Alive(view) = state {
+            let (name, pid) = view.details().as_ref().map_or((String::new(), 0), |d| {
+                (d.name().as_str().to_string(), d.process_id().value())
+            });
+            out.push(AliveNode { name, pid });
+        }
+        CallbackProgression::Continue
+    });
+    // A prefix without any node directory lists nothing; other failures are reported as such.
+    listed.map_err(|e| IpcError::BadName(format!("cannot list the nodes of {prefix}: {e:?}")))?;
+    Ok(out)
 }
 
 /// The files [`remove_residue`] would delete for `prefix` (for checks and diagnostics).

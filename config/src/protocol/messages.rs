@@ -24,6 +24,12 @@ pub struct RunControl {
     pub step: u64,
 }
 
+crate::wire_fields!(RunControl {
+    kind: u32 => "-",
+    _pad: u32 => "-",
+    step: u64 => "-",
+});
+
 /// Orchestrator -> plant and leader: how many steps have been recorded (the pacing reference; the
 /// first one is the start signal).
 #[repr(C)]
@@ -37,6 +43,10 @@ pub struct RunProgress {
     /// Number of steps recorded so far.
     pub recorded: u64,
 }
+
+crate::wire_fields!(RunProgress {
+    recorded: u64 => "-",
+});
 
 /// A role process of a run. On the wire (as [`Hello::role`]) it is its `u32` discriminant.
 #[repr(u32)]
@@ -104,6 +114,13 @@ pub struct Hello {
     pub _pad: u32,
 }
 
+crate::wire_fields!(Hello {
+    role: u32 => "-",
+    agent: u32 => "-",
+    pid: u32 => "-",
+    _pad: u32 => "-",
+});
+
 /// Plant -> orchestrator: what quadrotor i did at one step (an element of the per-step slice).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -118,6 +135,11 @@ pub struct StepEntry {
     /// The command the agent sent for this step.
     pub command: ControlCommand,
 }
+
+crate::wire_fields!(StepEntry {
+    truth: PlantTruth => "-",
+    command: ControlCommand => "-",
+});
 
 /// [`InjectRequest::kind`]: an actuator fault (to the plant).
 pub const INJECT_FAULT: u32 = 1;
@@ -317,3 +339,29 @@ impl RuntimeEvent {
         }
     }
 }
+
+crate::wire_fields!(InjectRequest {
+    nonce: u64 => "-",
+    at_step: u64 => "-",
+    kind: u32 => "-",
+    agent: u32 => "-",
+    gamma: [f64; 3] => "-",
+    delta: [f64; 3] => "N m",
+    base_s: f64 => "s",
+    amplitude_s: f64 => "s",
+    angular_rate_rad_s: f64 => "rad/s",
+    other: u32 => "-",
+    _pad: u32 => "-",
+    down_s: f64 => "s",
+});
+
+crate::wire_fields!(RuntimeEvent {
+    step: u64 => "-",
+    kind: u32 => "-",
+    agent: u32 => "-",
+    other: u32 => "-",
+    _pad: u32 => "-",
+    down_steps: u64 => "steps",
+    probability: f64 => "-",
+    seed: u64 => "-",
+});

@@ -10,6 +10,7 @@
 //! Names are relative to the run's iceoryx2 prefix ([`run_prefix`]), so concurrent runs never see
 //! each other. Per-agent names carry the 0-based agent index (`formation/agent/0/state` is agent 1's).
 
+use super::layout::WireLayout;
 use super::messages::{Hello, InjectRequest, RunControl, RunProgress, RuntimeEvent, StepEntry};
 use super::pacing::{
     CONTROL_BUFFER, LOCKSTEP_BUFFER, REALTIME_STEPS_BUFFER, REFERENCE_BUFFER, STEPS_BUFFER,
@@ -28,14 +29,29 @@ pub fn run_prefix(run_id: &str) -> String {
 /// Most concurrent client processes (`formation inspect`, `ps`, `inject`) a run admits.
 pub const MAX_CLIENTS: usize = 8;
 
+/// Default number of outside observers a run admits (`formation run --observers K`): spare
+/// subscriber / listener slots on every service and spare node slots, for programs the run does
+/// not know about (a Python client, `iox2 service subscribe`, `iox2 service listen`). A few cost
+/// little (shared memory for their buffers) and leave room to watch while `formation inspect` runs.
+pub const DEFAULT_OBSERVERS: usize = 4;
+
+/// Most outside observers `formation run --observers` accepts (each one adds a subscriber buffer
+/// to every service; on a realtime run the step records alone take 1024 samples x N x 696 B per
+/// observer, 3.6 MB at N = 5).
+pub const MAX_OBSERVERS: usize = 64;
+
 /// A message type that crosses a process boundary: `#[repr(C)]`, `Copy`, and (feature `ipc`)
-/// iceoryx2's `ZeroCopySend` with an explicit, versioned type name.
+/// iceoryx2's `ZeroCopySend` with an explicit, versioned type name; its field table is
+/// [`WireLayout`].
 #[cfg(feature = "ipc")]
-pub trait Message: core::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend + 'static {}
+pub trait Message:
+    core::fmt::Debug + Copy + iceoryx2::prelude::ZeroCopySend + WireLayout + 'static
+{
+}
 /// A message type that crosses a process boundary: `#[repr(C)]`, `Copy`, and (feature `ipc`)
 /// iceoryx2's `ZeroCopySend` with an explicit, versioned type name.
 #[cfg(not(feature = "ipc"))]
-pub trait Message: core::fmt::Debug + Copy + 'static {}
+pub trait Message: core::fmt::Debug + Copy + WireLayout + 'static {}
 
 macro_rules! messages {
     ($($t:ty),* $(,)?) => { $(impl Message for $t {})* };
@@ -112,31 +128,44 @@ pub struct Sizing {
     pub n: usize,
     /// Client processes admitted besides the run's own ([`MAX_CLIENTS`]).
     pub clients: usize,
+    /// Outside observers K: every service gets K receivers (subscribers or listeners) and K nodes
+    /// more than the run and its clients need ([`DEFAULT_OBSERVERS`], `formation run --observers`).
+    pub observers: usize,
     /// Realtime mode: the plant does not wait for the recorder (deeper step-record buffer).
     pub realtime: bool,
 }
 
 impl Sizing {
-    /// A run of `n` agents with the default number of clients.
+    /// A run of `n` agents with the default numbers of clients and observers.
     pub fn run(n: usize, realtime: bool) -> Sizing {
         Sizing {
             n,
             clients: MAX_CLIENTS,
+            observers: DEFAULT_OBSERVERS,
             realtime,
         }
     }
 
-    /// Nodes that may open any service: N agents, plant, leader, orchestrator, one spare, and the
-    /// clients.
-    pub fn nodes(&self) -> usize {
-        self.n + 4 + self.clients
+    /// The same run with room for `k` outside observers.
+    pub fn with_observers(self, k: usize) -> Sizing {
+        Sizing {
+            observers: k,
+            ..self
+        }
     }
 
+    /// Nodes that may open any service: N agents, plant, leader, orchestrator, one spare, the
+    /// clients and the observers.
+    pub fn nodes(&self) -> usize {
+        self.n + 4 + self.clients + self.observers
+    }
+
+    /// `receivers` are the run's own (and its clients'); the observers' slots are added here.
     fn limits(&self, senders: usize, receivers: usize, buffer: usize) -> Limits {
         Limits {
             nodes: self.nodes(),
             senders,
-            receivers,
+            receivers: receivers + self.observers,
             buffer,
         }
     }
@@ -561,10 +590,32 @@ mod tests {
         let mut names = Names::default();
         visit(&s, &mut names).unwrap();
         for (name, l) in &names.0 {
-            assert_eq!(l.nodes, 7 + 4 + MAX_CLIENTS, "{name}");
+            assert_eq!(l.nodes, 7 + 4 + MAX_CLIENTS + DEFAULT_OBSERVERS, "{name}");
         }
-        assert_eq!(TELEMETRY.limits(&s).receivers, MAX_CLIENTS);
+        assert_eq!(
+            TELEMETRY.limits(&s).receivers,
+            MAX_CLIENTS + DEFAULT_OBSERVERS
+        );
         assert_eq!(WAKE_ORCHESTRATOR.limits(&s).senders, 7 + 3 + MAX_CLIENTS);
+    }
+
+    #[test]
+    fn every_service_has_k_spare_receivers_and_nodes_for_outside_observers() {
+        let own = Sizing::run(5, false).with_observers(0);
+        let watched = own.with_observers(3);
+        let (mut a, mut b) = (Names::default(), Names::default());
+        visit(&own, &mut a).unwrap();
+        visit(&watched, &mut b).unwrap();
+        assert_eq!(a.0.len(), b.0.len());
+        for ((name, l0), (_, l3)) in a.0.iter().zip(&b.0) {
+            assert_eq!(l3.receivers, l0.receivers + 3, "{name}");
+            assert_eq!(l3.nodes, l0.nodes + 3, "{name}");
+            assert_eq!((l3.senders, l3.buffer), (l0.senders, l0.buffer), "{name}");
+        }
+        // Without observers, the state of agent i has exactly one subscriber (agent i) and its wake
+        // event exactly one listener.
+        assert_eq!(VEHICLE_STATE.limits(&own).receivers, 1);
+        assert_eq!(WAKE_AGENT.limits(&own).receivers, 1);
     }
 
     #[test]

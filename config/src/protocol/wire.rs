@@ -49,6 +49,18 @@ pub struct VehicleState {
     pub rate: [f64; 3],
 }
 
+crate::wire_fields!(VehicleState {
+    step: u64 => "-",
+    t: f64 => "s",
+    agent: u32 => "-",
+    _pad: u32 => "-",
+    sent_ns: u64 => "ns",
+    position: [f64; 3] => "m",
+    velocity: [f64; 3] => "m/s",
+    attitude: [f64; 3] => "rad",
+    rate: [f64; 3] => "rad/s",
+});
+
 /// Agent i -> neighbours: the information the paper exchanges, (P_i, V_i) at step k.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -73,6 +85,16 @@ pub struct NeighbourState {
     /// Velocity V_j, m/s.
     pub velocity: [f64; 3],
 }
+
+crate::wire_fields!(NeighbourState {
+    step: u64 => "-",
+    t: f64 => "s",
+    agent: u32 => "-",
+    _pad: u32 => "-",
+    sent_ns: u64 => "ns",
+    position: [f64; 3] => "m",
+    velocity: [f64; 3] => "m/s",
+});
 
 /// Leader -> agents: virtual leader P_d and the formation offsets Delta_i0 = Lambda_i - Lambda_0 with
 /// their first and second derivatives, at step k.
@@ -107,6 +129,20 @@ pub struct ReferenceFrame {
     /// Delta_i0'', m/s².
     pub offset_acc: [[f64; 3]; MAX_AGENTS],
 }
+
+crate::wire_fields!(ReferenceFrame {
+    step: u64 => "-",
+    t: f64 => "s",
+    n_agents: u32 => "-",
+    _pad: u32 => "-",
+    target: [f64; 3] => "m",
+    p_d: [f64; 3] => "m",
+    v_d: [f64; 3] => "m/s",
+    a_d: [f64; 3] => "m/s^2",
+    offset: [[f64; 3]; 128] => "m",
+    offset_vel: [[f64; 3]; 128] => "m/s",
+    offset_acc: [[f64; 3]; 128] => "m/s^2",
+});
 
 impl ReferenceFrame {
     /// Copies `src` into `self` up to its `n_agents` valid entries (the rest of `self` is left as
@@ -199,6 +235,30 @@ pub struct ControllerTelemetry {
     pub e2: [f64; 3],
 }
 
+crate::wire_fields!(ControllerTelemetry {
+    tau_s: f64 => "s",
+    e_p: [f64; 3] => "m",
+    e_v: [f64; 3] => "m/s",
+    u_p: [f64; 3] => "m/s^2",
+    f_hat: [f64; 3] => "m/s^2",
+    nn_weight_norm: f64 => "-",
+    attitude_cmd_raw: [f64; 3] => "rad",
+    attitude_cmd: [f64; 3] => "rad",
+    alpha: [f64; 3] => "rad/s",
+    z1: [f64; 3] => "rad",
+    z2: [f64; 3] => "rad/s",
+    blf1: f64 => "-",
+    blf2: f64 => "-",
+    c1: f64 => "rad",
+    c2: f64 => "rad/s",
+    gamma_hat: [f64; 3] => "-",
+    delta_hat: [f64; 3] => "N m",
+    d_hat: f64 => "rad/s^2",
+    model_hat_dev: f64 => "-",
+    e1: [f64; 3] => "-",
+    e2: [f64; 3] => "-",
+});
+
 /// Agent i -> plant: total thrust and torque command U_iAC for step k, with the telemetry.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -226,6 +286,17 @@ pub struct ControlCommand {
     pub telemetry: ControllerTelemetry,
 }
 
+crate::wire_fields!(ControlCommand {
+    step: u64 => "-",
+    t: f64 => "s",
+    agent: u32 => "-",
+    _pad: u32 => "-",
+    sent_ns: u64 => "ns",
+    thrust_n: f64 => "N",
+    torque_nm: [f64; 3] => "N m",
+    telemetry: ControllerTelemetry => "-",
+});
+
 /// Plant -> recorder: the true quantities of quadrotor i at step k that only the plant knows.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -251,6 +322,16 @@ pub struct PlantTruth {
     pub disturbance: [f64; 3],
 }
 
+crate::wire_fields!(PlantTruth {
+    state: VehicleState => "-",
+    thrust_n: f64 => "N",
+    torque_applied_nm: [f64; 3] => "N m",
+    gamma: [f64; 3] => "-",
+    delta: [f64; 3] => "N m",
+    uncertainty: [f64; 3] => "m/s^2",
+    disturbance: [f64; 3] => "rad/s^2",
+});
+
 /// Orchestrator -> plant: actuator fault override of agent i from step `step` on.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -273,6 +354,15 @@ pub struct FaultInjection {
     /// Additive fault delta_i, N m.
     pub delta: [f64; 3],
 }
+
+crate::wire_fields!(FaultInjection {
+    step: u64 => "-",
+    t: f64 => "s",
+    agent: u32 => "-",
+    mode: u32 => "-",
+    gamma: [f64; 3] => "-",
+    delta: [f64; 3] => "N m",
+});
 
 /// Orchestrator -> agents: new delay profile of agent i from step `step` on.
 #[repr(C)]
@@ -298,6 +388,16 @@ pub struct DelayInjection {
     /// Angular rate, rad/s.
     pub angular_rate_rad_s: f64,
 }
+
+crate::wire_fields!(DelayInjection {
+    step: u64 => "-",
+    t: f64 => "s",
+    agent: u32 => "-",
+    _pad: u32 => "-",
+    base_s: f64 => "s",
+    amplitude_s: f64 => "s",
+    angular_rate_rad_s: f64 => "rad/s",
+});
 
 /// Agent i -> `formation inspect` (service [`crate::protocol::services::telemetry`]): a live sample of the
 /// controller, published every [`TELEMETRY_EVERY_S`] of simulation time without waiting for anyone.
@@ -332,6 +432,20 @@ pub struct AgentTelemetry {
     /// The controller's internals at step k.
     pub controller: ControllerTelemetry,
 }
+
+crate::wire_fields!(AgentTelemetry {
+    step: u64 => "-",
+    t: f64 => "s",
+    agent: u32 => "-",
+    _pad: u32 => "-",
+    formation_error_m: f64 => "m",
+    attitude: [f64; 3] => "rad",
+    rate: [f64; 3] => "rad/s",
+    attitude_limit_rad: f64 => "rad",
+    rate_limit_rad_s: f64 => "rad/s",
+    loop_latency_us: f64 => "us",
+    controller: ControllerTelemetry => "-",
+});
 
 /// Simulation time between two [`AgentTelemetry`] samples of one agent, s.
 pub const TELEMETRY_EVERY_S: f64 = 0.02;

@@ -66,6 +66,17 @@ pub struct RunArgs {
     /// are never pinned. See docs/runtime.md, "Cost of a step".
     #[arg(long, default_value = "auto", value_name = "auto|off|CPUS")]
     pub pin: String,
+    /// Outside observers the run makes room for: K spare subscribers / listeners on every service
+    /// (states, commands, telemetry, steps, events, wake-ups) and K spare nodes, for programs such
+    /// as a Python client or `iox2 service subscribe` (docs/services.md). More cost shared memory.
+    #[arg(
+        long,
+        value_name = "K",
+        default_value_t = formation_config::protocol::services::DEFAULT_OBSERVERS,
+        value_parser = crate::cli::whole_number::<usize>,
+        allow_negative_numbers = true
+    )]
+    pub observers: usize,
 }
 
 /// How a run is paced.
@@ -75,6 +86,8 @@ struct Mode {
     wait: timing::WaitMode,
     spin_us: u32,
     rt_priority: u32,
+    /// Outside observers the services make room for.
+    observers: usize,
 }
 
 impl Mode {
@@ -104,6 +117,14 @@ pub fn main(args: RunArgs) -> ExitCode {
         );
         return ExitCode::from(cli::EXIT_INVALID);
     }
+    if args.observers > formation_config::protocol::services::MAX_OBSERVERS {
+        eprintln!(
+            "error: --observers {}: at most {} outside observers are supported",
+            args.observers,
+            formation_config::protocol::services::MAX_OBSERVERS
+        );
+        return ExitCode::from(cli::EXIT_INVALID);
+    }
     let allowed = crate::cpus::allowed();
     let pin = match placement::PinRequest::parse(&args.pin, &allowed) {
         Ok(p) => p,
@@ -128,6 +149,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         wait: args.wait,
         spin_us: args.spin_us,
         rt_priority: args.rt_priority,
+        observers: args.observers,
     };
     let out = args.common.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
@@ -184,8 +206,18 @@ pub fn main(args: RunArgs) -> ExitCode {
         &prefix,
         &interrupted,
     );
-    if let Err(e) = cleanup::remove(&prefix) {
-        eprintln!("warning: {e}");
+    match cleanup::remove(&prefix, cleanup::OUTSIDE_GRACE) {
+        Ok(cleanup::Cleaned::All) => {}
+        Ok(cleanup::Cleaned::LeftTo(nodes)) => eprintln!(
+            "warning: {} outside node(s) still attached to {prefix} ({}): their files are left to them",
+            nodes.len(),
+            nodes
+                .iter()
+                .map(|n| format!("'{}' pid {}", n.name, n.pid))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Err(e) => eprintln!("warning: {e}"),
     }
     drop(membership);
     drop(slot);
@@ -276,7 +308,7 @@ fn run(
         eprintln!("warning: {e}");
     }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
-    let services = services::RunServices::create(&node, n, mode.realtime)?;
+    let services = services::RunServices::create(&node, n, mode.realtime, mode.observers)?;
     let ports = driver::Ports::open(&node, n, !mode.realtime)?;
     let timing_dir = formation_config::node::timing::dir(&run_dir);
     if mode.realtime {

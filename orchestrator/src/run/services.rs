@@ -69,14 +69,21 @@ impl Visitor for Creator<'_> {
 }
 
 impl RunServices {
-    /// Creates every service of a run with `n` agents. In realtime mode the plant does not wait for
-    /// the recorder, so the step records get a deeper buffer.
-    pub fn create(node: &RunNode, n: usize, realtime: bool) -> Result<RunServices, PortError> {
+    /// Creates every service of a run with `n` agents and room for `observers` outside
+    /// observers. In realtime mode the plant does not wait for the recorder, so the step records
+    /// get a deeper buffer.
+    pub fn create(
+        node: &RunNode,
+        n: usize,
+        realtime: bool,
+        observers: usize,
+    ) -> Result<RunServices, PortError> {
         let mut creator = Creator {
             node,
             keep: Vec::new(),
         };
-        services::visit(&Sizing::run(n, realtime), &mut creator)?;
+        let sizing = Sizing::run(n, realtime).with_observers(observers);
+        services::visit(&sizing, &mut creator)?;
         Ok(RunServices {
             _keep: creator.keep,
         })
