@@ -277,6 +277,14 @@ pub struct RunnerArgs {
     /// `--set 'agents[*].delay.base_s=0.04'` (every agent); repeatable.
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
+    /// Also record in this format: `mcap` writes DIR/run.mcap (every output step of every agent
+    /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md).
+    #[arg(long, value_enum, value_name = "FORMAT", value_delimiter = ',')]
+    pub record: Vec<crate::record::Format>,
+    /// Print the summary as JSON on standard output (the content of DIR/summary.json) instead of
+    /// the table; everything else goes to standard error.
+    #[arg(long)]
+    pub json: bool,
 }
 
 impl RunnerArgs {

@@ -6,7 +6,7 @@ use plotters::style::FontStyle;
 use std::sync::OnceLock;
 
 /// DejaVu Sans, embedded so that figures render without any system font (licence beside the file).
-static FONT_TTF: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+pub(super) static FONT_TTF: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// The font family every text of the figures uses.
 pub const FONT: &str = "sans-serif";
@@ -31,8 +31,14 @@ pub fn register_fonts() -> Result<(), String> {
 /// Error type of the drawing code.
 pub type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// A backend a figure can be drawn on: the PNG bitmap (through [`super::text::GlyphText`]) or
+/// SVG; its errors can be boxed.
+pub trait Backend: DrawingBackend<ErrorType: 'static> {}
+
+impl<T: DrawingBackend<ErrorType: 'static>> Backend for T {}
+
 /// The drawing area type every figure draws on.
-pub type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+pub type Area<DB> = DrawingArea<DB, Shift>;
 
 /// Colour of agent `id` (1-based): a ten-colour qualitative palette, cycled.
 pub fn agent_color(id: u32) -> RGBColor {
@@ -204,7 +210,7 @@ pub fn lines_y_range(lines: &[&Line]) -> (f64, f64) {
 }
 
 /// Draws a time-series panel into `area`.
-pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
+pub fn draw_panel<DB: Backend>(area: &Area<DB>, panel: Panel) -> DrawResult {
     let lines: Vec<Line> = panel
         .lines
         .into_iter()
@@ -336,7 +342,7 @@ fn dash(pixels: &[(i32, i32)], on: f64, off: f64) -> Vec<((i32, i32), (i32, i32)
 }
 
 /// Draws the labelled lines' samples and names in a column, from the top.
-fn draw_side_legend(side: &Area, lines: &[Line]) -> DrawResult {
+fn draw_side_legend<DB: Backend>(side: &Area<DB>, lines: &[Line]) -> DrawResult {
     let font = (FONT, 15).into_font().color(&BLACK);
     let mut y = 48;
     for line in lines {
@@ -386,7 +392,7 @@ fn trim_zeros(s: String) -> String {
 }
 
 /// Draws a figure title across the top of `root` and returns the area below it.
-pub fn titled<'a>(root: &Area<'a>, title: &str) -> Result<Area<'a>, Box<dyn std::error::Error>> {
+pub fn titled<DB: Backend>(root: &Area<DB>, title: &str) -> Result<Area<DB>, Box<dyn std::error::Error>> {
     root.fill(&WHITE)?;
     Ok(root.titled(title, (FONT, 26))?)
 }

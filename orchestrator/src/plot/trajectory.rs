@@ -1,12 +1,11 @@
 //! Fig. 5: 3D trajectories, and the top view with the target disk and the sensor footprints.
 
 use super::data::AgentTrace;
-use super::style::{
+use super::style::{Area, Backend, 
     agent_color, clip_runs, fit_range, format_tick, thin, titled, DrawResult, FONT, REFERENCE,
 };
 use super::Figure;
 use plotters::prelude::*;
-use std::path::Path;
 
 /// Colour of the target disk (outline; the fill is a light tint). Distinct from every agent colour.
 const DISK: RGBColor = RGBColor(20, 20, 20);
@@ -14,10 +13,9 @@ const DISK: RGBColor = RGBColor(20, 20, 20);
 const TRAIL_S: f64 = 5.0;
 
 /// Fig. 5 (left): trajectories of all agents and the target's path in 3D.
-pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 5 — trajectories of the quadrotors and the target ({})",
             fig.run.title()
@@ -128,9 +126,8 @@ pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult 
     area.draw_text(
         "● start   ▲ end",
         &(FONT, 16).into_font().color(&RGBColor(80, 80, 80)),
-        (20, size.1 as i32 - 90),
+        (20, root.dim_in_pixel().1 as i32 - 90),
     )?;
-    root.present()?;
     Ok(())
 }
 
@@ -247,10 +244,9 @@ fn circle(c: (f64, f64), r: f64) -> Vec<(f64, f64)> {
 }
 
 /// Fig. 5 (right): top view; an overview and two zoomed snapshots with the disk and the footprints.
-pub fn top_view(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn top_view<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 5 — top view: target disk (r = {} m) and sensor footprints ({})",
             fig.geometry.target_radius_m,
@@ -318,15 +314,14 @@ pub fn top_view(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             false,
         )?;
     }
-    root.present()?;
     Ok(())
 }
 
 /// One square top-view panel centred on `centre` with half-width `half`.
 #[allow(clippy::too_many_arguments)]
-fn top_panel(
+fn top_panel<DB: Backend>(
     fig: &Figure,
-    area: &super::style::Area,
+    area: &Area<DB>,
     title: &str,
     centre: (f64, f64),
     half: f64,

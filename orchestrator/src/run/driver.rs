@@ -210,6 +210,11 @@ pub fn drive(
         if let Err(e) = live.injections.poll(recorded) {
             return (Outcome::Failed(e.to_string()), recorded);
         }
+        for line in live.injections.take_logged() {
+            if let Err(e) = recorder.event(&line) {
+                return (Outcome::Failed(format!("cannot write run.mcap: {e}")), recorded);
+            }
+        }
         live.registration.update(recorded);
         if got > 0 {
             if let Err(e) = ports.announce(recorded) {

@@ -33,6 +33,8 @@ pub struct Injections {
     faults: Output<FaultInjection>,
     delays: Output<DelayInjection>,
     events: File,
+    /// The lines written to `events.jsonl` since the last [`Injections::take_logged`].
+    logged: Vec<serde_json::Value>,
     scenario: Scenario,
 }
 
@@ -46,6 +48,7 @@ impl Injections {
             delays: publisher(node, &services::DELAY_INJECTION.named())?,
             events: File::create(&path)
                 .map_err(|e| format!("cannot create {}: {e}", path.display()))?,
+            logged: Vec::new(),
             scenario: scenario.clone(),
         })
     }
@@ -138,10 +141,18 @@ impl Injections {
         }
     }
 
+    /// The lines written to `events.jsonl` since the last call (the recorder puts the accepted
+    /// ones into `run.mcap`).
+    pub fn take_logged(&mut self) -> Vec<serde_json::Value> {
+        std::mem::take(&mut self.logged)
+    }
+
     fn log(&mut self, v: serde_json::Value) -> Result<(), String> {
         writeln!(self.events, "{v}")
             .and_then(|_| self.events.flush())
-            .map_err(|e| format!("cannot write events.jsonl: {e}"))
+            .map_err(|e| format!("cannot write events.jsonl: {e}"))?;
+        self.logged.push(v);
+        Ok(())
     }
 }
 
