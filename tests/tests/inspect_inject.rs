@@ -497,7 +497,14 @@ fn an_injection_into_a_recording_run_is_an_event_of_run_mcap_and_inject_json_pri
     let o = formation(
         &runs,
         &[
-            "inject", "fault", "--agent", "2", "--gamma", "0.5,0.6,0.7", "--delta", "0.1,0,0",
+            "inject",
+            "fault",
+            "--agent",
+            "2",
+            "--gamma",
+            "0.5,0.6,0.7",
+            "--delta",
+            "0.1,0,0",
             "--json",
         ],
     );
@@ -513,8 +520,16 @@ fn an_injection_into_a_recording_run_is_an_event_of_run_mcap_and_inject_json_pri
 
     // Let the run pass that step, then stop it (Ctrl-C finishes the outputs, run.mcap included).
     let start = Instant::now();
-    while inspect(&runs, 1).and_then(|s| s["step"].as_u64()).unwrap_or(0) <= step + 100 {
-        assert!(start.elapsed() < TIMEOUT, "the run stalled: {}", run.stderr());
+    while inspect(&runs, 1)
+        .and_then(|s| s["step"].as_u64())
+        .unwrap_or(0)
+        <= step + 100
+    {
+        assert!(
+            start.elapsed() < TIMEOUT,
+            "the run stalled: {}",
+            run.stderr()
+        );
         std::thread::sleep(Duration::from_millis(100));
     }
     run.signal(libc::SIGINT);
@@ -545,7 +560,11 @@ fn an_injection_into_a_recording_run_is_an_event_of_run_mcap_and_inject_json_pri
     }
     assert_eq!(events.len(), 1, "{events:?}");
     let (log_time, event) = &events[0];
-    assert_eq!(*log_time, step * 1_000_000, "logged at the step it applies, in ns");
+    assert_eq!(
+        *log_time,
+        step * 1_000_000,
+        "logged at the step it applies, in ns"
+    );
     assert_eq!(event["kind"], "fault");
     assert_eq!(event["agent"], 2);
     assert_eq!(event["step"], step);

@@ -83,7 +83,11 @@ fn lockstep_run_mcap_equals_sim_mcap_byte_for_byte_and_its_states_equal_trajecto
     let a = std::fs::read(dir.join("lockstep/run.mcap")).expect("the run wrote run.mcap");
     let b = std::fs::read(dir.join("sim/run.mcap")).expect("sim wrote run.mcap");
     assert!(a.starts_with(b"\x89MCAP0\r\n"), "MCAP magic");
-    assert!(a.len() > 100_000, "run.mcap is too short: {} bytes", a.len());
+    assert!(
+        a.len() > 100_000,
+        "run.mcap is too short: {} bytes",
+        a.len()
+    );
     assert!(a == b, "run.mcap differs between run and sim");
 
     let Some(python) = python_or_skip() else {

@@ -1,6 +1,8 @@
 //! Figs. 8-10: attitude tracking and the attitude / angular-rate constraints.
 
-use super::style::{Area, Backend, agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel, REFERENCE};
+use super::style::{
+    agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel, REFERENCE,
+};
 use super::Figure;
 use plotters::prelude::*;
 

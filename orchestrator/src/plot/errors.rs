@@ -1,10 +1,9 @@
 //! Figs. 6 and 7: formation errors (optionally two variants side by side) and RBFNN approximation error.
 
-use super::style::{Area, Backend, 
-    agent_color, draw_panel, lines_y_range, titled, DrawResult, Legend, Line, Panel,
+use super::style::{
+    agent_color, draw_panel, lines_y_range, titled, Area, Backend, DrawResult, Legend, Line, Panel,
 };
 use super::{Figure, Run};
-
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 

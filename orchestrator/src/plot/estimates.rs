@@ -1,7 +1,9 @@
 //! Figs. 12-14: adaptive estimates against the true values (disturbance bound, multiplicative and
 //! additive actuator faults).
 
-use super::style::{Area, Backend, agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::style::{
+    agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel,
+};
 use super::Figure;
 use plotters::prelude::*;
 

@@ -1,8 +1,9 @@
 //! Fig. 11: control inputs applied to the quadrotors (torques after faults and saturation, thrust).
 
-use super::style::{Area, Backend, agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::style::{
+    agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel,
+};
 use super::Figure;
-
 
 /// Fig. 11: applied torques U_iA (x, y, z) and total thrust, all agents.
 pub fn inputs<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {

@@ -1,7 +1,7 @@
 //! Separation figure: the distance between the closest two quadrotors over time, against the
 //! scenario's safety distance (the CSV's output rate; `summary.json` has the per-step minimum).
 
-use super::style::{Area, Backend, draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::style::{draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel};
 use super::{Figure, Run};
 use crate::record::separation::closest_pair;
 use plotters::prelude::*;

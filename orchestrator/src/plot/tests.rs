@@ -237,7 +237,10 @@ fn svg_figures_are_well_formed_xml_with_their_labels_as_text() {
         let root = doc.root_element();
         assert_eq!(root.tag_name().name(), "svg", "{}", f.path.display());
         assert_eq!(root.attribute("width"), Some(f.width.to_string().as_str()));
-        assert_eq!(root.attribute("height"), Some(f.height.to_string().as_str()));
+        assert_eq!(
+            root.attribute("height"),
+            Some(f.height.to_string().as_str())
+        );
         assert!(
             !root.descendants().any(|n| n.has_tag_name("image")),
             "{}: a bitmap inside",
@@ -382,4 +385,25 @@ fn malformed_number_is_an_input_error_naming_line_and_column() {
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_legend_inside_the_data_goes_to_the_corner_with_the_fewest_points() {
+    use super::style::emptiest_corner;
+    use plotters::prelude::SeriesLabelPosition;
+    let (x, y) = ((0.0, 10.0), (0.0, 10.0));
+    let size = (0.3, 0.3);
+    assert!(matches!(
+        emptiest_corner(std::iter::empty(), x, y, size),
+        SeriesLabelPosition::UpperRight
+    ));
+    // Data along the upper and the right edges: the lower left corner is empty.
+    let edges = (0..100).flat_map(|k| {
+        let v = k as f64 / 10.0;
+        [(v, 9.5), (9.5, v)]
+    });
+    assert!(matches!(
+        emptiest_corner(edges, x, y, size),
+        SeriesLabelPosition::LowerLeft
+    ));
 }

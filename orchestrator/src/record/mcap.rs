@@ -162,12 +162,32 @@ pub fn event_schema() -> Value {
     for (name, kind, doc) in [
         ("step", "integer", "first step the injection applies to"),
         ("t", "number", "time of that step, s"),
-        ("kind", "string", "`fault` (actuator fault) or `delay` (delay profile)"),
+        (
+            "kind",
+            "string",
+            "`fault` (actuator fault) or `delay` (delay profile)",
+        ),
         ("agent", "integer", "agent id, 1-based"),
-        ("requested_step", "integer", "the step `--at` asked for (absent: as soon as possible)"),
-        ("gamma", "vec3", "fault: multiplicative fault Gamma_i from this step on"),
-        ("delta", "vec3", "fault: additive fault delta_i from this step on, N m"),
-        ("base_s", "number", "delay: tau_i(t) = base + amplitude sin(rate t): base, s"),
+        (
+            "requested_step",
+            "integer",
+            "the step `--at` asked for (absent: as soon as possible)",
+        ),
+        (
+            "gamma",
+            "vec3",
+            "fault: multiplicative fault Gamma_i from this step on",
+        ),
+        (
+            "delta",
+            "vec3",
+            "fault: additive fault delta_i from this step on, N m",
+        ),
+        (
+            "base_s",
+            "number",
+            "delay: tau_i(t) = base + amplitude sin(rate t): base, s",
+        ),
         ("amplitude_s", "number", "delay: amplitude, s"),
         ("angular_rate_rad_s", "number", "delay: angular rate, rad/s"),
     ] {
@@ -466,7 +486,12 @@ pub fn event_message(line: &Value) -> Option<(u64, Value)> {
     let fields: &[&str] = if kind == "fault" {
         &["requested_step", "gamma", "delta"]
     } else {
-        &["requested_step", "base_s", "amplitude_s", "angular_rate_rad_s"]
+        &[
+            "requested_step",
+            "base_s",
+            "amplitude_s",
+            "angular_rate_rad_s",
+        ]
     };
     for f in fields {
         if let Some(v) = line.get(*f).filter(|v| !v.is_null()) {
@@ -537,7 +562,10 @@ mod tests {
         );
         let schema = event_schema();
         for k in keys(&e) {
-            assert!(schema["properties"].get(&k).is_some(), "{k} not in the schema");
+            assert!(
+                schema["properties"].get(&k).is_some(),
+                "{k} not in the schema"
+            );
         }
         assert!(event_message(&json!({"event": "rejected", "nonce": 1})).is_none());
     }

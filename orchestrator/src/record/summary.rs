@@ -177,7 +177,8 @@ impl Summary {
 
     /// The pretty JSON of `summary.json` (without the final line break).
     pub fn to_json(&self) -> String {
-        serde_json::to_string_pretty(self).expect("a summary serialises (no map with non-string keys)")
+        serde_json::to_string_pretty(self)
+            .expect("a summary serialises (no map with non-string keys)")
     }
 
     /// Prints the human-readable table.

@@ -212,7 +212,10 @@ pub fn drive(
         }
         for line in live.injections.take_logged() {
             if let Err(e) = recorder.event(&line) {
-                return (Outcome::Failed(format!("cannot write run.mcap: {e}")), recorded);
+                return (
+                    Outcome::Failed(format!("cannot write run.mcap: {e}")),
+                    recorded,
+                );
             }
         }
         live.registration.update(recorded);

@@ -187,7 +187,7 @@ fn run_one(
                 mcap: false,
             },
         )
-            .map_err(|e| format!("cannot write {}: {e}", dir.display()))
+        .map_err(|e| format!("cannot write {}: {e}", dir.display()))
     });
     Outcome::new(sample.clone(), result, start.elapsed().as_secs_f64())
 }
