@@ -8,7 +8,7 @@
 //! `FORMATION_REQUIRE_PYTHON=1` (set by `.ci/run`): then it fails.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, temp_dir};
+use formation_tests::{sim, temp_dir};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -57,19 +57,6 @@ fn python_or_skip() -> Option<PathBuf> {
             None
         }
     }
-}
-
-fn sim(args: &[&str], out: &Path) {
-    let st = Command::new(bin("formation"))
-        .arg("sim")
-        .args(args)
-        .arg("--out")
-        .arg(out)
-        .env_remove("CARGO")
-        .stdout(std::process::Stdio::null())
-        .status()
-        .expect("formation sim starts");
-    assert!(st.success(), "formation sim failed");
 }
 
 #[test]
