@@ -295,6 +295,14 @@ pub struct RunnerArgs {
     /// What a restarted agent starts from (`runtime.restart_state`).
     #[arg(long, value_enum)]
     pub restart_state: Option<RestartStateArg>,
+    /// Also record in this format: `mcap` writes DIR/run.mcap (every output step of every agent
+    /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md).
+    #[arg(long, value_enum, value_name = "FORMAT", value_delimiter = ',')]
+    pub record: Vec<crate::record::Format>,
+    /// Print the summary as JSON on standard output (the content of DIR/summary.json) instead of
+    /// the table; everything else goes to standard error.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `--restart`.

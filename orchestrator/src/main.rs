@@ -26,31 +26,65 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Run the closed loop in one process and write trajectory.csv and summary.json.
+    #[command(
+        after_help = "Examples:\n  formation sim\n  formation sim --variant no-rbfnn --out out/no-rbfnn\n  formation sim --set controller.position.k_v=2.5 --set 'agents[*].delay.base_s=0.02'\n  formation sim --record mcap --json > summary.json\n  formation sim --repeat 5"
+    )]
     Sim(sim::SimArgs),
     /// Run one OS process per quadrotor (plus plant and leader) over iceoryx2, in lockstep (or on
     /// the wall clock with `--realtime`).
+    #[command(
+        after_help = "Examples:\n  formation run\n  formation run config/scenarios/abrupt-faults.toml --out out/abrupt\n  formation run --record mcap --out out/rec   # also writes out/rec/run.mcap\n  formation run --json | jq .agents[0].rms_formation_error_m\n  formation run --realtime --set simulation.duration_s=10"
+    )]
     Run(run::RunArgs),
     /// Generate a scenario with N agents (radii, graph, leaders) from the paper template.
+    #[command(
+        after_help = "Examples:\n  formation scenario --n 20 --graph ring --out gen20.toml\n  formation scenario --n 8 --graph random-connected --seed 3 --leader-agents 1,5\n  formation scenario --n 12 --json > gen12.json"
+    )]
     Scenario(scenario_gen::ScenarioArgs),
     /// Monte Carlo or grid over scenario parameters, in parallel with the in-process runner:
     /// DIR/sweep.csv (one row per sample) and DIR/sweep.json (median / p95 / worst).
+    #[command(
+        after_help = "Examples:\n  formation sweep --vary delay.max=0..0.05 --vary fault.gamma=0.4..1 --samples 20 --seed 1\n  formation sweep --vary n=5,10,20 --vary graph=ring,path --grid --out out/grid"
+    )]
     Sweep(sweep::SweepArgs),
     /// Render the paper's figures (PNG) from one run directory (or two, to compare variants).
+    #[command(
+        after_help = "Examples:\n  formation plot out/paper-proposed\n  formation plot out/paper-proposed --format svg --out figs\n  formation plot out/paper-proposed --compare out/paper-no-rbfnn --out figs/compare"
+    )]
     Plot(plot::PlotArgs),
     /// Print the graph spectrum, Theorem 1's matrix M and the loop bandwidths of a scenario.
+    #[command(
+        after_help = "Examples:\n  formation check\n  formation check paper-exact\n  formation check --set controller.position.k_p=1.5 --json"
+    )]
     Check(check::CheckArgs),
     /// Measure IPC latency and jitter (iceoryx2, Unix domain sockets, UDP loopback).
+    #[command(
+        after_help = "Examples:\n  formation bench --n 5 --seconds 5\n  formation bench --n 5 --transports iox2-event --rounds 9 --json"
+    )]
     Bench(bench::BenchArgs),
     /// List the running runs and their processes (role, agent, pid, alive, CPU share, progress).
+    #[command(after_help = "Examples:\n  formation ps\n  formation ps --json")]
     Ps(live::ps::PsArgs),
     /// Show one agent's live telemetry (agent ids are 1-based).
+    #[command(
+        after_help = "Examples:\n  formation inspect --agent 2\n  formation inspect --agent 2 --follow\n  formation inspect --agent 2 --run 3d2cb2b7 --json"
+    )]
     Inspect(live::inspect::InspectArgs),
     /// Inject an actuator fault or a delay profile into a running run (agent ids are 1-based).
+    #[command(
+        after_help = "Examples:\n  formation inject fault --agent 2 --gamma 0.5,0.5,0.5 --delta 0,0,0\n  formation inject delay --agent 3 --tau '0.02+0.01*sin(0.5*t)' --at 30\n  formation inject fault --agent 1 --gamma 0.6,0.6,0.6 --delta 0.1,0,0 --json"
+    )]
     Inject(live::inject::InjectArgs),
     /// Print every service of a run (name pattern, message type and iceoryx2 type name, size,
     /// alignment, senders, receivers, limits) from the service table.
+    #[command(
+        after_help = "Examples:\n  formation schema\n  formation schema --n 20 --json\n  formation schema --markdown > docs/services.md"
+    )]
     Schema(schema::SchemaArgs),
     /// Print a shell completion script (e.g. `formation completions bash > ~/.local/share/bash-completion/completions/formation`).
+    #[command(
+        after_help = "Examples:\n  formation completions bash > ~/.local/share/bash-completion/completions/formation\n  formation completions zsh > ~/.zfunc/_formation"
+    )]
     Completions(CompletionsArgs),
     /// Internal: one agent process of `formation bench`.
     #[command(hide = true)]
@@ -158,6 +192,56 @@ mod tests {
             let e = parse(args).expect_err("a negative count").to_string();
             assert!(e.contains("is negative"), "{args:?}: {e}");
             assert!(!e.contains("unexpected argument"), "{args:?}: {e}");
+        }
+    }
+
+    /// The words of one example line as the shell would pass them (single quotes; a comment,
+    /// redirection or pipe ends the command).
+    fn words(line: &str) -> Vec<String> {
+        let mut out = Vec::new();
+        let (mut word, mut quoted, mut any) = (String::new(), false, false);
+        for c in line.chars() {
+            match c {
+                '\'' => (quoted, any) = (!quoted, true),
+                ' ' if !quoted => {
+                    if any {
+                        out.push(std::mem::take(&mut word));
+                    }
+                    any = false;
+                }
+                '#' | '>' | '|' if !quoted => break,
+                c => (word, any) = (word + &c.to_string(), true),
+            }
+        }
+        if any {
+            out.push(word);
+        }
+        out
+    }
+
+    #[test]
+    fn every_subcommand_has_examples_in_its_help_and_each_example_parses() {
+        let cli = Cli::command();
+        for sub in cli.get_subcommands().filter(|s| !s.is_hide_set()) {
+            let name = sub.get_name();
+            let help = sub
+                .get_after_help()
+                .unwrap_or_else(|| panic!("`formation {name}` has no after_help"))
+                .to_string();
+            let examples: Vec<&str> = help
+                .lines()
+                .skip_while(|l| *l != "Examples:")
+                .skip(1)
+                .map(str::trim)
+                .collect();
+            assert!(!examples.is_empty(), "`formation {name}`: no examples");
+            for line in examples {
+                let args = words(line);
+                assert_eq!(args[..2], ["formation", name], "{line}");
+                if let Err(e) = Cli::try_parse_from(&args) {
+                    panic!("example `{line}` of `formation {name}` does not parse: {e}");
+                }
+            }
         }
     }
 

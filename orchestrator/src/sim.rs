@@ -2,7 +2,7 @@
 
 use crate::cli;
 use crate::closed_loop::ClosedLoop;
-use crate::record::{Recorder, Summary};
+use crate::record::{Outputs, Recorder, Summary};
 use formation_config::{Scenario, Variant};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -45,9 +45,10 @@ pub fn main(args: SimArgs) -> ExitCode {
         eprintln!("error: cannot write {}/scenario.toml: {e}", out.display());
         return ExitCode::from(1);
     }
+    let outputs = Outputs::with(&args.common.record);
     let mut factors = Vec::new();
     for _ in 1..args.repeat.max(1) {
-        match run_in_process(&scenario, variant, &out) {
+        match run_in_process_with(&scenario, variant, &out, outputs) {
             Ok(s) => factors.push(s.realtime_factor),
             Err(e) => {
                 eprintln!("error: cannot write outputs to {}: {e}", out.display());
@@ -55,12 +56,12 @@ pub fn main(args: SimArgs) -> ExitCode {
             }
         }
     }
-    match run_in_process(&scenario, variant, &out) {
+    match run_in_process_with(&scenario, variant, &out, outputs) {
         Ok(summary) => {
             if args.repeat > 1 {
                 factors.push(summary.realtime_factor);
                 factors.sort_by(|a, b| a.total_cmp(b));
-                println!(
+                let line = format!(
                     "speed over {} runs: median {:.0}x real time (slowest {:.0}x, fastest {:.0}x), {:.2} µs per simulated step",
                     factors.len(),
                     factors[factors.len() / 2],
@@ -68,8 +69,16 @@ pub fn main(args: SimArgs) -> ExitCode {
                     factors[factors.len() - 1],
                     1e6 * scenario.simulation.dt_s / factors[factors.len() / 2]
                 );
+                // With --json, standard output holds the JSON only.
+                if args.common.json {
+                    eprintln!("{line}");
+                } else {
+                    println!("{line}");
+                }
             }
-            if args.quiet {
+            if args.common.json {
+                println!("{}", summary.to_json());
+            } else if args.quiet {
                 println!("{}", out.join("summary.json").display());
             } else {
                 summary.print_table();
@@ -116,20 +125,20 @@ pub fn run_in_process(
     variant: Variant,
     out: &Path,
 ) -> std::io::Result<Summary> {
-    run_in_process_with(scenario, variant, out, true)
+    run_in_process_with(scenario, variant, out, Outputs::with(&[]))
 }
 
-/// [`run_in_process`], writing `trajectory.csv` only when `trajectory` is set (`summary.json`
-/// always): `formation sweep` keeps only the summaries.
+/// [`run_in_process`], writing the files of `outputs` (`summary.json` always): `formation sweep`
+/// keeps only the summaries, `--record mcap` adds `run.mcap`.
 pub fn run_in_process_with(
     scenario: &Scenario,
     variant: Variant,
     out: &Path,
-    trajectory: bool,
+    outputs: Outputs,
 ) -> std::io::Result<Summary> {
     let start = Instant::now();
     let mut lp = ClosedLoop::new(scenario, variant);
-    let mut recorder = Recorder::create_with(scenario, variant, "in-process", out, trajectory)?;
+    let mut recorder = Recorder::create_with(scenario, variant, "in-process", out, outputs)?;
     let steps = scenario.n_steps();
     let mut done = 0;
     for k in 0..steps {

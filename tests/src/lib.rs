@@ -43,6 +43,21 @@ pub fn formation_in(runs: &std::path::Path, args: &[&str]) -> std::process::Outp
         .expect("formation starts")
 }
 
+/// Runs `formation sim <args...> --out <out>` to its end (standard output discarded, never
+/// building anything) and asserts that it succeeded.
+pub fn sim(args: &[&str], out: &std::path::Path) {
+    let st = std::process::Command::new(bin("formation"))
+        .arg("sim")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .env_remove("CARGO")
+        .stdout(std::process::Stdio::null())
+        .status()
+        .expect("formation sim starts");
+    assert!(st.success(), "formation sim failed");
+}
+
 /// CPUs in a `Cpus_allowed_list` line of /proc/<pid>/status (e.g. `0-1,3`).
 pub fn cpus_allowed(pid: u32) -> Vec<usize> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();

@@ -375,3 +375,47 @@ fn negative_numbers_reach_validation_which_names_the_argument() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn run_and_sim_with_json_print_exactly_their_summary_json_on_stdout() {
+    let dir = temp_dir("json-summary");
+    for command in ["sim", "run"] {
+        let out = dir.join(command);
+        let o = formation(
+            &dir,
+            &[
+                command,
+                "--set",
+                "simulation.duration_s=0.3",
+                "--out",
+                out.to_str().unwrap(),
+                "--json",
+            ],
+        );
+        assert!(o.status.success(), "{command}: {}", stderr(&o));
+        let printed: serde_json::Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| panic!("{command} --json: stdout is not one JSON value: {e}"));
+        assert_eq!(printed, summary(&out), "{command}: stdout == summary.json");
+        assert_eq!(printed["steps"], 300);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn scenario_with_json_prints_the_same_scenario_as_its_toml() {
+    let dir = temp_dir("scenario-json");
+    let args = ["scenario", "--n", "7", "--graph", "ring"];
+    let toml = formation(&dir, &args);
+    assert!(toml.status.success(), "{}", stderr(&toml));
+    let json = formation(&dir, &[&args[..], &["--json"]].concat());
+    assert!(json.status.success(), "{}", stderr(&json));
+    let from_toml = Scenario::from_toml_str(&String::from_utf8_lossy(&toml.stdout))
+        .expect("the TOML output parses");
+    let printed: serde_json::Value =
+        serde_json::from_slice(&json.stdout).expect("--json prints one JSON value");
+    assert_eq!(printed["agents"].as_array().map(Vec::len), Some(7));
+    // Compared as text: serde_json's float parser may be an ulp off, its printer is exact.
+    let expected = serde_json::to_string_pretty(&from_toml).unwrap() + "\n";
+    assert_eq!(String::from_utf8_lossy(&json.stdout), expected);
+    let _ = std::fs::remove_dir_all(&dir);
+}

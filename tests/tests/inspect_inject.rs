@@ -550,3 +550,96 @@ fn inspect_answers_on_a_realtime_run_and_shows_an_injected_fault_in_gamma_hat() 
     drop(run);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn an_injection_into_a_recording_run_is_an_event_of_run_mcap_and_inject_json_prints_its_step() {
+    let dir = temp_dir("inject-mcap");
+    let runs = dir.join("runs");
+    let mut run = RunningRun::start_with_env(
+        &["--set", "simulation.duration_s=600", "--record", "mcap"],
+        &dir.join("out"),
+        &[("FORMATION_RUNS_DIR", &runs)],
+    );
+    let listed = wait_listed(&runs, &run, 5);
+    let o = formation(
+        &runs,
+        &[
+            "inject",
+            "fault",
+            "--agent",
+            "2",
+            "--gamma",
+            "0.5,0.6,0.7",
+            "--delta",
+            "0.1,0,0",
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "inject failed: {}", stderr(&o));
+    let applied: Value =
+        serde_json::from_str(stdout(&o).trim()).expect("inject --json prints one JSON object");
+    assert_eq!(applied["event"], "fault", "{applied}");
+    assert_eq!(applied["agent"], 2, "{applied}");
+    assert_eq!(applied["run"], listed["id"], "{applied}");
+    assert_eq!(applied["gamma"], serde_json::json!([0.5, 0.6, 0.7]));
+    let step = applied["step"].as_u64().expect("the step it applies at");
+    assert_eq!(applied["t"].as_f64(), Some(step as f64 * 0.001));
+
+    // Let the run pass that step, then stop it (Ctrl-C finishes the outputs, run.mcap included).
+    let start = Instant::now();
+    while inspect(&runs, 1)
+        .and_then(|s| s["step"].as_u64())
+        .unwrap_or(0)
+        <= step + 100
+    {
+        assert!(
+            start.elapsed() < TIMEOUT,
+            "the run stalled: {}",
+            run.stderr()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    run.signal(libc::SIGINT);
+    let (st, _) = run.wait(TIMEOUT).expect("the run stops on Ctrl-C");
+    assert_eq!(st.code(), Some(130), "{}", run.stderr());
+
+    let bytes = std::fs::read(dir.join("out/run.mcap")).expect("run.mcap is written");
+    let mut events = Vec::new();
+    // Gamma of agent 2 at the first output step from the applied step on, and just before it.
+    let (mut after, mut before) = (None::<(u64, Value)>, None::<(u64, Value)>);
+    for m in mcap::MessageStream::new(&bytes).expect("run.mcap parses") {
+        let m = m.expect("every message parses");
+        let v: Value = serde_json::from_slice(&m.data).expect("JSON messages");
+        match m.channel.topic.as_str() {
+            "/events" => events.push((m.log_time, v)),
+            "/agent/2/truth" => {
+                let k = v["step"].as_u64().expect("a step");
+                let slot = if k >= step { &mut after } else { &mut before };
+                let closer = slot
+                    .as_ref()
+                    .is_none_or(|(s, _)| if k >= step { k < *s } else { k > *s });
+                if closer {
+                    *slot = Some((k, v["gamma"].clone()));
+                }
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(events.len(), 1, "{events:?}");
+    let (log_time, event) = &events[0];
+    assert_eq!(
+        *log_time,
+        step * 1_000_000,
+        "logged at the step it applies, in ns"
+    );
+    assert_eq!(event["kind"], "fault");
+    assert_eq!(event["agent"], 2);
+    assert_eq!(event["step"], step);
+    assert_eq!(event["gamma"], serde_json::json!([0.5, 0.6, 0.7]));
+    assert!(event.get("nonce").is_none() && event.get("wall_time_unix_s").is_none());
+    // The plant's truth in run.mcap shows the fault from that step on, and not before.
+    let injected = serde_json::json!([0.5, 0.6, 0.7]);
+    assert_eq!(after.expect("an output step after it").1, injected);
+    assert_ne!(before.expect("an output step before it").1, injected);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -3,7 +3,7 @@
 //! a dead child, keep concurrent runs apart, and leave nothing in /dev/shm or /tmp/iceoryx2.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, cpus_allowed, temp_dir};
+use formation_tests::{bin, cpus_allowed, sim, temp_dir};
 use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -13,18 +13,6 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(120);
 
 fn residue(prefix: &str) -> Vec<std::path::PathBuf> {
     formation_config::node::ipc::residue(prefix).expect("can list /dev/shm and /tmp/iceoryx2")
-}
-
-fn sim(args: &[&str], out: &Path) {
-    let st = Command::new(bin("formation"))
-        .arg("sim")
-        .args(args)
-        .arg("--out")
-        .arg(out)
-        .stdout(std::process::Stdio::null())
-        .status()
-        .expect("formation sim starts");
-    assert!(st.success(), "formation sim failed");
 }
 
 fn summary_without_timing(dir: &Path) -> serde_json::Value {

@@ -20,6 +20,11 @@ pub struct InjectArgs {
     /// What to inject.
     #[command(subcommand)]
     pub what: InjectWhat,
+    /// Print the applied injection as one JSON object on standard output: the run's line of
+    /// `DIR/events.jsonl` (`event`, `agent` 1-based, `step` and `t` it applies at,
+    /// `requested_step`, `after_end`, the values) plus `run` (the run id).
+    #[arg(long, global = true)]
+    pub json: bool,
 }
 
 /// The injection kinds.
@@ -234,7 +239,14 @@ pub fn main(args: InjectArgs) -> ExitCode {
     super::tidy_after(&run);
     match result {
         Ok(line) => {
-            let v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
+            let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
+            if args.json {
+                if let Some(o) = v.as_object_mut() {
+                    o.insert("run".into(), run.id.clone().into());
+                }
+                println!("{v}");
+                return ExitCode::SUCCESS;
+            }
             println!(
                 "{} injection for agent {} of run {} applies at step {} (t = {:.3} s){}",
                 v["event"].as_str().unwrap_or("?"),

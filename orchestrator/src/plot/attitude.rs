@@ -1,9 +1,10 @@
 //! Figs. 8-10: attitude tracking and the attitude / angular-rate constraints.
 
-use super::style::{agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel, REFERENCE};
+use super::style::{
+    agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel, REFERENCE,
+};
 use super::Figure;
 use plotters::prelude::*;
-use std::path::Path;
 
 /// Colour of constraint bounds (black: distinct from every agent colour).
 const BOUND: RGBColor = RGBColor(0, 0, 0);
@@ -13,10 +14,9 @@ const COMMAND: RGBColor = RGBColor(110, 110, 110);
 const OTHER: RGBColor = RGBColor(150, 150, 150);
 
 /// Fig. 8: roll and pitch of each agent against the filtered commands.
-pub fn attitude(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn attitude<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 8 — attitude (solid) vs filtered command (dashed) ({})",
             fig.run.title()
@@ -51,17 +51,15 @@ pub fn attitude(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             )?;
         }
     }
-    root.present()?;
     Ok(())
 }
 
 /// Fig. 9: ‖A_i‖ and ‖A_iC‖ against the constraint C̄_i1, one panel per agent; with `--compare`,
 /// the compared run's ‖A_i‖ as well (the paper compares an unconstrained AFTAC).
-pub fn attitude_constraint(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+pub fn attitude_constraint<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     constraint_figure(
         fig,
-        path,
-        size,
+        root,
         "Fig. 9 — attitude norm ‖A_i‖ and constraint C1_bar",
         ("att_norm", "‖A_i‖"),
         ("att_cmd_norm", "‖A_iC‖"),
@@ -72,11 +70,10 @@ pub fn attitude_constraint(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawR
 }
 
 /// Fig. 10: ‖Ω_i‖ and ‖α_i‖ against the constraint C̄_i2, one panel per agent.
-pub fn rate_constraint(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+pub fn rate_constraint<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     constraint_figure(
         fig,
-        path,
-        size,
+        root,
         "Fig. 10 — angular-rate norm ‖Ω_i‖, virtual control ‖α_i‖ and constraint C2_bar",
         ("rate_norm", "‖Ω_i‖"),
         ("alpha_norm", "‖α_i‖"),
@@ -87,10 +84,9 @@ pub fn rate_constraint(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResul
 }
 
 #[allow(clippy::too_many_arguments)]
-fn constraint_figure(
+fn constraint_figure<DB: Backend>(
     fig: &Figure,
-    path: &Path,
-    size: (u32, u32),
+    root: &Area<DB>,
     title: &str,
     state: (&str, &str),
     command: (&str, &str),
@@ -98,8 +94,7 @@ fn constraint_figure(
     unit: &str,
     with_compare: bool,
 ) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    let area = titled(&root, &format!("{title} ({})", fig.run.title()))?;
+    let area = titled(root, &format!("{title} ({})", fig.run.title()))?;
     let cells = area.split_evenly((fig.run.agents.len(), 1));
     for (cell, a) in cells.iter().zip(&fig.run.agents) {
         let mut lines = vec![
@@ -132,6 +127,5 @@ fn constraint_figure(
             },
         )?;
     }
-    root.present()?;
     Ok(())
 }

@@ -1,11 +1,9 @@
 //! Figs. 6 and 7: formation errors (optionally two variants side by side) and RBFNN approximation error.
 
 use super::style::{
-    agent_color, draw_panel, lines_y_range, titled, DrawResult, Legend, Line, Panel,
+    agent_color, draw_panel, lines_y_range, titled, Area, Backend, DrawResult, Legend, Line, Panel,
 };
 use super::{Figure, Run};
-use plotters::prelude::*;
-use std::path::Path;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 
@@ -19,8 +17,7 @@ fn per_agent(run: &Run, f: impl Fn(&super::data::AgentTrace) -> Vec<(f64, f64)>)
 
 /// Fig. 6: formation error components per agent; with `--compare`, both variants side by side on
 /// the same scales.
-pub fn position_errors(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn position_errors<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let runs: Vec<&Run> = std::iter::once(fig.run).chain(fig.compare).collect();
     let title = if runs.len() == 2 {
         format!(
@@ -34,7 +31,7 @@ pub fn position_errors(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResul
             fig.run.title()
         )
     };
-    let area = titled(&root, &title)?;
+    let area = titled(root, &title)?;
     let cells = area.split_evenly((3, runs.len()));
     for (row, axis) in AXES.iter().enumerate() {
         let col = format!("e{axis}");
@@ -66,15 +63,13 @@ pub fn position_errors(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResul
             )?;
         }
     }
-    root.present()?;
     Ok(())
 }
 
 /// Fig. 7: RBFNN approximation error F_iP − F̂_iP on the three axes.
-pub fn rbfnn_error(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn rbfnn_error<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 7 — RBFNN approximation error F − F_hat ({})",
             fig.run.title()
@@ -102,6 +97,5 @@ pub fn rbfnn_error(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             },
         )?;
     }
-    root.present()?;
     Ok(())
 }

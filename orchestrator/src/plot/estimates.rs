@@ -1,16 +1,16 @@
 //! Figs. 12-14: adaptive estimates against the true values (disturbance bound, multiplicative and
 //! additive actuator faults).
 
-use super::style::{agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::style::{
+    agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel,
+};
 use super::Figure;
 use plotters::prelude::*;
-use std::path::Path;
 
 /// Fig. 12: D̂_iA against ‖D_iA‖ (solid: estimate, dashed: true), all agents.
-pub fn disturbance(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn disturbance<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 12 — disturbance bound estimate D_hat (solid) vs ‖D_iA‖ (dashed) ({})",
             fig.run.title()
@@ -45,16 +45,14 @@ pub fn disturbance(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             x_range: None,
         },
     )?;
-    root.present()?;
     Ok(())
 }
 
 /// Fig. 13: Γ̂_i against Γ_i per channel.
-pub fn gamma(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+pub fn gamma<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     per_channel(
         fig,
-        path,
-        size,
+        root,
         "Fig. 13 — multiplicative fault Γ: estimate (solid) vs true (dashed)",
         "gamma",
         "Γ",
@@ -63,11 +61,10 @@ pub fn gamma(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
 }
 
 /// Fig. 14: δ̂_i against δ_i per channel.
-pub fn delta(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
+pub fn delta<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     per_channel(
         fig,
-        path,
-        size,
+        root,
         "Fig. 14 — additive fault δ: estimate (solid) vs true (dashed)",
         "delta",
         "δ",
@@ -76,17 +73,15 @@ pub fn delta(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn per_channel(
+fn per_channel<DB: Backend>(
     fig: &Figure,
-    path: &Path,
-    size: (u32, u32),
+    root: &Area<DB>,
     title: &str,
     col: &str,
     sym: &str,
     unit: &str,
 ) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
-    let area = titled(&root, &format!("{title} ({})", fig.run.title()))?;
+    let area = titled(root, &format!("{title} ({})", fig.run.title()))?;
     let cells = area.split_evenly((3, 1));
     for (row, (cell, axis)) in cells.iter().zip(["x", "y", "z"]).enumerate() {
         let mut lines = Vec::new();
@@ -123,7 +118,6 @@ fn per_channel(
             },
         )?;
     }
-    root.present()?;
     Ok(())
 }
 

@@ -1,15 +1,14 @@
 //! Fig. 11: control inputs applied to the quadrotors (torques after faults and saturation, thrust).
 
-use super::style::{agent_color, draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::style::{
+    agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel,
+};
 use super::Figure;
-use plotters::prelude::*;
-use std::path::Path;
 
 /// Fig. 11: applied torques U_iA (x, y, z) and total thrust, all agents.
-pub fn inputs(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn inputs<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 11 — applied inputs U_iA (after faults and saturation) and thrust ({})",
             fig.run.title()
@@ -54,6 +53,5 @@ pub fn inputs(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             },
         )?;
     }
-    root.present()?;
     Ok(())
 }

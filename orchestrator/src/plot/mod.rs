@@ -1,9 +1,11 @@
-//! `formation plot`: the paper's Figs. 5-14 and the separation figure as PNG files, from one run directory (or two, to compare
-//! variants in Fig. 6 and Fig. 9).
+//! `formation plot`: the paper's Figs. 5-14 and the separation figure as PNG or SVG files, from
+//! one run directory (or two, to compare variants in Fig. 6 and Fig. 9).
 //!
-//! Text is rendered by plotters' ab_glyph backend from a font embedded in the binary, so figures
-//! render identically on machines without any system font (no fontconfig, no font-kit).
+//! PNG text is rasterised by [`text::GlyphText`] from a font embedded in the binary, so figures
+//! render identically on machines without any system font (no fontconfig, no font-kit). SVG text
+//! stays text (`<text>` elements in the `sans-serif` family), laid out with the same metrics.
 
+use plotters::prelude::IntoDrawingArea;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -17,6 +19,7 @@ mod separation;
 mod style;
 #[cfg(test)]
 mod tests;
+pub mod text;
 mod trajectory;
 
 pub use data::Run;
@@ -30,9 +33,32 @@ pub struct PlotArgs {
     /// Second run directory (e.g. a `no-rbfnn` or `unconstrained` run) compared in Figs. 6 and 9.
     #[arg(long, value_name = "DIR2")]
     pub compare: Option<PathBuf>,
-    /// Directory to write the PNG files into (created if missing). Default: the run directory.
+    /// Directory to write the figures into (created if missing). Default: the run directory.
     #[arg(long, value_name = "OUTDIR")]
     pub out: Option<PathBuf>,
+    /// File format of the figures: `png` (bitmap) or `svg` (vector, text as text).
+    #[arg(long, value_enum, default_value_t = Format::Png)]
+    pub format: Format,
+}
+
+/// File format of the figures.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// PNG bitmap.
+    #[default]
+    Png,
+    /// SVG vector graphics; text is text.
+    Svg,
+}
+
+impl Format {
+    /// The file extension.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Png => "png",
+            Format::Svg => "svg",
+        }
+    }
 }
 
 /// Why plotting failed.
@@ -54,7 +80,7 @@ impl std::fmt::Display for PlotError {
 
 impl std::error::Error for PlotError {}
 
-/// One PNG written: its path and pixel size.
+/// One figure written: its path and size, px.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Rendered {
     /// Path of the file.
@@ -98,11 +124,68 @@ pub fn run(args: &PlotArgs) -> Result<Vec<Rendered>, PlotError> {
         ))
     })?;
     let geometry = Geometry::for_run(&main_run);
-    render_all(&main_run, compare.as_ref(), &geometry, &out)
+    render_all(&main_run, compare.as_ref(), &geometry, &out, args.format)
 }
 
-/// A figure renderer: draws into the file at the given path with the given size.
-type Renderer = fn(&Figure, &Path, (u32, u32)) -> style::DrawResult;
+/// The figures.
+#[derive(Debug, Clone, Copy)]
+enum Kind {
+    Trajectory3d,
+    TopView,
+    PositionErrors,
+    RbfnnError,
+    Attitude,
+    AttitudeConstraint,
+    RateConstraint,
+    Inputs,
+    Disturbance,
+    Gamma,
+    Delta,
+    Separation,
+}
+
+/// Draws figure `kind` on `root`.
+fn draw<DB: style::Backend>(kind: Kind, fig: &Figure, root: &style::Area<DB>) -> style::DrawResult {
+    match kind {
+        Kind::Trajectory3d => trajectory::trajectory_3d(fig, root),
+        Kind::TopView => trajectory::top_view(fig, root),
+        Kind::PositionErrors => errors::position_errors(fig, root),
+        Kind::RbfnnError => errors::rbfnn_error(fig, root),
+        Kind::Attitude => attitude::attitude(fig, root),
+        Kind::AttitudeConstraint => attitude::attitude_constraint(fig, root),
+        Kind::RateConstraint => attitude::rate_constraint(fig, root),
+        Kind::Inputs => inputs::inputs(fig, root),
+        Kind::Disturbance => estimates::disturbance(fig, root),
+        Kind::Gamma => estimates::gamma(fig, root),
+        Kind::Delta => estimates::delta(fig, root),
+        Kind::Separation => separation::separation(fig, root),
+    }
+}
+
+/// Draws figure `kind` into the file `path` of `format`, `size` px.
+fn draw_file(
+    kind: Kind,
+    fig: &Figure,
+    path: &Path,
+    size: (u32, u32),
+    format: Format,
+) -> style::DrawResult {
+    match format {
+        Format::Png => {
+            let backend = plotters::backend::BitMapBackend::new(path, size);
+            let root = text::GlyphText::new(backend).into_drawing_area();
+            draw(kind, fig, &root)?;
+            root.present()?;
+        }
+        Format::Svg => {
+            let backend = plotters::backend::SVGBackend::new(path, size);
+            let root = text::GlyphText::vector(backend).into_drawing_area();
+            draw(kind, fig, &root)?;
+            root.present()?;
+        }
+    }
+    Ok(())
+}
 
 /// What every figure renderer receives.
 pub struct Figure<'a> {
@@ -114,12 +197,13 @@ pub struct Figure<'a> {
     pub geometry: &'a Geometry,
 }
 
-/// Renders Figs. 5-14 of `run` and the separation figure into `out`.
+/// Renders Figs. 5-14 of `run` and the separation figure into `out`, as `format` files.
 pub fn render_all(
     run: &Run,
     compare: Option<&Run>,
     geometry: &Geometry,
     out: &Path,
+    format: Format,
 ) -> Result<Vec<Rendered>, PlotError> {
     style::register_fonts().map_err(PlotError::Render)?;
     let fig = Figure {
@@ -129,48 +213,36 @@ pub fn render_all(
     };
     let n = run.agents.len() as u32;
     let cols = if compare.is_some() { 2 } else { 1 };
-    let list: Vec<(&str, (u32, u32), Renderer)> = vec![
+    let list: Vec<(&str, (u32, u32), Kind)> = vec![
+        ("fig05_trajectory_3d", (1400, 1100), Kind::Trajectory3d),
+        ("fig05_top_view", (1950, 720), Kind::TopView),
         (
-            "fig05_trajectory_3d.png",
-            (1400, 1100),
-            trajectory::trajectory_3d,
-        ),
-        ("fig05_top_view.png", (1950, 720), trajectory::top_view),
-        (
-            "fig06_position_errors.png",
+            "fig06_position_errors",
             (900 * cols + 100, 1100),
-            errors::position_errors,
+            Kind::PositionErrors,
         ),
-        ("fig07_rbfnn_error.png", (1400, 1100), errors::rbfnn_error),
+        ("fig07_rbfnn_error", (1400, 1100), Kind::RbfnnError),
+        ("fig08_attitude", (1600, 90 + 260 * n), Kind::Attitude),
         (
-            "fig08_attitude.png",
-            (1600, 90 + 260 * n),
-            attitude::attitude,
-        ),
-        (
-            "fig09_attitude_constraint.png",
+            "fig09_attitude_constraint",
             (1400, 90 + 250 * n),
-            attitude::attitude_constraint,
+            Kind::AttitudeConstraint,
         ),
         (
-            "fig10_rate_constraint.png",
+            "fig10_rate_constraint",
             (1400, 90 + 250 * n),
-            attitude::rate_constraint,
+            Kind::RateConstraint,
         ),
-        ("fig11_inputs.png", (1400, 1400), inputs::inputs),
-        (
-            "fig12_disturbance_estimate.png",
-            (1400, 700),
-            estimates::disturbance,
-        ),
-        ("fig13_gamma.png", (1400, 1100), estimates::gamma),
-        ("fig14_delta.png", (1400, 1100), estimates::delta),
-        ("separation.png", (1400, 700), separation::separation),
+        ("fig11_inputs", (1400, 1400), Kind::Inputs),
+        ("fig12_disturbance_estimate", (1400, 700), Kind::Disturbance),
+        ("fig13_gamma", (1400, 1100), Kind::Gamma),
+        ("fig14_delta", (1400, 1100), Kind::Delta),
+        ("separation", (1400, 700), Kind::Separation),
     ];
     let mut written = Vec::with_capacity(list.len());
-    for (name, size, render) in list {
-        let path = out.join(name);
-        render(&fig, &path, size)
+    for (stem, size, kind) in list {
+        let path = out.join(format!("{stem}.{}", format.extension()));
+        draw_file(kind, &fig, &path, size, format)
             .map_err(|e| PlotError::Render(format!("{}: {e}", path.display())))?;
         written.push(Rendered {
             path,

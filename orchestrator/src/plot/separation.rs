@@ -1,11 +1,10 @@
 //! Separation figure: the distance between the closest two quadrotors over time, against the
 //! scenario's safety distance (the CSV's output rate; `summary.json` has the per-step minimum).
 
-use super::style::{draw_panel, titled, DrawResult, Legend, Line, Panel};
+use super::style::{draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel};
 use super::{Figure, Run};
 use crate::record::separation::closest_pair;
 use plotters::prelude::*;
-use std::path::Path;
 
 /// (t, closest distance) at every output instant the agents share.
 pub fn min_distance_series(run: &Run) -> Vec<(f64, f64)> {
@@ -29,10 +28,9 @@ pub fn min_distance_series(run: &Run) -> Vec<(f64, f64)> {
 }
 
 /// Distance between the closest two quadrotors with the safety distance (dashed).
-pub fn separation(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn separation<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Separation — distance between the closest two quadrotors ({})",
             fig.run.title()
@@ -64,6 +62,5 @@ pub fn separation(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             x_range: None,
         },
     )?;
-    root.present()?;
     Ok(())
 }

@@ -6,7 +6,7 @@ use plotters::style::FontStyle;
 use std::sync::OnceLock;
 
 /// DejaVu Sans, embedded so that figures render without any system font (licence beside the file).
-static FONT_TTF: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+pub(super) static FONT_TTF: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 
 /// The font family every text of the figures uses.
 pub const FONT: &str = "sans-serif";
@@ -31,8 +31,14 @@ pub fn register_fonts() -> Result<(), String> {
 /// Error type of the drawing code.
 pub type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// A backend a figure can be drawn on: the PNG bitmap (through [`super::text::GlyphText`]) or
+/// SVG; its errors can be boxed.
+pub trait Backend: DrawingBackend<ErrorType: 'static> {}
+
+impl<T: DrawingBackend<ErrorType: 'static>> Backend for T {}
+
 /// The drawing area type every figure draws on.
-pub type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+pub type Area<DB> = DrawingArea<DB, Shift>;
 
 /// Colour of agent `id` (1-based): a ten-colour qualitative palette, cycled.
 pub fn agent_color(id: u32) -> RGBColor {
@@ -204,7 +210,7 @@ pub fn lines_y_range(lines: &[&Line]) -> (f64, f64) {
 }
 
 /// Draws a time-series panel into `area`.
-pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
+pub fn draw_panel<DB: Backend>(area: &Area<DB>, panel: Panel) -> DrawResult {
     let lines: Vec<Line> = panel
         .lines
         .into_iter()
@@ -284,13 +290,14 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
                 (x - base.0, y - base.1)
             })
             .collect();
-        pixels.dedup();
-        let pieces = match line.stroke {
-            Stroke::Solid => pixels.windows(2).map(|w| (w[0], w[1])).collect(),
-            Stroke::Dashed => dash(&pixels, 9.0, 5.0),
-        };
-        for (a, b) in pieces {
-            canvas.draw(&PathElement::new(vec![a, b], style))?;
+        match line.stroke {
+            Stroke::Solid => stroke_pixels(&canvas, &pixels, style)?,
+            Stroke::Dashed => {
+                pixels.dedup();
+                for (a, b) in dash(&pixels, 9.0, 5.0) {
+                    canvas.draw(&PathElement::new(vec![a, b], style))?;
+                }
+            }
         }
     }
 
@@ -298,6 +305,67 @@ pub fn draw_panel(area: &Area, panel: Panel) -> DrawResult {
         draw_side_legend(&side, &lines)?;
     }
     Ok(())
+}
+
+/// Strokes a polyline given in pixels of `area` segment by segment: plotters joins the segments of
+/// a thick polyline with mitres, which shoot far out of the line (spurs) where it turns back
+/// sharply, as a noisy signal or a densely sampled path does at every pixel step.
+pub fn stroke_pixels<DB: Backend>(
+    area: &Area<DB>,
+    pixels: &[(i32, i32)],
+    style: ShapeStyle,
+) -> DrawResult {
+    let mut pixels = pixels.to_vec();
+    pixels.dedup();
+    for w in pixels.windows(2) {
+        area.draw(&PathElement::new(vec![w[0], w[1]], style))?;
+    }
+    Ok(())
+}
+
+/// The corner of the window `x` × `y` where a legend box `size` (fractions of the window's
+/// width and height) covers the fewest of `points`: a legend inside the data goes where it hides
+/// the least (the first of upper right, upper left, lower left, lower right on a tie).
+pub fn emptiest_corner(
+    points: impl Iterator<Item = (f64, f64)>,
+    x: (f64, f64),
+    y: (f64, f64),
+    size: (f64, f64),
+) -> SeriesLabelPosition {
+    let (w, h) = ((x.1 - x.0) * size.0, (y.1 - y.0) * size.1);
+    // (position, x range, y range) of each candidate box.
+    let corners = [
+        (
+            SeriesLabelPosition::UpperRight,
+            (x.1 - w, x.1),
+            (y.1 - h, y.1),
+        ),
+        (
+            SeriesLabelPosition::UpperLeft,
+            (x.0, x.0 + w),
+            (y.1 - h, y.1),
+        ),
+        (
+            SeriesLabelPosition::LowerLeft,
+            (x.0, x.0 + w),
+            (y.0, y.0 + h),
+        ),
+        (
+            SeriesLabelPosition::LowerRight,
+            (x.1 - w, x.1),
+            (y.0, y.0 + h),
+        ),
+    ];
+    let mut counts = [0usize; 4];
+    for p in points {
+        for (k, (_, bx, by)) in corners.iter().enumerate() {
+            if p.0 >= bx.0 && p.0 <= bx.1 && p.1 >= by.0 && p.1 <= by.1 {
+                counts[k] += 1;
+            }
+        }
+    }
+    let best = (0..4).min_by_key(|&k| counts[k]).unwrap_or(0);
+    corners[best].0.clone()
 }
 
 /// Cuts a pixel polyline into dashes of `on` px separated by gaps of `off` px; returns the
@@ -336,7 +404,7 @@ fn dash(pixels: &[(i32, i32)], on: f64, off: f64) -> Vec<((i32, i32), (i32, i32)
 }
 
 /// Draws the labelled lines' samples and names in a column, from the top.
-fn draw_side_legend(side: &Area, lines: &[Line]) -> DrawResult {
+fn draw_side_legend<DB: Backend>(side: &Area<DB>, lines: &[Line]) -> DrawResult {
     let font = (FONT, 15).into_font().color(&BLACK);
     let mut y = 48;
     for line in lines {
@@ -386,7 +454,10 @@ fn trim_zeros(s: String) -> String {
 }
 
 /// Draws a figure title across the top of `root` and returns the area below it.
-pub fn titled<'a>(root: &Area<'a>, title: &str) -> Result<Area<'a>, Box<dyn std::error::Error>> {
+pub fn titled<DB: Backend>(
+    root: &Area<DB>,
+    title: &str,
+) -> Result<Area<DB>, Box<dyn std::error::Error>> {
     root.fill(&WHITE)?;
     Ok(root.titled(title, (FONT, 26))?)
 }

@@ -1,6 +1,6 @@
 //! Tests of `formation plot` on synthetic run directories.
 
-use super::{run, PlotArgs, PlotError, Rendered};
+use super::{run, Format, PlotArgs, PlotError, Rendered};
 use std::path::{Path, PathBuf};
 
 /// Every column of docs/formats.md, in the documented order: the recorder's own list.
@@ -213,6 +213,65 @@ fn renders_all_paper_figures_from_a_trajectory() {
 }
 
 #[test]
+fn svg_figures_are_well_formed_xml_with_their_labels_as_text() {
+    let dir = temp_dir("svg");
+    write_synthetic_run(&dir, 3, 301, 0.2, Some("proposed"));
+    let files = run(&PlotArgs {
+        dir: dir.clone(),
+        format: Format::Svg,
+        ..Default::default()
+    })
+    .expect("plot succeeds");
+    let names: Vec<String> = files
+        .iter()
+        .map(|f| f.path.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let expected: Vec<String> = FIGURES.iter().map(|f| f.replace(".png", ".svg")).collect();
+    assert_eq!(names, expected);
+    // The text of every <text> element of each figure.
+    let mut texts = std::collections::BTreeMap::new();
+    for f in &files {
+        let xml = std::fs::read_to_string(&f.path).expect("an SVG is UTF-8 text");
+        let doc = roxmltree::Document::parse(&xml)
+            .unwrap_or_else(|e| panic!("{}: not well-formed XML: {e}", f.path.display()));
+        let root = doc.root_element();
+        assert_eq!(root.tag_name().name(), "svg", "{}", f.path.display());
+        assert_eq!(root.attribute("width"), Some(f.width.to_string().as_str()));
+        assert_eq!(
+            root.attribute("height"),
+            Some(f.height.to_string().as_str())
+        );
+        assert!(
+            !root.descendants().any(|n| n.has_tag_name("image")),
+            "{}: a bitmap inside",
+            f.path.display()
+        );
+        let stem = f.path.file_stem().unwrap().to_string_lossy().into_owned();
+        let labels: Vec<String> = root
+            .descendants()
+            .filter(|n| n.has_tag_name("text"))
+            .map(|n| n.text().unwrap_or("").trim().to_string())
+            .collect();
+        assert!(!labels.is_empty(), "{stem}: no text");
+        texts.insert(stem, labels);
+    }
+    for (stem, label) in [
+        ("fig05_trajectory_3d", "quadrotor 1"),
+        ("fig05_trajectory_3d", "target path T_g"),
+        ("fig09_attitude_constraint", "C1_bar"),
+        ("separation", "closest pair"),
+        ("fig06_position_errors", "t (s)"),
+    ] {
+        assert!(
+            texts[stem].iter().any(|t| t == label),
+            "{stem}.svg lacks the text element {label:?}: {:?}",
+            texts[stem]
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn compares_two_variants_into_a_separate_output_directory() {
     let a = temp_dir("proposed");
     let b = temp_dir("no-rbfnn");
@@ -223,6 +282,7 @@ fn compares_two_variants_into_a_separate_output_directory() {
         dir: a.clone(),
         compare: Some(b.clone()),
         out: Some(out.join("figs")),
+        ..Default::default()
     };
     let files = run(&args).expect("plot succeeds");
     assert_figures(&files, &out.join("figs"));
@@ -325,4 +385,25 @@ fn malformed_number_is_an_input_error_naming_line_and_column() {
         "{err}"
     );
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_legend_inside_the_data_goes_to_the_corner_with_the_fewest_points() {
+    use super::style::emptiest_corner;
+    use plotters::prelude::SeriesLabelPosition;
+    let (x, y) = ((0.0, 10.0), (0.0, 10.0));
+    let size = (0.3, 0.3);
+    assert!(matches!(
+        emptiest_corner(std::iter::empty(), x, y, size),
+        SeriesLabelPosition::UpperRight
+    ));
+    // Data along the upper and the right edges: the lower left corner is empty.
+    let edges = (0..100).flat_map(|k| {
+        let v = k as f64 / 10.0;
+        [(v, 9.5), (9.5, v)]
+    });
+    assert!(matches!(
+        emptiest_corner(edges, x, y, size),
+        SeriesLabelPosition::LowerLeft
+    ));
 }

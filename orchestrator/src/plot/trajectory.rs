@@ -2,11 +2,11 @@
 
 use super::data::AgentTrace;
 use super::style::{
-    agent_color, clip_runs, fit_range, format_tick, thin, titled, DrawResult, FONT, REFERENCE,
+    agent_color, clip_runs, emptiest_corner, fit_range, format_tick, stroke_pixels, thin, titled,
+    Area, Backend, DrawResult, FONT, REFERENCE,
 };
 use super::Figure;
 use plotters::prelude::*;
-use std::path::Path;
 
 /// Colour of the target disk (outline; the fill is a light tint). Distinct from every agent colour.
 const DISK: RGBColor = RGBColor(20, 20, 20);
@@ -14,10 +14,9 @@ const DISK: RGBColor = RGBColor(20, 20, 20);
 const TRAIL_S: f64 = 5.0;
 
 /// Fig. 5 (left): trajectories of all agents and the target's path in 3D.
-pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 5 — trajectories of the quadrotors and the target ({})",
             fig.run.title()
@@ -67,15 +66,30 @@ pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult 
         .z_formatter(&|v| format_tick(*v))
         .draw()?;
 
+    // Paths are stroked segment by segment in pixels (no mitre spurs on the thick target path);
+    // the legend entries come from empty series.
     let target = &run.agents[0];
     let target_pts: Vec<(f64, f64, f64)> = thin3(target, "tx", "ty", None);
+    let pixels: Vec<(i32, i32)> = target_pts
+        .iter()
+        .map(|p| chart.as_coord_spec().translate(p))
+        .collect();
+    stroke_pixels(root, &pixels, REFERENCE.stroke_width(3))?;
     chart
-        .draw_series(LineSeries::new(target_pts, REFERENCE.stroke_width(3)))?
+        .draw_series(LineSeries::new(
+            Vec::<(f64, f64, f64)>::new(),
+            REFERENCE.stroke_width(3),
+        ))?
         .label("target path T_g")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], REFERENCE.stroke_width(3)));
     for a in &run.agents {
         let color = agent_color(a.id);
         let pts = thin3(a, "px", "py", Some("pz"));
+        let pixels: Vec<(i32, i32)> = pts
+            .iter()
+            .map(|p| chart.as_coord_spec().translate(p))
+            .collect();
+        stroke_pixels(root, &pixels, color.stroke_width(2))?;
         if let Some(&start) = pts.first() {
             chart.draw_series(std::iter::once(Circle::new(start, 5, color.filled())))?;
         }
@@ -83,7 +97,10 @@ pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult 
             chart.draw_series(std::iter::once(TriangleMarker::new(end, 7, color.filled())))?;
         }
         chart
-            .draw_series(LineSeries::new(pts, color.stroke_width(2)))?
+            .draw_series(LineSeries::new(
+                Vec::<(f64, f64, f64)>::new(),
+                color.stroke_width(2),
+            ))?
             .label(format!("quadrotor {}", a.id))
             .legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2))
@@ -128,9 +145,8 @@ pub fn trajectory_3d(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult 
     area.draw_text(
         "● start   ▲ end",
         &(FONT, 16).into_font().color(&RGBColor(80, 80, 80)),
-        (20, size.1 as i32 - 90),
+        (20, root.dim_in_pixel().1 as i32 - 90),
     )?;
-    root.present()?;
     Ok(())
 }
 
@@ -247,10 +263,9 @@ fn circle(c: (f64, f64), r: f64) -> Vec<(f64, f64)> {
 }
 
 /// Fig. 5 (right): top view; an overview and two zoomed snapshots with the disk and the footprints.
-pub fn top_view(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+pub fn top_view<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let area = titled(
-        &root,
+        root,
         &format!(
             "Fig. 5 — top view: target disk (r = {} m) and sensor footprints ({})",
             fig.geometry.target_radius_m,
@@ -318,15 +333,14 @@ pub fn top_view(fig: &Figure, path: &Path, size: (u32, u32)) -> DrawResult {
             false,
         )?;
     }
-    root.present()?;
     Ok(())
 }
 
 /// One square top-view panel centred on `centre` with half-width `half`.
 #[allow(clippy::too_many_arguments)]
-fn top_panel(
+fn top_panel<DB: Backend>(
     fig: &Figure,
-    area: &super::style::Area,
+    area: &Area<DB>,
     title: &str,
     centre: (f64, f64),
     half: f64,
@@ -454,9 +468,24 @@ fn top_panel(
         }
     }
     if legend {
+        // Legend box: ~7 entries of 19 px and ~190 px wide, in the emptiest corner of the data
+        // (trajectories, target path, the disks and footprints of the snapshots).
+        let (pw, ph) = chart.plotting_area().dim_in_pixel();
+        let size = (200.0 / pw.max(1) as f64, 150.0 / ph.max(1) as f64);
+        let mut data: Vec<(f64, f64)> = target_path.clone();
+        for a in &run.agents {
+            data.extend(a.col("px").iter().copied().zip(a.col("py").iter().copied()));
+        }
+        for s in snaps {
+            data.extend(circle(s.target, fig.geometry.target_radius_m));
+            for &(_, x, y, r) in &s.agents {
+                data.extend(circle((x, y), r));
+            }
+        }
+        let corner = emptiest_corner(data.into_iter(), window.0, window.1, size);
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(corner)
             .label_font((FONT, 14))
             .background_style(WHITE.mix(0.85))
             .border_style(RGBColor(160, 160, 160))

@@ -90,31 +90,93 @@ pub const COLUMNS: &[&str] = &[
 ];
 
 /// The rows of one output step, handed to the writer thread.
-struct StepRows {
-    p_d: [f64; 3],
-    target: [f64; 3],
-    offsets: Vec<[f64; 3]>,
-    truths: Vec<PlantTruth>,
-    commands: Vec<ControlCommand>,
-    errors: Vec<f64>,
+pub(crate) struct StepRows {
+    /// Virtual leader P_d, m.
+    pub(crate) p_d: [f64; 3],
+    /// Ground target T_g, m.
+    pub(crate) target: [f64; 3],
+    /// Formation offsets Delta_i0 of the N agents, m.
+    pub(crate) offsets: Vec<[f64; 3]>,
+    /// The plant's truths of the N agents.
+    pub(crate) truths: Vec<PlantTruth>,
+    /// The N commands.
+    pub(crate) commands: Vec<ControlCommand>,
+    /// Formation error of each agent, m.
+    pub(crate) errors: Vec<f64>,
 }
 
 enum Msg {
     Step(Box<StepRows>),
+    /// An injection (a line of `events.jsonl`) for `run.mcap`.
+    Event(serde_json::Value),
     Flush(std::sync::mpsc::SyncSender<std::io::Result<()>>),
 }
 
-/// Writer of `trajectory.csv`: formatting and writing run on a thread of their own, off the
-/// simulation loop (the formatting code is the same, so the bytes are too).
+/// What the writer thread writes.
+pub struct Files<'a> {
+    /// `trajectory.csv`, if written.
+    pub trajectory: Option<&'a Path>,
+    /// `run.mcap`, if written (`--record mcap`).
+    pub mcap: Option<super::mcap::McapSink>,
+}
+
+/// The sinks the writer thread owns.
+struct Sinks {
+    rows: Option<RowWriter>,
+    mcap: Option<super::mcap::McapSink>,
+}
+
+impl Sinks {
+    fn write_rows(&mut self, r: &StepRows) -> std::io::Result<()> {
+        if let Some(rows) = &mut self.rows {
+            rows.write_rows(r)?;
+        }
+        if let Some(mcap) = &mut self.mcap {
+            mcap.write_step(r)?;
+        }
+        Ok(())
+    }
+
+    fn write_event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        match (&mut self.mcap, super::mcap::event_message(line)) {
+            (Some(mcap), Some((step, event))) => mcap.write_event(step, &event),
+            _ => Ok(()),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match &mut self.rows {
+            Some(rows) => rows.flush(),
+            None => Ok(()),
+        }
+    }
+
+    fn close(mut self) -> std::io::Result<()> {
+        self.flush()?;
+        match self.mcap.take() {
+            Some(mcap) => mcap.finish(),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Writer of `trajectory.csv` (and `run.mcap`): formatting and writing run on a thread of their
+/// own, off the simulation loop (the formatting code is the same, so the bytes are too).
 pub struct TrajectoryWriter {
     tx: Option<std::sync::mpsc::SyncSender<Msg>>,
     handle: Option<std::thread::JoinHandle<std::io::Result<()>>>,
 }
 
 impl TrajectoryWriter {
-    /// Creates the file, writes the header and starts the writer thread.
-    pub fn create(path: &Path, s: &Scenario) -> std::io::Result<TrajectoryWriter> {
-        let mut rows = RowWriter::create(path, s)?;
+    /// Creates the files, writes the CSV header and starts the writer thread.
+    pub fn create(files: Files, s: &Scenario) -> std::io::Result<TrajectoryWriter> {
+        let mut rows = Sinks {
+            rows: files
+                .trajectory
+                .map(|path| RowWriter::create(path, s))
+                .transpose()?,
+            mcap: files.mcap,
+        };
         let (tx, rx) = std::sync::mpsc::sync_channel::<Msg>(1024);
         let handle = std::thread::Builder::new()
             .name("csv-writer".into())
@@ -135,6 +197,7 @@ impl TrajectoryWriter {
                             rows.write_rows(&r)?;
                             pending = true;
                         }
+                        Ok(Msg::Event(line)) => rows.write_event(&line)?,
                         Ok(Msg::Flush(reply)) => {
                             let _ = reply.send(rows.flush());
                             (flushed, pending) = (Instant::now(), false);
@@ -147,7 +210,7 @@ impl TrajectoryWriter {
                         (flushed, pending) = (Instant::now(), false);
                     }
                 }
-                rows.flush()
+                rows.close()
             })?;
         Ok(TrajectoryWriter {
             tx: Some(tx),
@@ -173,6 +236,11 @@ impl TrajectoryWriter {
             errors: metrics.agents.iter().map(|a| a.last_error).collect(),
         };
         self.send(Msg::Step(Box::new(rows)))
+    }
+
+    /// Queues an injection (a line of `events.jsonl`) for `run.mcap` (ignored without it).
+    pub fn write_event(&mut self, line: serde_json::Value) -> std::io::Result<()> {
+        self.send(Msg::Event(line))
     }
 
     /// Waits until everything queued so far is written and flushed to the file.

@@ -1,11 +1,13 @@
 //! The recorder: turns the per-step messages of a run (reference frame, plant truths, control
-//! commands) into `trajectory.csv` (decimated) and `summary.json` (metrics computed on every step).
+//! commands) into `trajectory.csv` (decimated), `summary.json` (metrics computed on every step)
+//! and, with `--record mcap`, `run.mcap` (the decimated steps and the injections, for Foxglove).
 //!
 //! Both runners feed it the same messages, so the files of an in-process run and of a lockstep run
 //! over iceoryx2 are byte-identical when the trajectories are.
 
 pub mod coverage;
 pub mod csv;
+pub mod mcap;
 pub mod metrics;
 pub mod recovery;
 pub mod separation;
@@ -18,6 +20,33 @@ pub use summary::Summary;
 use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use formation_config::{Scenario, Variant};
 use std::path::{Path, PathBuf};
+
+/// A recording format besides `trajectory.csv` and `summary.json` (`--record`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// `DIR/run.mcap`: every output step and injection as JSON messages with JSON Schemas, one
+    /// channel per agent and kind (docs/formats.md); opens in Foxglove.
+    Mcap,
+}
+
+/// Which files a [`Recorder`] writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Outputs {
+    /// `trajectory.csv` (sweeps need only `summary.json`).
+    pub trajectory: bool,
+    /// `run.mcap`.
+    pub mcap: bool,
+}
+
+impl Outputs {
+    /// `trajectory.csv` and the files of `formats`.
+    pub fn with(formats: &[Format]) -> Outputs {
+        Outputs {
+            trajectory: true,
+            mcap: formats.contains(&Format::Mcap),
+        }
+    }
+}
 
 /// Writes the outputs of one run.
 pub struct Recorder {
@@ -50,24 +79,37 @@ impl Recorder {
         mode: &'static str,
         out_dir: &Path,
     ) -> std::io::Result<Recorder> {
-        Recorder::create_with(s, variant, mode, out_dir, true)
+        Recorder::create_with(s, variant, mode, out_dir, Outputs::with(&[]))
     }
 
-    /// Creates `out_dir`, and `trajectory.csv` in it when `trajectory` is set (sweeps need only
-    /// `summary.json`).
+    /// Creates `out_dir` and the files of `outputs` in it.
     pub fn create_with(
         s: &Scenario,
         variant: Variant,
         mode: &'static str,
         out_dir: &Path,
-        trajectory: bool,
+        outputs: Outputs,
     ) -> std::io::Result<Recorder> {
         std::fs::create_dir_all(out_dir)?;
-        let csv = if trajectory {
-            Some(csv::TrajectoryWriter::create(
-                &out_dir.join("trajectory.csv"),
-                s,
-            )?)
+        let csv_path = out_dir.join("trajectory.csv");
+        let mcap_path = out_dir.join(mcap::FILE_NAME);
+        if !outputs.mcap {
+            // A recording of an earlier run in the same folder would not match this run.
+            match std::fs::remove_file(&mcap_path) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+                _ => {}
+            }
+        }
+        let mcap = outputs
+            .mcap
+            .then(|| mcap::McapSink::create(&mcap_path, s, variant))
+            .transpose()?;
+        let csv = if outputs.trajectory || mcap.is_some() {
+            let files = csv::Files {
+                trajectory: outputs.trajectory.then_some(csv_path.as_path()),
+                mcap,
+            };
+            Some(csv::TrajectoryWriter::create(files, s)?)
         } else {
             None
         };
@@ -117,6 +159,15 @@ impl Recorder {
             }
         }
         Ok(div)
+    }
+
+    /// Records an injection (a line of `events.jsonl`) in `run.mcap` at the step it applies;
+    /// nothing without `--record mcap` or for a rejected request.
+    pub fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        match &mut self.csv {
+            Some(csv) => csv.write_event(line.clone()),
+            None => Ok(()),
+        }
     }
 
     /// Sets the `timing` object of `summary.json` (realtime runs).

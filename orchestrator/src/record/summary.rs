@@ -183,8 +183,13 @@ impl Summary {
 
     /// Writes it as pretty JSON.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
-        std::fs::write(path, text + "\n")
+        std::fs::write(path, self.to_json() + "\n")
+    }
+
+    /// The pretty JSON of `summary.json` (without the final line break).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self)
+            .expect("a summary serialises (no map with non-string keys)")
     }
 
     /// Prints the human-readable table.

@@ -291,6 +291,14 @@ pub fn drive(
             }
             Err(e) => return (Outcome::Failed(e.to_string()), recorded),
         }
+        for line in live.injections.take_logged() {
+            if let Err(e) = recorder.event(&line) {
+                return (
+                    Outcome::Failed(format!("cannot write run.mcap: {e}")),
+                    recorded,
+                );
+            }
+        }
         live.registration.update(recorded);
         if got > 0 {
             if let Err(e) = ports.announce(recorded) {

@@ -35,6 +35,8 @@ pub struct Injections {
     faults: Output<FaultInjection>,
     delays: Output<DelayInjection>,
     events: File,
+    /// The lines written to `events.jsonl` since the last [`Injections::take_logged`].
+    logged: Vec<serde_json::Value>,
     scenario: Scenario,
 }
 
@@ -48,6 +50,7 @@ impl Injections {
             delays: publisher(node, &services::DELAY_INJECTION.named())?,
             events: File::create(&path)
                 .map_err(|e| format!("cannot create {}: {e}", path.display()))?,
+            logged: Vec::new(),
             scenario: scenario.clone(),
         })
     }
@@ -171,10 +174,18 @@ impl Injections {
         }
     }
 
+    /// The lines written to `events.jsonl` since the last call (the recorder puts the accepted
+    /// ones into `run.mcap`).
+    pub fn take_logged(&mut self) -> Vec<serde_json::Value> {
+        std::mem::take(&mut self.logged)
+    }
+
     fn log(&mut self, v: serde_json::Value) -> Result<(), String> {
         writeln!(self.events, "{v}")
             .and_then(|_| self.events.flush())
-            .map_err(|e| format!("cannot write events.jsonl: {e}"))
+            .map_err(|e| format!("cannot write events.jsonl: {e}"))?;
+        self.logged.push(v);
+        Ok(())
     }
 }
 

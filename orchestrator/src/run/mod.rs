@@ -200,6 +200,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         &scenario,
         variant,
         mode,
+        crate::record::Outputs::with(&args.common.record),
         placement.as_ref(),
         &out,
         &run_id,
@@ -223,6 +224,11 @@ pub fn main(args: RunArgs) -> ExitCode {
     drop(slot);
     drop(out_lock);
     match result {
+        Ok((Outcome::Completed, summary)) if args.common.json => {
+            // Standard output holds the summary JSON only (the progress is on stderr).
+            println!("{}", summary.to_json());
+            crate::sim::exit_code(&summary)
+        }
         Ok((Outcome::Completed, summary)) => {
             summary.print_table();
             match &summary.timing {
@@ -280,6 +286,7 @@ fn run(
     scenario: &Scenario,
     variant: Variant,
     mode: Mode,
+    outputs: crate::record::Outputs,
     placement: Option<&placement::Placement>,
     out: &Path,
     run_id: &str,
@@ -296,7 +303,7 @@ fn run(
     }
     let n = scenario.n_agents();
     let exe = spawn::self_exe()?;
-    let mut recorder = Recorder::create(scenario, variant, mode.name(), out)
+    let mut recorder = Recorder::create_with(scenario, variant, mode.name(), out, outputs)
         .map_err(|e| format!("cannot write outputs to {}: {e}", out.display()))?;
     let run_dir = std::fs::canonicalize(out).unwrap_or_else(|_| out.to_path_buf());
     crate::sim::write_resolved_scenario(scenario, &run_dir)

@@ -44,6 +44,9 @@ pub struct ScenarioArgs {
     /// Output file (default: standard output).
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write the scenario as JSON (the same fields as the TOML) instead of TOML.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// How far outside its cover slot each quadrotor starts, m: the paper's quadrotors start on a
@@ -212,7 +215,17 @@ pub fn main(args: ScenarioArgs) -> ExitCode {
         }
         return ExitCode::from(EXIT_INVALID);
     }
-    let text = s.to_toml_string();
+    let text = if args.json {
+        match serde_json::to_string_pretty(&s) {
+            Ok(j) => j + "\n",
+            Err(e) => {
+                eprintln!("error: cannot write the scenario as JSON: {e}");
+                return ExitCode::from(1);
+            }
+        }
+    } else {
+        s.to_toml_string()
+    };
     match &args.out {
         Some(path) => match std::fs::write(path, text) {
             Ok(()) => {

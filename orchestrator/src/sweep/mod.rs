@@ -178,8 +178,16 @@ fn run_one(
     let result = apply::apply(base, &sample.values).and_then(|s| {
         crate::sim::write_resolved_scenario(&s, dir)
             .map_err(|e| format!("cannot write {}: {e}", dir.display()))?;
-        crate::sim::run_in_process_with(&s, variant, dir, false)
-            .map_err(|e| format!("cannot write {}: {e}", dir.display()))
+        crate::sim::run_in_process_with(
+            &s,
+            variant,
+            dir,
+            crate::record::Outputs {
+                trajectory: false,
+                mcap: false,
+            },
+        )
+        .map_err(|e| format!("cannot write {}: {e}", dir.display()))
     });
     Outcome::new(sample.clone(), result, start.elapsed().as_secs_f64())
 }
