@@ -125,6 +125,22 @@ pub fn main(args: RunArgs) -> ExitCode {
         );
         return ExitCode::from(cli::EXIT_INVALID);
     }
+    if args.realtime {
+        // The realtime loops fly every quadrotor on the wall clock without the lockstep's
+        // take-over protocol: a timeline crash or hang, or a restart, is refused there.
+        let down = scenario.events.iter().position(|e| e.kind.takes_agent_down());
+        if let Some(k) = down {
+            eprintln!(
+                "error: events[{k}]: a `{}` event needs a lockstep run (realtime runs take faults, delays, link faults and message loss; docs/failures.md)",
+                scenario.events[k].kind.name()
+            );
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+        if scenario.runtime.restart != formation_config::scenario::events::RestartPolicy::Never {
+            eprintln!("error: --restart on-failure needs a lockstep run (docs/failures.md)");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    }
     let allowed = crate::cpus::allowed();
     let pin = match placement::PinRequest::parse(&args.pin, &allowed) {
         Ok(p) => p,

@@ -217,7 +217,7 @@ fn fly_fallback(
 }
 
 /// The fault events of the scenario's timeline as injections.
-fn scenario_faults(s: &formation_config::Scenario) -> Vec<FaultInjection> {
+pub(super) fn scenario_faults(s: &formation_config::Scenario) -> Vec<FaultInjection> {
     use formation_config::scenario::events::Change;
     s.timeline()
         .changes()

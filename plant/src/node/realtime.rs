@@ -79,7 +79,8 @@ pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), NodeError> {
         commands: vec![None; n],
         held: vec![ControlCommand::default(); n],
         entries: vec![StepEntry::default(); n],
-        faults: Vec::new(),
+        // The scenario's fault events go the way of the live injections, as in lockstep.
+        faults: super::scenario_faults(&b.scenario),
         k: 0,
         published_ns: 0,
         m: Meters {
