@@ -106,10 +106,8 @@ impl Blend {
         };
         // One step of constant acceleration from the state (and slot) of the last update.
         let a_prev = accel(self.t, self.r, self.rv, &self.s);
-        for k in 0..3 {
-            self.r[k] += self.rv[k] * h + 0.5 * a_prev[k] * h * h;
-            self.rv[k] += a_prev[k] * h;
-        }
+        self.r = std::array::from_fn(|k| self.r[k] + (self.rv[k] * h + 0.5 * a_prev[k] * h * h));
+        self.rv = std::array::from_fn(|k| self.rv[k] + a_prev[k] * h);
         self.t = t;
         self.s = *s;
         let a = accel(t, self.r, self.rv, s);
