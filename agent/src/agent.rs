@@ -205,6 +205,9 @@ impl Agent {
         // Start-up reference generators (D19): every member's from its first shared state, the same
         // on all agents, advanced on the delayed time axis with the member's delayed slot.
         for (m, slot) in self.startup.iter_mut().enumerate() {
+            if self.startup_set && slot.is_none() {
+                continue; // off, or over: nothing to look up
+            }
             let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
             let s = std::array::from_fn(|d| {
                 std::array::from_fn(|k| [leader.p, leader.v, leader.a][d][k] + o[d][k])
@@ -225,7 +228,9 @@ impl Agent {
                     Blend::new(p, v, t_kd, &s, gains)
                 });
             } else if let Some(b) = slot {
-                b.advance(t_kd, &s);
+                if b.advance(t_kd, &s).is_none() {
+                    *slot = None;
+                }
             }
         }
         self.startup_set = true;
