@@ -10,7 +10,7 @@ use crate::delay::{delay_steps, StepHistory};
 use crate::params::AgentParams;
 use crate::position::{clip_norm, consensus_errors, limit, raw_law, LeaderInfo, Member};
 use crate::rbfnn::{uniform, Rbfnn};
-use crate::startup::Blend;
+use crate::startup::{Blend, BlendGains};
 use formation_config::protocol::wire::{
     ControlCommand, ControllerTelemetry, DelayInjection, NeighbourState, ReferenceFrame,
     VehicleState,
@@ -353,26 +353,40 @@ impl Agent {
         let off = self.offsets[0].at_or_before(kd).unwrap_or(zero);
         let leader = self.leader.at_or_before(kd).unwrap_or_default();
         let t_kd = kd as f64 * self.p.dt;
-        if !self.startup_set {
-            self.startup_set = true;
-            if let Some(a_s) = g.position.startup_blend_accel_m_s2 {
-                // Every agent's blend from its first shared state, the same on all agents (D19).
-                for (m, slot) in self.startup.iter_mut().enumerate() {
-                    // Position only: the blended reference moves with the slot's velocity from the
-                    // start (matching the initial velocity too runs away behind a fast target).
-                    let p = if m == 0 {
-                        p_d
-                    } else {
-                        self.neighbours[m - 1].at_or_before(kd).map_or(p_d, |s| s.0)
+        // Start-up reference generators (D19): every member's from its first shared state, the same
+        // on all agents, advanced on the delayed time axis with the member's delayed slot.
+        for (m, slot) in self.startup.iter_mut().enumerate() {
+            if self.startup_set && slot.is_none() {
+                continue; // off, or over: nothing to look up
+            }
+            let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
+            let s = std::array::from_fn(|d| {
+                std::array::from_fn(|k| [leader.p, leader.v, leader.a][d][k] + o[d][k])
+            });
+            if !self.startup_set {
+                let (p, v) = match m {
+                    0 => (p_d, v_d),
+                    _ => self.neighbours[m - 1]
+                        .at_or_before(kd)
+                        .unwrap_or((p_d, v_d)),
+                };
+                *slot = g.position.startup_blend_accel_m_s2.and_then(|a_s| {
+                    let gains = BlendGains {
+                        accel: a_s,
+                        jerk: g.position.startup_blend_jerk_m_s3,
+                        rate: g.position.startup_blend_rate_1_s,
                     };
-                    let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
-                    let e0 = std::array::from_fn(|k| p[k] - leader.p[k] - o[0][k]);
-                    *slot = Blend::new(e0, t_kd, a_s);
+                    Blend::new(p, v, t_kd, &s, gains)
+                });
+            } else if let Some(b) = slot {
+                if b.advance(t_kd, &s).is_none() {
+                    *slot = None;
                 }
             }
         }
+        self.startup_set = true;
         let blend = |m: usize, o: Offsets| -> Offsets {
-            match self.startup[m].and_then(|b| b.at(t_kd)) {
+            match self.startup[m].and_then(|b| b.offset()) {
                 Some(e) => std::array::from_fn(|d| std::array::from_fn(|k| o[d][k] + e[d][k])),
                 None => o,
             }

@@ -302,16 +302,26 @@ pub struct PositionGains {
     /// is flown at the speed where k_V, k_L balance it instead of bang-bang on the limit (ringing).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub position_error_limit_m: Option<f64>,
-    /// Start-up blend of each agent's reference, a_S, m/s² (docs/deviations.md D19; paper: none). When
-    /// set, the slot P_d + Delta_i0 each agent tracks is offset at start-up by e(t) = e_0 h_0(t/T), e_0
-    /// the agent's initial position relative to its slot and h_0 the minimum-jerk shape, so that the
-    /// reference starts at the agent and reaches the slot at rest relative to it after
-    /// T = sqrt(c_0 |e_0| / a_S) (c_0 = 10/sqrt(3)), its acceleration never above a_S. Every agent
-    /// blends its neighbours' slots the same way from their first shared state, so the consensus
-    /// errors start at zero. Ours: absent (off), also in `paper.toml` — the measured effect depends
-    /// on a_S non-monotonically (docs/tuning.md, section 8).
+    /// Start-up reference generator, a_S: the largest acceleration of the reference each agent tracks
+    /// at start-up, m/s² (docs/deviations.md D19; paper: none). When set, the reference starts at the
+    /// agent's first shared position and velocity and reaches its slot P_d + Delta_i0 within a_S, its
+    /// acceleration limit rising at `startup_blend_jerk_m_s3` and its final approach at
+    /// `startup_blend_rate_1_s` (agent/src/startup.rs); every agent shapes its neighbours' references
+    /// the same way from their first shared states, so the consensus errors start at zero. Ours: 1.0 in
+    /// `paper.toml` (docs/tuning.md, section 8): a third of the 3 m/s² of D5, the rest for feedback.
+    /// Absent: off (`paper-exact`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub startup_blend_accel_m_s2: Option<f64>,
+    /// j_S: rate at which the generator's acceleration limit rises from 0 to a_S at start-up, m/s³
+    /// (D19). Default 2.0: the full a_S after a_S / j_S = 0.5 s, so the attitude command does not step
+    /// at t = 0.
+    #[serde(default = "default_startup_blend_jerk")]
+    pub startup_blend_jerk_m_s3: f64,
+    /// lambda_S: rate of the generator's final approach, 1/s (D19): near the slot the reference error
+    /// decays with a double pole at -2 lambda_S. Default 0.5: slower than the position loop's slow
+    /// closed-loop mode, so the loop follows the reference without saturating.
+    #[serde(default = "default_startup_blend_rate")]
+    pub startup_blend_rate_1_s: f64,
     /// Largest horizontal norm of U_iP, m/s². Paper: none (infinite). Ours: 3.0 (D5).
     pub max_horizontal_accel_m_s2: f64,
     /// Largest upward U_i3P, m/s². Paper: none. Ours: 4.0 (D5).
@@ -643,6 +653,14 @@ impl std::fmt::Display for LoadError {
 }
 
 impl std::error::Error for LoadError {}
+
+fn default_startup_blend_jerk() -> f64 {
+    2.0
+}
+
+fn default_startup_blend_rate() -> f64 {
+    0.5
+}
 
 impl Scenario {
     /// The paper scenario with our tuned gains (embedded; the default).

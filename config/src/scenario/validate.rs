@@ -868,6 +868,16 @@ fn check_adaptive_and_auxiliary(s: &Scenario, c: &mut Collector) {
     }
     if let Some(a) = ctl.position.startup_blend_accel_m_s2 {
         c.positive("controller.position.startup_blend_accel_m_s2", a, CTRL);
+        c.positive(
+            "controller.position.startup_blend_jerk_m_s3",
+            ctl.position.startup_blend_jerk_m_s3,
+            CTRL,
+        );
+        c.positive(
+            "controller.position.startup_blend_rate_1_s",
+            ctl.position.startup_blend_rate_1_s,
+            CTRL,
+        );
     }
     let aux = &ctl.auxiliary;
     for (name, val) in [
