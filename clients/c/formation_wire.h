@@ -166,7 +166,7 @@ typedef struct fm_StepEntry {
 } fm_StepEntry;
 #define FM_STEPENTRY_TYPE_NAME "formation.v2.StepEntry"
 
-/* 96 bytes, align 8; iceoryx2 type name "formation.v1.InjectRequest". */
+/* 112 bytes, align 8; iceoryx2 type name "formation.v2.InjectRequest". */
 typedef struct fm_InjectRequest {
     uint64_t nonce; /* - */
     uint64_t at_step; /* - */
@@ -177,7 +177,10 @@ typedef struct fm_InjectRequest {
     double base_s; /* s */
     double amplitude_s; /* s */
     double angular_rate_rad_s; /* rad/s */
+    uint32_t other; /* - */
+    uint32_t _pad; /* - */
+    double down_s; /* s */
 } fm_InjectRequest;
-#define FM_INJECTREQUEST_TYPE_NAME "formation.v1.InjectRequest"
+#define FM_INJECTREQUEST_TYPE_NAME "formation.v2.InjectRequest"
 
 #endif /* FORMATION_WIRE_H */

@@ -463,7 +463,7 @@ mod tests {
     #[test]
     fn the_schema_lists_each_service_of_the_table_once_with_its_wire_type_and_layout() {
         let s = schema(3);
-        assert_eq!(s.services.len(), 11 + 5);
+        assert_eq!(s.services.len(), 12 + 5);
         let tel = s
             .services
             .iter()

@@ -248,7 +248,7 @@ class StepEntry(ctypes.Structure):
 
 
 class InjectRequest(ctypes.Structure):
-    """96 bytes, align 8; iceoryx2 type name formation.v1.InjectRequest."""
+    """112 bytes, align 8; iceoryx2 type name formation.v2.InjectRequest."""
 
     _fields_ = [
         ("nonce", ctypes.c_uint64),  # -
@@ -260,12 +260,15 @@ class InjectRequest(ctypes.Structure):
         ("base_s", ctypes.c_double),  # s
         ("amplitude_s", ctypes.c_double),  # s
         ("angular_rate_rad_s", ctypes.c_double),  # rad/s
+        ("other", ctypes.c_uint32),  # -
+        ("_pad", ctypes.c_uint32),  # -
+        ("down_s", ctypes.c_double),  # s
     ]
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name the run's service declares."""
-        return "formation.v1.InjectRequest"
+        return "formation.v2.InjectRequest"
 
 
 # Every service: name pattern ({i}: 0-based agent index) -> (scope, message class or None
@@ -277,6 +280,7 @@ SERVICES = {
     "formation/run/control": ("run", RunControl, False),
     "formation/run/progress": ("run", RunProgress, False),
     "formation/run/hello": ("run", Hello, False),
+    "formation/run/events": ("run", RuntimeEvent, False),
     "formation/plant/steps": ("run", StepEntry, True),
     "formation/inject/request": ("run", InjectRequest, False),
     "formation/wake/orchestrator": ("run", None, False),

@@ -128,7 +128,10 @@ pub fn main(args: RunArgs) -> ExitCode {
     if args.realtime {
         // The realtime loops fly every quadrotor on the wall clock without the lockstep's
         // take-over protocol: a timeline crash or hang, or a restart, is refused there.
-        let down = scenario.events.iter().position(|e| e.kind.takes_agent_down());
+        let down = scenario
+            .events
+            .iter()
+            .position(|e| e.kind.takes_agent_down());
         if let Some(k) = down {
             eprintln!(
                 "error: events[{k}]: a `{}` event needs a lockstep run (realtime runs take faults, delays, link faults and message loss; docs/failures.md)",
