@@ -183,4 +183,17 @@ typedef struct fm_InjectRequest {
 } fm_InjectRequest;
 #define FM_INJECTREQUEST_TYPE_NAME "formation.v2.InjectRequest"
 
+/* 48 bytes, align 8; iceoryx2 type name "formation.v1.RuntimeEvent". */
+typedef struct fm_RuntimeEvent {
+    uint64_t step; /* - */
+    uint32_t kind; /* - */
+    uint32_t agent; /* - */
+    uint32_t other; /* - */
+    uint32_t _pad; /* - */
+    uint64_t down_steps; /* steps */
+    double probability; /* - */
+    uint64_t seed; /* - */
+} fm_RuntimeEvent;
+#define FM_RUNTIMEEVENT_TYPE_NAME "formation.v1.RuntimeEvent"
+
 #endif /* FORMATION_WIRE_H */

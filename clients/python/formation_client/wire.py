@@ -271,6 +271,26 @@ class InjectRequest(ctypes.Structure):
         return "formation.v2.InjectRequest"
 
 
+class RuntimeEvent(ctypes.Structure):
+    """48 bytes, align 8; iceoryx2 type name formation.v1.RuntimeEvent."""
+
+    _fields_ = [
+        ("step", ctypes.c_uint64),  # -
+        ("kind", ctypes.c_uint32),  # -
+        ("agent", ctypes.c_uint32),  # -
+        ("other", ctypes.c_uint32),  # -
+        ("_pad", ctypes.c_uint32),  # -
+        ("down_steps", ctypes.c_uint64),  # steps
+        ("probability", ctypes.c_double),  # -
+        ("seed", ctypes.c_uint64),  # -
+    ]
+
+    @staticmethod
+    def type_name():
+        """The iceoryx2 type name the run's service declares."""
+        return "formation.v1.RuntimeEvent"
+
+
 # Every service: name pattern ({i}: 0-based agent index) -> (scope, message class or None
 # for an event, whether a sample is a slice of N elements).
 SERVICES = {

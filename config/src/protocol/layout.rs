@@ -84,7 +84,9 @@ impl TypeLayout {
     }
 }
 
-use crate::protocol::messages::{Hello, InjectRequest, RunControl, RunProgress, StepEntry};
+use crate::protocol::messages::{
+    Hello, InjectRequest, RunControl, RunProgress, RuntimeEvent, StepEntry,
+};
 use crate::protocol::wire::{
     AgentTelemetry, ControlCommand, ControllerTelemetry, DelayInjection, FaultInjection,
     NeighbourState, PlantTruth, ReferenceFrame, VehicleState,
@@ -92,7 +94,7 @@ use crate::protocol::wire::{
 
 /// Every wire type: the messages of the services and the structs nested in them, each after the
 /// types it contains.
-pub fn every_type() -> [TypeLayout; 14] {
+pub fn every_type() -> [TypeLayout; 15] {
     [
         TypeLayout::of::<VehicleState>(),
         TypeLayout::of::<NeighbourState>(),
@@ -108,6 +110,7 @@ pub fn every_type() -> [TypeLayout; 14] {
         TypeLayout::of::<Hello>(),
         TypeLayout::of::<StepEntry>(),
         TypeLayout::of::<InjectRequest>(),
+        TypeLayout::of::<RuntimeEvent>(),
     ]
 }
 

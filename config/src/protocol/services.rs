@@ -572,10 +572,10 @@ mod tests {
     }
 
     #[test]
-    fn a_run_has_eleven_run_wide_services_and_five_per_agent_all_with_distinct_names() {
+    fn a_run_has_twelve_run_wide_services_and_five_per_agent_all_with_distinct_names() {
         let mut names = Names::default();
         visit(&Sizing::run(5, false), &mut names).unwrap();
-        assert_eq!(names.0.len(), 11 + 5 * 5);
+        assert_eq!(names.0.len(), 12 + 5 * 5);
         let mut unique: Vec<&String> = names.0.iter().map(|(n, _)| n).collect();
         unique.sort();
         unique.dedup();

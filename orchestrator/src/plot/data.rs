@@ -71,6 +71,8 @@ pub struct Run {
     pub variant: Option<String>,
     /// Agents in ascending index order.
     pub agents: Vec<AgentTrace>,
+    /// The events of `summary.json` (time, label), for the events figure.
+    pub events: Vec<(f64, String)>,
 }
 
 fn column_index(name: &str) -> usize {
@@ -136,6 +138,7 @@ impl Run {
             scenario,
             variant,
             agents,
+            events: read_events(&dir.join("summary.json")),
         })
     }
 
@@ -280,4 +283,27 @@ fn read_summary(path: &Path) -> (Option<String>, Option<String>) {
         _ => None,
     };
     (field("scenario"), field("variant"))
+}
+
+/// The events of a `summary.json` as (at_s, label) pairs: `crash 3`, `link_down 2-3`.
+fn read_events(path: &Path) -> Vec<(f64, String)> {
+    let v: serde_json::Value = std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or_default();
+    let Some(list) = v.get("events").and_then(|e| e.as_array()) else {
+        return Vec::new();
+    };
+    list.iter()
+        .filter_map(|e| {
+            let t = e.get("at_s")?.as_f64()?;
+            let kind = e.get("kind")?.as_str()?;
+            let who = match (e.get("agents").and_then(|a| a.as_array()), e.get("agent")) {
+                (Some(a), _) if a.len() == 2 => format!(" {}-{}", a[0], a[1]),
+                (_, Some(a)) if a.is_u64() => format!(" {a}"),
+                _ => String::new(),
+            };
+            Some((t, format!("{kind}{who}")))
+        })
+        .collect()
 }

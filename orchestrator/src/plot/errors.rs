@@ -99,3 +99,40 @@ pub fn rbfnn_error<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     }
     Ok(())
 }
+
+/// The formation error norm of every agent with the events of the timeline marked (crashes, hangs,
+/// link faults, losses, detected deaths; docs/failures.md).
+pub fn events<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
+    let area = titled(
+        root,
+        &format!(
+            "Formation error ||P_i − P_d − Δ_i0|| with the events of the run ({})",
+            fig.run.title()
+        ),
+    )?;
+    draw_panel(
+        &area,
+        Panel {
+            title: format!(
+                "dashed: {}",
+                fig.run
+                    .events
+                    .iter()
+                    .map(|(t, what)| format!("{what} at {t:.2} s"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            x_desc: "t (s)",
+            y_desc: "||e_i|| (m)".to_string(),
+            lines: per_agent(fig.run, |a| {
+                a.derived(&["ex", "ey", "ez"], |r| {
+                    (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
+                })
+            }),
+            markers: &fig.run.events,
+            legend: Legend::Side,
+            y_range: None,
+            x_range: None,
+        },
+    )
+}

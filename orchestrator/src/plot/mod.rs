@@ -142,6 +142,7 @@ enum Kind {
     Gamma,
     Delta,
     Separation,
+    Events,
 }
 
 /// Draws figure `kind` on `root`.
@@ -159,6 +160,7 @@ fn draw<DB: style::Backend>(kind: Kind, fig: &Figure, root: &style::Area<DB>) ->
         Kind::Gamma => estimates::gamma(fig, root),
         Kind::Delta => estimates::delta(fig, root),
         Kind::Separation => separation::separation(fig, root),
+        Kind::Events => errors::events(fig, root),
     }
 }
 
@@ -239,6 +241,10 @@ pub fn render_all(
         ("fig14_delta", (1400, 1100), Kind::Delta),
         ("separation", (1400, 700), Kind::Separation),
     ];
+    let mut list = list;
+    if !run.events.is_empty() {
+        list.push(("events", (1400, 700), Kind::Events));
+    }
     let mut written = Vec::with_capacity(list.len());
     for (stem, size, kind) in list {
         let path = out.join(format!("{stem}.{}", format.extension()));

@@ -13,7 +13,7 @@
 //!   that are up, connected, and one of them pinned to the leader) held at every step.
 
 use formation_config::protocol::messages::RuntimeEvent;
-use formation_config::scenario::events::{Event, EventKind, Timeline};
+use formation_config::scenario::events::{Event, Timeline};
 use formation_config::scenario::graph::Topology;
 use serde::Serialize;
 
@@ -256,20 +256,10 @@ pub fn marks(events: &[Event], runtime: &[RuntimeEvent], incidents: &[Mark], dt:
     out
 }
 
-/// Whether an event kind takes an agent down (for the figure's shading).
-pub fn is_down(kind: &str) -> bool {
-    [
-        EventKind::Crash.name(),
-        EventKind::Hang.name(),
-        "died",
-        "hung",
-    ]
-    .contains(&kind)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use formation_config::scenario::events::EventKind;
 
     #[test]
     fn an_event_recovers_when_the_error_is_back_under_twice_its_value_before_and_stays_there() {
