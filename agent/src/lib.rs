@@ -7,6 +7,8 @@
 //! construction). The process loop around it is `main.rs`; the in-process runner calls the same
 //! [`Agent`] methods with the same messages.
 #![warn(missing_docs)]
+// Per-axis loops index several arrays at once, as the paper's component equations do.
+#![allow(clippy::needless_range_loop)]
 
 pub mod agent;
 pub mod attitude;

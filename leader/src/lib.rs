@@ -3,6 +3,8 @@
 //!
 //! Pure math: no IPC, no clock, no allocation per step. The process loop around it is `main.rs`.
 #![warn(missing_docs)]
+// Per-axis loops index several arrays at once, as the paper's component equations do.
+#![allow(clippy::needless_range_loop)]
 
 pub mod mission;
 pub mod smooth;

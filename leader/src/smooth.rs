@@ -17,7 +17,8 @@ impl Jet {
         Jet { v, d: 0.0, dd: 0.0 }
     }
 
-    /// Product rule.
+    /// Product rule (a plain method: the jets are built in `const`-like chains, not operators).
+    #[allow(clippy::should_implement_trait)]
     pub fn mul(self, o: Jet) -> Jet {
         Jet {
             v: self.v * o.v,
@@ -27,6 +28,7 @@ impl Jet {
     }
 
     /// Sum.
+    #[allow(clippy::should_implement_trait)]
     pub fn add(self, o: Jet) -> Jet {
         Jet {
             v: self.v + o.v,

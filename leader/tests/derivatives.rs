@@ -1,4 +1,5 @@
 //! The leader's analytic derivatives agree with finite differences, and the formation is centred.
+#![allow(clippy::needless_range_loop)] // per-axis index math, as in the library
 
 use formation_config::protocol::wire::ReferenceFrame;
 use formation_config::Scenario;

@@ -124,7 +124,7 @@ impl ClosedLoop {
                 }
             }
         }
-        if self.history.len() > 0 {
+        if !self.history.is_empty() {
             for (i, st) in self.states.iter().enumerate() {
                 self.history.set_state(k, i, *st);
             }
@@ -188,7 +188,8 @@ impl ClosedLoop {
                     // The agent process checkpoints before the control of every checkpoint step
                     // and of its first step (agent node); only a loop that takes agents down
                     // needs them here.
-                    if self.history.len() > 0 && (k % every == 0 || k == self.started[i]) {
+                    if !self.history.is_empty() && (k.is_multiple_of(every) || k == self.started[i])
+                    {
                         if let Ok(bytes) = a.checkpoint() {
                             self.checkpoints[i] = Some((k, bytes));
                         }
@@ -201,7 +202,7 @@ impl ClosedLoop {
                 }
             }
             self.truths[i] = self.plant.truth(i);
-            if self.history.len() > 0 {
+            if !self.history.is_empty() {
                 self.history.set_command(
                     k,
                     i,

@@ -33,6 +33,11 @@ impl History {
         self.len
     }
 
+    /// True when it keeps nothing (a loop without down windows).
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
     fn slot(&self, k: u64, i: usize) -> usize {
         (k % self.len.max(1)) as usize * self.n + i
     }

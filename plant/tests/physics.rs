@@ -148,7 +148,7 @@ fn fault_profiles_of_eq_63_64_match_the_printed_values() {
     assert!((d0 - Vector3::new(0.0, 0.0, 0.5)).norm() < 1e-15);
     let t = 40.0;
     let (g, d) = f.at(40_000, t);
-    let e = (-t as f64).exp();
+    let e = (-t).exp();
     assert!((g[0] - (0.7 + 0.3 * e)).abs() < 1e-15);
     assert!((d[1] - (0.1 * (1.0 - e) + 0.05 * (0.27 * t).sin())).abs() < 1e-15);
     assert!((d[2] - (-1.3 * (1.0 - e) + 0.5)).abs() < 1e-15);
