@@ -297,14 +297,14 @@ mod tests {
         assert!(
             s.measure(
                 &[Mark {
-                    step: 100,
+                    step: 2000,
                     ..out_mark()
                 }],
                 0.001
             )[0]
             .recovered_after_s
                 == Some(0.0),
-            "never left"
+            "never above its threshold, 2 x the 1.0 m of the second before"
         );
         assert_eq!(e.violations_during, 201);
         assert!(e.peak_error_m >= 0.15);

@@ -37,6 +37,20 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     let mut roster = Roster::new(n, b.scenario.timeline());
     let runtime = b.scenario.runtime.clone();
     let mut pace = Lockstep::new(n, steps);
+    // The runtime events (take-down requests, joins, timeline events) read at a wake-up.
+    macro_rules! drain_events {
+        () => {
+            Step {
+                plant: &mut plant,
+                roster: &mut roster,
+                runtime: &runtime,
+                arrived: &mut arrived,
+                entries: &mut entries,
+                pace: &mut pace,
+            }
+            .drain_events(&ports)?
+        };
+    }
     // Reading fewer subscribers per wake-up keeps the plant, which is on the critical path of every
     // step, short (docs/runtime.md, "Cost of a step"): the commands still missing on every wake-up;
     // stop and the lifeline on a wake-up that brought no command (a stop comes with a poke, the
@@ -76,15 +90,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
         // or the timeout.
         let idle = fresh == 0;
         if idle {
-            let mut step = Step {
-                plant: &mut plant,
-                roster: &mut roster,
-                runtime: &runtime,
-                arrived: &mut arrived,
-                entries: &mut entries,
-                pace: &mut pace,
-            };
-            step.drain_events(&ports)?;
+            drain_events!();
         }
         if idle {
             while let Some(c) = ports.control.receive()? {
@@ -108,15 +114,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 while let Some(f) = ports.faults.receive()? {
                     faults.push(*f);
                 }
-                let mut step = Step {
-                    plant: &mut plant,
-                    roster: &mut roster,
-                    runtime: &runtime,
-                    arrived: &mut arrived,
-                    entries: &mut entries,
-                    pace: &mut pace,
-                };
-                step.drain_events(&ports)?;
+                drain_events!();
             }
             let awaited = roster.awaited(k);
             match pace.states() {
