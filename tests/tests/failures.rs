@@ -144,6 +144,37 @@ fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends
     let pid = run.agent_pid(1).expect("agent 2 runs");
     // SAFETY: a pid of this run's agent 2, just read.
     unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+    let id = run
+        .wait_for_line("formation run: id ", Duration::from_secs(5))
+        .and_then(|l| {
+            l.split("id ")
+                .nth(1)
+                .map(|r| r.split(',').next().unwrap_or("").to_string())
+        })
+        .expect("the run says its id");
+    run.wait_for_line("taken over", Duration::from_secs(30))
+        .expect("a new process takes over");
+    // `formation ps` lists the new process, alive, once it has joined.
+    let start = Instant::now();
+    let listed = loop {
+        let o = formation(&["ps", "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_default();
+        let agent2 = v["runs"].as_array().and_then(|runs| {
+            runs.iter().find(|r| r["id"] == id.as_str()).and_then(|r| {
+                r["processes"]
+                    .as_array()?
+                    .iter()
+                    .find(|p| p["agent"] == 2)
+                    .cloned()
+            })
+        });
+        match agent2 {
+            Some(p) if p["pid"] != pid && p["alive"] == true => break Some(p),
+            _ if start.elapsed() > Duration::from_secs(10) => break None,
+            _ => std::thread::sleep(Duration::from_millis(100)),
+        }
+    };
+    assert!(listed.is_some(), "ps lists agent 2's new process");
     let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
     let stderr = run.stderr();
     assert_eq!(st.code(), Some(0), "{stderr}");

@@ -340,6 +340,22 @@ impl Registration {
         &self.path
     }
 
+    /// Keeps the record's pids those of the running children (`pids[k]`: child k, in the order
+    /// after the orchestrator): a replaced agent process is listed with its new pid at once.
+    pub fn follow_pids(&mut self, pids: impl Iterator<Item = u32>) {
+        let mut changed = false;
+        for (entry, pid) in self.rec.processes.iter_mut().skip(1).zip(pids) {
+            if entry.pid != pid {
+                entry.pid = pid;
+                changed = true;
+            }
+        }
+        if changed {
+            // Best effort, as for the progress.
+            let _ = write_atomically(&self.path, &self.rec);
+        }
+    }
+
     /// Refreshes the progress (at most every 500 ms; cheap otherwise).
     pub fn update(&mut self, recorded: u64) {
         let dt = self.last.elapsed();

@@ -276,6 +276,11 @@ pub fn drive(
             eprintln!("error: {e}");
             return (Outcome::Died(e), recorded);
         }
+        if !hellos.is_empty() {
+            // A new agent process has its ports: `formation ps` lists it from now on.
+            live.registration
+                .follow_pids(children.iter().map(|c| c.pid()));
+        }
         if recorded >= steps {
             progress.finish(recorded);
             return (Outcome::Completed, recorded);
