@@ -7,9 +7,9 @@ use crate::history::History;
 use formation_agent::restart::{rebuild, Rejoin, Replayed};
 use formation_agent::Agent;
 use formation_config::protocol::wire::{
-    ControlCommand, NeighbourState, PlantTruth, ReferenceFrame, VehicleState,
+    ControlCommand, FaultInjection, NeighbourState, PlantTruth, ReferenceFrame, VehicleState,
 };
-use formation_config::scenario::events::{Change, EventKind, RestartState, Runtime, Timeline};
+use formation_config::scenario::events::{EventKind, RestartState, Runtime, Timeline};
 use formation_config::{Scenario, Variant};
 use formation_leader::Mission;
 use formation_plant::Plant;
@@ -86,17 +86,8 @@ impl ClosedLoop {
     pub fn observe(&mut self) {
         let k = self.k;
         for c in self.timeline.changes() {
-            if let Change::Fault {
-                step,
-                agent,
-                gamma,
-                delta,
-            } = *c
-            {
-                if step == k {
-                    self.plant
-                        .inject_fault(&fault_injection(step, self.dt, agent, gamma, delta));
-                }
+            if let Some(f) = FaultInjection::of_change(c, self.dt).filter(|f| f.step == k) {
+                self.plant.inject_fault(&f);
             }
         }
         for i in 0..self.agents.len() {
@@ -246,24 +237,6 @@ impl ClosedLoop {
     /// The agents.
     pub fn agents(&self) -> &[Agent] {
         &self.agents
-    }
-}
-
-/// The plant's injection message of a fault change.
-pub fn fault_injection(
-    step: u64,
-    dt: f64,
-    agent: usize,
-    gamma: [f64; 3],
-    delta: [f64; 3],
-) -> formation_config::protocol::wire::FaultInjection {
-    formation_config::protocol::wire::FaultInjection {
-        step,
-        t: step as f64 * dt,
-        agent: agent as u32,
-        mode: 1,
-        gamma,
-        delta,
     }
 }
 

@@ -92,6 +92,13 @@ impl RunningRun {
         Some(rest.split([',', ' ']).next()?.to_string())
     }
 
+    /// The run id of the start line (`formation run: id <id>, ...`).
+    pub fn id(&self) -> Option<String> {
+        let line = self.wait_for_line("formation run: id ", Duration::from_secs(30))?;
+        let rest = line.split("formation run: id ").nth(1)?;
+        Some(rest.split(',').next()?.to_string())
+    }
+
     /// Waits for the orchestrator to exit (or `timeout`); returns its status and the time it took.
     pub fn wait(&mut self, timeout: Duration) -> Option<(ExitStatus, Duration)> {
         let start = Instant::now();

@@ -144,14 +144,7 @@ fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends
     let pid = run.agent_pid(1).expect("agent 2 runs");
     // SAFETY: a pid of this run's agent 2, just read.
     unsafe { libc::kill(pid as i32, libc::SIGKILL) };
-    let id = run
-        .wait_for_line("formation run: id ", Duration::from_secs(5))
-        .and_then(|l| {
-            l.split("id ")
-                .nth(1)
-                .map(|r| r.split(',').next().unwrap_or("").to_string())
-        })
-        .expect("the run says its id");
+    let id = run.id().expect("the run says its id");
     run.wait_for_line("taken over", Duration::from_secs(30))
         .expect("a new process takes over");
     // `formation ps` lists the new process, alive, once it has joined.
@@ -351,14 +344,7 @@ fn a_live_run_with_injected_fault_and_crash_replayed_from_its_events_jsonl_is_by
     let out = dir.join("live");
     let mut run = RunningRun::start(&["--set", "simulation.duration_s=20"], &out);
     wait_stepping(&run);
-    let id = run
-        .wait_for_line("formation run: id ", Duration::from_secs(5))
-        .and_then(|l| {
-            l.split("id ")
-                .nth(1)
-                .map(|r| r.split(',').next().unwrap_or("").to_string())
-        })
-        .expect("the run says its id");
+    let id = run.id().expect("the run says its id");
     let inject = |args: &[&str]| {
         let o = Command::new(bin("formation"))
             .arg("inject")

@@ -68,7 +68,8 @@ fn start_long_run(runs: &Path, out: &Path) -> RunningRun {
 
 /// The run id on the start line of a run.
 fn run_id(run: &RunningRun) -> String {
-    field_after(run, "formation run: id ")
+    run.id()
+        .unwrap_or_else(|| panic!("no run id: {}", run.stderr()))
 }
 
 /// What follows `needle` on the first stderr line holding it, up to a comma.

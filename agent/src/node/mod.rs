@@ -123,7 +123,8 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                 agent.observe_reference(r);
                 sampler.observe_reference(r);
             }),
-            Some(m) if !observed => {
+            // Once per step (the frame carries its step; a process taking over starts at k > 0).
+            Some(m) if local_reference.step != k => {
                 m.reference(
                     k,
                     k as f64 * b.scenario.simulation.dt_s,

@@ -364,6 +364,29 @@ crate::wire_fields!(FaultInjection {
     delta: [f64; 3] => "N m",
 });
 
+impl FaultInjection {
+    /// The injection of a timeline's fault change (None for a delay change): what the plant
+    /// applies at that step, in `sim` and in `run` alike.
+    pub fn of_change(c: &crate::scenario::events::Change, dt: f64) -> Option<FaultInjection> {
+        match *c {
+            crate::scenario::events::Change::Fault {
+                step,
+                agent,
+                gamma,
+                delta,
+            } => Some(FaultInjection {
+                step,
+                t: step as f64 * dt,
+                agent: agent as u32,
+                mode: 1,
+                gamma,
+                delta,
+            }),
+            crate::scenario::events::Change::Delay { .. } => None,
+        }
+    }
+}
+
 /// Orchestrator -> agents: new delay profile of agent i from step `step` on.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

@@ -108,7 +108,8 @@ fn supervise(
     if interrupted.load(Ordering::SeqCst) {
         return Some(Outcome::Interrupted);
     }
-    let mut death = spawn::check_indexed(children).map(|(idx, line)| (idx, line, since_check));
+    let mut death =
+        spawn::check_indexed(children).map(|(idx, line)| (idx, line, false, since_check));
     if death.is_none() {
         if let Some(limit) = stall.filter(|l| since_progress >= *l) {
             let hung = (0..children.len()).find(|&idx| {
@@ -124,7 +125,7 @@ fn supervise(
                         since_progress.as_millis()
                     );
                     children[idx].kill_and_reap();
-                    death = Some((idx, line, limit));
+                    death = Some((idx, line, true, limit));
                 }
                 None => {
                     let line = format!(
@@ -137,8 +138,8 @@ fn supervise(
             }
         }
     }
-    let (idx, line, seen) = death?;
-    match takeover.on_death(idx, line, seen, recorded, node, children) {
+    let (idx, line, hung, seen) = death?;
+    match takeover.on_death(idx, line, hung, seen, recorded, node, children) {
         Ok(()) => None,
         Err(line) => {
             // Said at once, before the other processes are stopped (which takes up to STOP_GRACE).

@@ -171,17 +171,17 @@ impl Supervisor {
     /// Agent i's process died (or was declared hung and killed) outside the timeline; `line`
     /// names it. `None`: the timeline killed it (expected).
     pub fn on_death(&mut self, i: usize, line: &str) -> Option<Action> {
-        Some(self.decide_death(i, line)).filter(|_| !self.expects_gone(i))
-    }
-
-    fn decide_death(&mut self, i: usize, line: &str) -> Action {
         match self.slots[i] {
-            Slot::Parked(_) => return Action::Fail(String::new()),
+            Slot::Parked(_) => return None,
             Slot::Running | Slot::Spawned { .. } => {}
             Slot::Dead | Slot::Down { .. } => {
-                return Action::Fail(format!("{line} while it was being replaced"))
+                return Some(Action::Fail(format!("{line} while it was being replaced")))
             }
         }
+        Some(self.decide_restart(i, line))
+    }
+
+    fn decide_restart(&mut self, i: usize, line: &str) -> Action {
         if self.runtime.restart == RestartPolicy::Never {
             return Action::Fail(line.to_string());
         }

@@ -21,6 +21,10 @@ use iceoryx2::port::notifier::Notifier;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+/// Sim time the ring of recorded steps covers beyond a checkpoint period and the delay histories
+/// when the timeline has no longer down window, s.
+const RESTART_WINDOW_S: f64 = 2.0;
+
 /// Index of agent i among the children (plant, leader, then the agents).
 const FIRST_AGENT: usize = 2;
 
@@ -78,9 +82,10 @@ impl Takeover {
         let timeline = scenario.timeline();
         let dt = scenario.simulation.dt_s;
         let capacity = formation_agent::Agent::new(scenario, 0, variant).history_capacity();
-        // A restart under the policy is down for about the announcement lead plus the detection
-        // time; keep ten seconds of steps for it at least.
-        let longest = history::longest_down(&timeline).max((10.0 / dt) as u64);
+        // A restart under the policy (or a live crash) is down for about the announcement lead plus
+        // the detection time: two seconds of steps at least. A longer live crash restarts from what
+        // the ring still holds (cold if its checkpoint has left it).
+        let longest = history::longest_down(&timeline).max((RESTART_WINDOW_S / dt) as u64);
         let len = history::len(&scenario.runtime, dt, capacity, longest);
         let mut agent_wakes = Vec::with_capacity(n);
         for i in 0..n {
@@ -192,10 +197,12 @@ impl Takeover {
 
     /// A child exited or died (`idx` among the children, `line` naming it): `Ok` when the run goes
     /// on (the timeline killed it, or it is being replaced), `Err` with the line to print.
+    #[allow(clippy::too_many_arguments)] // what was seen, and the run's parts
     pub fn on_death(
         &mut self,
         idx: usize,
         line: String,
+        hung: bool,
         since_seen: Duration,
         recorded: u64,
         node: &RunNode,
@@ -212,11 +219,7 @@ impl Takeover {
             Some(a) => {
                 eprintln!("error: {line}; restarting it (runtime.restart = on-failure)");
                 self.incidents.push(Incident {
-                    kind: if line.contains("made no progress") {
-                        "hung"
-                    } else {
-                        "died"
-                    },
+                    kind: if hung { "hung" } else { "died" },
                     agent: i,
                     down_from: None,
                     rejoin_at: None,

@@ -216,26 +216,11 @@ fn fly_fallback(
 
 /// The fault events of the scenario's timeline as injections.
 pub(super) fn scenario_faults(s: &formation_config::Scenario) -> Vec<FaultInjection> {
-    use formation_config::scenario::events::Change;
+    let dt = s.simulation.dt_s;
     s.timeline()
         .changes()
         .iter()
-        .filter_map(|c| match *c {
-            Change::Fault {
-                step,
-                agent,
-                gamma,
-                delta,
-            } => Some(FaultInjection {
-                step,
-                t: step as f64 * s.simulation.dt_s,
-                agent: agent as u32,
-                mode: 1,
-                gamma,
-                delta,
-            }),
-            Change::Delay { .. } => None,
-        })
+        .filter_map(|c| FaultInjection::of_change(c, dt))
         .collect()
 }
 
