@@ -407,6 +407,31 @@ pub fn read_events(
 mod tests {
     use super::*;
 
+    #[test]
+    fn event_times_read_back_from_json_lines_are_the_exact_f64_that_was_written() {
+        // `t = step * dt` is not always the shortest decimal (1646 * 0.001 = 1.6460000000000001);
+        // a replayed events.jsonl and `inject --json` must give back those exact bits.
+        let path =
+            std::env::temp_dir().join(format!("formation-roundtrip-{}.jsonl", std::process::id()));
+        let times: Vec<f64> = (1..5000u32).map(|k| f64::from(k) * 0.001).collect();
+        let lines: String = times
+            .iter()
+            .map(|t| {
+                format!(
+                    "{}\n",
+                    serde_json::json!({"at_s": t, "kind": "crash", "agent": 1, "down_s": 0.5})
+                )
+            })
+            .collect();
+        std::fs::write(&path, lines).unwrap();
+        let events = read_events(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(events.len(), times.len());
+        for (e, t) in events.iter().zip(&times) {
+            assert_eq!(e.at_s.to_bits(), t.to_bits(), "{t} read back as {}", e.at_s);
+        }
+    }
+
     fn set(s: Scenario, sets: &[&str]) -> Result<Scenario, String> {
         apply_overrides(s, &sets.iter().map(|x| x.to_string()).collect::<Vec<_>>())
     }
