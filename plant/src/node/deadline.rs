@@ -39,6 +39,7 @@ impl Silence {
     }
 
     /// Steps agent i has missed in a row.
+    #[cfg(test)]
     pub fn missed(&self, i: usize) -> u64 {
         self.missed[i]
     }
