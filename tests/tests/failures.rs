@@ -328,6 +328,58 @@ fn a_stopped_agent_is_named_within_1_5_s_replaced_and_the_run_completes() {
 }
 
 #[test]
+fn a_stopped_agent_of_a_realtime_run_is_named_by_its_silence_replaced_and_the_run_completes() {
+    let dir = temp_dir("stop-agent-realtime");
+    let out = dir.join("run");
+    let mut run = RunningRun::start(
+        &[
+            "--realtime",
+            "--set",
+            "simulation.duration_s=20",
+            "--restart",
+            "on-failure",
+            "--stall-timeout-ms",
+            "1000",
+        ],
+        &out,
+    );
+    wait_stepping(&run);
+    std::thread::sleep(Duration::from_secs(4));
+    let pid = run.agent_pid(2).expect("agent 3 runs");
+    // SAFETY: a pid of this run's agent 3, just read.
+    unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
+    let stopped = Instant::now();
+    let line = run
+        .wait_for_line("sent no command", Duration::from_secs(10))
+        .expect("the hang is named");
+    let named_after = stopped.elapsed();
+    eprintln!("realtime SIGSTOP of agent 3 named after {named_after:?}: {line}");
+    assert!(
+        line.contains(&format!("agent 3 (--agent 2) (pid {pid})")) && line.contains("(stopped)"),
+        "{line}"
+    );
+    assert!(
+        named_after < Duration::from_millis(1500),
+        "named after {named_after:?}"
+    );
+    run.wait_for_line("taken over", Duration::from_secs(30))
+        .expect("a new process takes over");
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    assert_eq!(st.code(), Some(0), "{}", run.stderr());
+    let s = summary(&out);
+    assert_eq!(s["agents"][2]["restarts"], 1);
+    let hung = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["kind"] == "hung")
+        .expect("the hang is an event");
+    eprintln!("realtime SIGSTOP of agent 3: {hung}");
+    assert_eq!(s["diverged"], false);
+    assert!(residue_of(&run).is_empty());
+}
+
+#[test]
 fn link_faults_and_message_loss_are_flagged_survived_and_identical_in_run_and_sim() {
     let dir = temp_dir("links");
     let link = scenario_with(
