@@ -193,6 +193,60 @@ fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends
 }
 
 #[test]
+fn a_killed_agent_of_a_realtime_run_is_replaced_on_the_wall_clock_counted_measured_exit_0() {
+    let dir = temp_dir("kill-agent-realtime");
+    let out = dir.join("run");
+    let mut run = RunningRun::start(
+        &[
+            "--realtime",
+            "--set",
+            "simulation.duration_s=20",
+            "--restart",
+            "on-failure",
+        ],
+        &out,
+    );
+    wait_stepping(&run);
+    // Mid-run, with a checkpoint of agent 2 to restore (one per second of the run).
+    let ckpt = formation_config::node::restart::checkpoint_path(&out, 1);
+    let start = Instant::now();
+    while !ckpt.exists() || start.elapsed() < Duration::from_secs(6) {
+        assert!(start.elapsed() < RUN_TIMEOUT, "{}", run.stderr());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let pid = run.agent_pid(1).expect("agent 2 runs");
+    // SAFETY: a pid of this run's agent 2, just read.
+    unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+    run.wait_for_line("taken over", Duration::from_secs(30))
+        .expect("a new process takes over");
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    let stderr = run.stderr();
+    assert_eq!(st.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "agent 2 (--agent 1) (pid {pid}) was killed (SIGKILL); restarting it"
+        )) && stderr.contains("warm"),
+        "{stderr}"
+    );
+    let s = summary(&out);
+    assert_eq!(s["mode"], "realtime");
+    assert_eq!(s["agents"][1]["restarts"], 1);
+    let died = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["kind"] == "died")
+        .expect("the death is an event");
+    eprintln!("realtime kill -9 of agent 2: {died}");
+    assert_eq!(died["agent"], 2);
+    assert!(died["detected_after_ms"].as_f64().is_some(), "{died}");
+    assert!(died["restarted_after_ms"].as_f64().is_some(), "{died}");
+    assert!(died["recovered_after_s"].as_f64().is_some(), "{died}");
+    assert_eq!(s["diverged"], false);
+    assert!(residue_of(&run).is_empty());
+}
+
+#[test]
 fn a_killed_plant_or_leader_ends_the_run_with_a_non_zero_exit_naming_it_even_under_on_failure() {
     for (role, name) in [("plant", "fm-plant"), ("leader", "fm-leader")] {
         let dir = temp_dir(&format!("kill-{role}"));
@@ -270,6 +324,58 @@ fn a_stopped_agent_is_named_within_1_5_s_replaced_and_the_run_completes() {
         .unwrap()
         .iter()
         .any(|e| e["kind"] == "hung"));
+    assert!(residue_of(&run).is_empty());
+}
+
+#[test]
+fn a_stopped_agent_of_a_realtime_run_is_named_by_its_silence_replaced_and_the_run_completes() {
+    let dir = temp_dir("stop-agent-realtime");
+    let out = dir.join("run");
+    let mut run = RunningRun::start(
+        &[
+            "--realtime",
+            "--set",
+            "simulation.duration_s=20",
+            "--restart",
+            "on-failure",
+            "--stall-timeout-ms",
+            "1000",
+        ],
+        &out,
+    );
+    wait_stepping(&run);
+    std::thread::sleep(Duration::from_secs(4));
+    let pid = run.agent_pid(2).expect("agent 3 runs");
+    // SAFETY: a pid of this run's agent 3, just read.
+    unsafe { libc::kill(pid as i32, libc::SIGSTOP) };
+    let stopped = Instant::now();
+    let line = run
+        .wait_for_line("sent no command", Duration::from_secs(10))
+        .expect("the hang is named");
+    let named_after = stopped.elapsed();
+    eprintln!("realtime SIGSTOP of agent 3 named after {named_after:?}: {line}");
+    assert!(
+        line.contains(&format!("agent 3 (--agent 2) (pid {pid})")) && line.contains("(stopped)"),
+        "{line}"
+    );
+    assert!(
+        named_after < Duration::from_millis(1500),
+        "named after {named_after:?}"
+    );
+    run.wait_for_line("taken over", Duration::from_secs(30))
+        .expect("a new process takes over");
+    let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+    assert_eq!(st.code(), Some(0), "{}", run.stderr());
+    let s = summary(&out);
+    assert_eq!(s["agents"][2]["restarts"], 1);
+    let hung = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["kind"] == "hung")
+        .expect("the hang is an event");
+    eprintln!("realtime SIGSTOP of agent 3: {hung}");
+    assert_eq!(s["diverged"], false);
     assert!(residue_of(&run).is_empty());
 }
 

@@ -43,10 +43,10 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
         None => (0, None),
     };
     let _greeting = hello(&b.node, Role::Agent, i as u32)?;
+    let mut checkpoints = rejoin::Checkpoints::new(&b, i, start);
     if b.args.realtime {
-        return realtime::run(&b, i, agent, &ports);
+        return realtime::run(&b, i, agent, &ports, &mut checkpoints);
     }
-    let checkpoints = rejoin::Checkpoints::new(&b, i, start);
     let mut local_reference = formation_config::protocol::wire::ReferenceFrame::default();
     let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);
     let mut refs = early_references::EarlyReferences::default();

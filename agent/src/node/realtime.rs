@@ -9,8 +9,13 @@
 //! (neighbour send stamp -> received) and the compute time of `Agent::step`; written at the stop
 //! to `<run dir>/timing/agent-<i>.json`. Live telemetry for `formation inspect` goes out on the
 //! same service and with the same sim-time period as in lockstep ([`super::telemetry`]).
+//! It checkpoints as in lockstep (`super::rejoin::Checkpoints`), so that under `--restart
+//! on-failure` a process replacing a dead one restores the newest checkpoint, replays the recorded
+//! steps up to the one the orchestrator had recorded at the death, and then answers the newest
+//! states it gets (it cannot replay the steps it missed on the wall clock).
 
 use super::ports::Ports;
+use super::rejoin::Checkpoints;
 use super::telemetry::Sampler;
 use crate::Agent;
 use formation_config::node::boot::Boot;
@@ -33,7 +38,13 @@ struct Meters {
 }
 
 /// Runs agent i in realtime mode until the orchestrator says stop (or goes away).
-pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), NodeError> {
+pub fn run(
+    b: &Boot,
+    i: usize,
+    mut agent: Agent,
+    ports: &Ports,
+    checkpoints: &mut Checkpoints,
+) -> Result<(), NodeError> {
     if let Some(w) = formation_config::node::sched::realtime_setup(b.args.rt_priority) {
         eprintln!("warning: {w}");
     }
@@ -97,6 +108,8 @@ pub fn run(b: &Boot, i: usize, mut agent: Agent, ports: &Ports) -> Result<(), No
                 }
             });
             if k > 0 || agent.ready(0) {
+                // Outside the timed control: a warm restart restores the newest checkpoint.
+                checkpoints.before_step(&agent, k);
                 let t0 = now_ns();
                 let mut cmd = agent.step(&s);
                 let t1 = now_ns();

@@ -14,7 +14,8 @@ use std::path::PathBuf;
 pub struct Checkpoints {
     path: PathBuf,
     every: u64,
-    first: u64,
+    /// The next step whose checkpoint is due.
+    next: u64,
     agent: usize,
 }
 
@@ -27,17 +28,20 @@ impl Checkpoints {
                 .scenario
                 .runtime
                 .checkpoint_steps(b.scenario.simulation.dt_s),
-            first,
+            next: first,
             agent: i,
         }
     }
 
-    /// Writes the checkpoint of step k if one is due (before its control). A failed write is
-    /// logged and the run goes on: only a later warm restart would miss it.
-    pub fn before_step(&self, agent: &Agent, k: u64) {
-        if !k.is_multiple_of(self.every) && k != self.first {
+    /// Writes the checkpoint of step k if one is due (before its control): at the first step,
+    /// then at the first step computed at or after each multiple of the period (in lockstep every
+    /// step is computed, so exactly at the multiples; a realtime agent may skip steps). A failed
+    /// write is logged and the run goes on: only a later warm restart would miss it.
+    pub fn before_step(&mut self, agent: &Agent, k: u64) {
+        if k < self.next {
             return;
         }
+        self.next = (k / self.every + 1) * self.every;
         let written = agent
             .checkpoint()
             .map_err(|e| e.to_string())
@@ -109,7 +113,9 @@ pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), Node
         |k, j| plan.state(k, j),
         |k| plan.command(k),
     );
-    if replayed.mismatches > 0 {
+    // A realtime agent's commands depend on when its inputs arrived, which the replay from the
+    // recorded states cannot reproduce: there the count is informative only.
+    if replayed.mismatches > 0 && !b.args.realtime {
         tracing::warn!(
             agent = i + 1,
             replayed = replayed.steps,

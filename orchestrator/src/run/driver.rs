@@ -87,13 +87,18 @@ impl Ports {
 }
 
 /// How often the children are checked for an unexpected exit.
+/// Index of agent i among the children (plant, leader, then the agents).
+const FIRST_AGENT: usize = 2;
+
 const SUPERVISE_EVERY: Duration = Duration::from_millis(50);
 /// Longest wait for every role process to be ready.
 const START_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Watches children, Ctrl-C and the progress of the run: a dead agent is handled by the
 /// supervision (`takeover`), and so is one found stopped once the run has made no progress for the
-/// stall timeout; returns the reason to stop, if any.
+/// stall timeout, and (realtime, where the plant flies on) one whose commands have been missing
+/// from the step records for the stall timeout (`silent`: its index and for how long); returns
+/// the reason to stop, if any.
 #[allow(clippy::too_many_arguments)] // the supervision's inputs, each its own kind
 fn supervise(
     children: &mut [RoleProcess],
@@ -104,12 +109,25 @@ fn supervise(
     since_check: Duration,
     recorded: u64,
     node: &RunNode,
+    silent: Option<(usize, Duration)>,
 ) -> Option<Outcome> {
     if interrupted.load(Ordering::SeqCst) {
         return Some(Outcome::Interrupted);
     }
     let mut death =
         spawn::check_indexed(children).map(|(idx, line)| (idx, line, false, since_check));
+    if let (None, Some((i, quiet))) = (&death, silent) {
+        let c = &mut children[FIRST_AGENT + i];
+        let line = format!(
+            "{} (pid {}) sent no command for {} ms{}",
+            c.label,
+            c.pid(),
+            quiet.as_millis(),
+            if c.is_stopped() { " (stopped)" } else { "" }
+        );
+        c.kill_and_reap();
+        death = Some((FIRST_AGENT + i, line, true, quiet));
+    }
     if death.is_none() {
         if let Some(limit) = stall.filter(|l| since_progress >= *l) {
             let hung = (0..children.len()).find(|&idx| {
@@ -222,6 +240,10 @@ pub fn drive(
     let mut commands = vec![ControlCommand::default(); n];
     let mut progress = Progress::new(steps, dt);
     let mut last_check = Instant::now();
+    // Realtime: when each agent's command was last in a step record (its own, not the fallback's:
+    // those carry no send stamp); None before its first.
+    let realtime = !ports.wake_plant_on_progress;
+    let mut heard: Vec<Option<Instant>> = vec![None; n];
     if let Err(e) = ports.announce(0) {
         return (Outcome::Failed(e), 0);
     }
@@ -250,6 +272,14 @@ pub fn drive(
                 *c = e.command;
             }
             takeover.on_record(k, entries);
+            if realtime {
+                let now = Instant::now();
+                for (h, e) in heard.iter_mut().zip(entries) {
+                    if e.command.sent_ns != 0 {
+                        *h = Some(now);
+                    }
+                }
+            }
             drop(s);
             got += 1;
             mission.reference(k, k as f64 * dt, &mut reference);
@@ -271,6 +301,10 @@ pub fn drive(
         while let Ok(Some(h)) = ports.hello.receive() {
             if h.role == formation_config::protocol::messages::Role::Agent as u32 {
                 hellos.push(h.agent);
+                if let Some(t) = heard.get_mut(h.agent as usize) {
+                    // A new process: its silence counts from its hello.
+                    *t = Some(Instant::now());
+                }
             }
         }
         if let Err(e) = takeover.poll(recorded, &hellos, node, children) {
@@ -314,6 +348,16 @@ pub fn drive(
         if last_check.elapsed() >= SUPERVISE_EVERY {
             let since_check = last_check.elapsed();
             last_check = Instant::now();
+            let silent = stall.filter(|_| realtime).and_then(|limit| {
+                heard.iter().enumerate().find_map(|(i, t)| {
+                    let quiet = (*t)?.elapsed();
+                    (quiet >= limit && !takeover.expects_gone(i)).then_some((i, quiet))
+                })
+            });
+            if let Some((i, _)) = silent {
+                // Named once: a new process restarts the count at its hello.
+                heard[i] = None;
+            }
             if let Some(o) = supervise(
                 children,
                 interrupted,
@@ -323,6 +367,7 @@ pub fn drive(
                 since_check,
                 recorded,
                 node,
+                silent,
             ) {
                 progress.finish(recorded);
                 return (o, recorded);

@@ -126,8 +126,8 @@ pub fn main(args: RunArgs) -> ExitCode {
         return ExitCode::from(cli::EXIT_INVALID);
     }
     if args.realtime {
-        // The realtime loops fly every quadrotor on the wall clock without the lockstep's
-        // take-over protocol: a timeline crash or hang, or a restart, is refused there.
+        // The realtime loops replace a dead agent on the fly (`--restart on-failure`), but do not
+        // kill and respawn on the timeline: a timeline crash or hang is refused there.
         let down = scenario
             .events
             .iter()
@@ -137,10 +137,6 @@ pub fn main(args: RunArgs) -> ExitCode {
                 "error: events[{k}]: a `{}` event needs a lockstep run (realtime runs take faults, delays, link faults and message loss; docs/failures.md)",
                 scenario.events[k].kind.name()
             );
-            return ExitCode::from(cli::EXIT_INVALID);
-        }
-        if scenario.runtime.restart != formation_config::scenario::events::RestartPolicy::Never {
-            eprintln!("error: --restart on-failure needs a lockstep run (docs/failures.md)");
             return ExitCode::from(cli::EXIT_INVALID);
         }
     }
@@ -441,6 +437,7 @@ fn run(
         (0..n).map(|i| placement.map(|p| p.agent(i))).collect(),
         formation_config::protocol::pacing::PLANT_LEAD + injections::SLACK,
     )?;
+    takeover.set_realtime(mode.realtime);
     let mut step_timing = step_timing::StepTiming::default();
     // The wall time of the run is that of its steps: from every role process ready (after any
     // start-up) to the last step recorded.

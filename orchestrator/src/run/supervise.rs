@@ -197,6 +197,26 @@ impl Supervisor {
         Action::TakeDown(i)
     }
 
+    /// Realtime: agent i died (its restart counted by [`Supervisor::on_death`]) with `recorded`
+    /// steps recorded. The plant already flies it on its fallback (its commands stopped coming),
+    /// so no take-down is asked: its successor starts at once, rebuilt from the recorded steps
+    /// before `recorded`, and answers the newest states it gets.
+    pub fn on_dead_realtime(&mut self, i: usize, recorded: u64) -> Option<Action> {
+        if self.slots.get(i) != Some(&Slot::Dead) {
+            return None;
+        }
+        self.slots[i] = Slot::Spawned {
+            rejoin_at: recorded,
+        };
+        Some(Action::Respawn(Plan {
+            agent: i,
+            down_from: recorded,
+            rejoin_at: recorded,
+            warm: self.runtime.restart_state == RestartState::Warm,
+            scheduled: false,
+        }))
+    }
+
     /// The plant took agent i down from step `from` (`recorded` steps are recorded): its
     /// successor takes over far enough ahead that every process knows before the plant gets there.
     pub fn on_taken_down(&mut self, i: usize, from: u64, recorded: u64) -> Option<Action> {
@@ -319,6 +339,40 @@ mod tests {
         assert_eq!(s.restarts(), &[0, 1, 0]);
         assert!(
             matches!(s.on_death(1, "agent 2 was killed"), Some(Action::Fail(m)) if m.contains("max_restarts"))
+        );
+    }
+
+    #[test]
+    fn a_realtime_death_is_respawned_at_once_from_the_recorded_steps_and_joins_on_hello() {
+        let rt = Runtime {
+            restart: RestartPolicy::OnFailure,
+            ..Runtime::default()
+        };
+        let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
+        assert_eq!(s.on_dead_realtime(1, 500), None, "not dead");
+        assert_eq!(s.on_death(1, "agent 2 died"), Some(Action::TakeDown(1)));
+        let a = s.on_dead_realtime(1, 500);
+        assert_eq!(
+            a,
+            Some(Action::Respawn(Plan {
+                agent: 1,
+                down_from: 500,
+                rejoin_at: 500,
+                warm: true,
+                scheduled: false,
+            }))
+        );
+        assert_eq!(s.restarts(), &[0, 1, 0]);
+        assert!(
+            s.on_recorded(10_000).is_empty(),
+            "no announcement is awaited"
+        );
+        assert_eq!(
+            s.on_hello(1),
+            Some(Action::Joined {
+                agent: 1,
+                step: 500
+            })
         );
     }
 }

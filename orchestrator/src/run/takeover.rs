@@ -61,6 +61,8 @@ pub struct Takeover {
     pins: Vec<Option<usize>>,
     n: usize,
     capacity: usize,
+    /// A realtime run: a dead agent is replaced at once, without take-down or announcement.
+    realtime: bool,
     /// What happened, in order.
     pub incidents: Vec<Incident>,
 }
@@ -104,8 +106,14 @@ impl Takeover {
             pins,
             n,
             capacity,
+            realtime: false,
             incidents: Vec::new(),
         })
+    }
+
+    /// Supervises a realtime run (`Supervisor::on_dead_realtime`).
+    pub fn set_realtime(&mut self, realtime: bool) {
+        self.realtime = realtime;
     }
 
     /// Restarts under the policy, per agent.
@@ -227,6 +235,17 @@ impl Takeover {
                     restarted_after_ms: None,
                     started: Instant::now(),
                 });
+                let a = match a {
+                    Action::TakeDown(i) if self.realtime => {
+                        children[FIRST_AGENT + i].kill_and_reap();
+                        node.try_cleanup_dead_nodes();
+                        match self.supervisor.on_dead_realtime(i, recorded) {
+                            Some(a) => a,
+                            None => return Err(format!("{line}; stopping the run")),
+                        }
+                    }
+                    a => a,
+                };
                 self.carry(a, recorded, node, children)
             }
         }
@@ -278,6 +297,10 @@ impl Takeover {
                     inc.restarted_after_ms = Some(inc.started.elapsed().as_secs_f64() * 1e3);
                 }
                 tracing::info!(agent = agent + 1, step, "new agent process joined");
+                if self.realtime {
+                    // The realtime plant does not wait for it: it uses its commands as they come.
+                    return Ok(());
+                }
                 send(
                     &self.events_out,
                     RuntimeEvent {

@@ -3,6 +3,7 @@
 //! order of arrival changes nothing: `plant/tests/physics.rs`); once all N are in, k advances, the
 //! states of k + 1 go out and then the step record of k.
 
+mod deadline;
 mod lockstep;
 mod ports;
 mod realtime;

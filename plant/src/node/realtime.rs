@@ -7,12 +7,15 @@
 //!    step k stamped with the send time, wake the agents;
 //! 2. collect the commands of step k until all N are in or the deadline S_{k+1} passes;
 //! 3. apply them, integrate [t_k, t_{k+1}] and publish the step record. An agent whose command did
-//!    not arrive in time keeps its previous command (zero-order hold); such a step counts as one
-//!    deadline miss. Commands for a step already integrated are dropped and counted as late.
+//!    not arrive in time is flown on its fallback (`super::deadline`): its last command held for
+//!    `runtime.hold_s` (zero-order hold), then the level hover of `crate::fallback`, until its
+//!    commands come in again; such a step counts as one deadline miss. Commands for a step already
+//!    integrated are dropped and counted as late.
 //!
 //! The plant never waits for the recorder here: the step records buffer is sized for a second of
 //! steps instead.
 
+use super::deadline::{Decision, Silence};
 use super::ports::Ports;
 use crate::Plant;
 use formation_config::node::boot::Boot;
@@ -45,7 +48,7 @@ struct Loop<'a> {
     plant: Plant,
     n: usize,
     commands: Vec<Option<ControlCommand>>,
-    held: Vec<ControlCommand>,
+    silence: Silence,
     entries: Vec<StepEntry>,
     faults: Vec<FaultInjection>,
     k: u64,
@@ -77,7 +80,7 @@ pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), NodeError> {
         plant,
         n,
         commands: vec![None; n],
-        held: vec![ControlCommand::default(); n],
+        silence: Silence::new(n),
         entries: vec![StepEntry::default(); n],
         // The scenario's fault events go the way of the live injections, as in lockstep.
         faults: super::scenario_faults(&b.scenario),
@@ -244,8 +247,8 @@ impl Loop<'_> {
         Ok(())
     }
 
-    /// Applies the commands of step k (holding the previous one where none came), integrates, and
-    /// publishes the step record.
+    /// Applies the commands of step k (the fallback where none came), integrates, and publishes the
+    /// step record.
     fn integrate(&mut self) -> Result<(), Stop> {
         let k = self.k;
         let plant = &mut self.plant;
@@ -258,12 +261,19 @@ impl Loop<'_> {
             }
         });
         for i in 0..self.n {
-            if let Some(c) = self.commands[i].take() {
-                self.held[i] = c;
-            }
-            let mut cmd = self.held[i];
-            cmd.step = k;
-            self.plant.apply(i, &cmd);
+            let arrived = self.commands[i].take();
+            let cmd = match (self.silence.decide(i, arrived.is_some()), arrived) {
+                (Decision::Command, Some(mut c)) => {
+                    c.step = k;
+                    self.plant.apply(i, &c);
+                    c
+                }
+                (Decision::Fallback { since_steps }, _) => {
+                    self.plant
+                        .apply_fallback(i, since_steps, &self.b.scenario.runtime)
+                }
+                (Decision::Command, None) => unreachable!("a command decision has its command"),
+            };
             self.entries[i] = StepEntry {
                 truth: self.plant.truth(i),
                 command: cmd,
