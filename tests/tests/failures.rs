@@ -12,6 +12,14 @@ use std::time::{Duration, Instant};
 
 const RUN_TIMEOUT: Duration = Duration::from_secs(240);
 
+/// The tests that kill or stop a process on the wall clock and time its detection and take-over
+/// run one at a time: on a 2-core machine two 20 s realtime runs beside them would measure the
+/// host, not the supervisor.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// The paper scenario of `duration_s` with `events` (TOML `[[events]]` tables) appended.
 fn scenario_with(dir: &Path, name: &str, duration_s: f64, events: &str) -> PathBuf {
     let mut text = formation_config::scenario::PAPER_TOML
@@ -129,6 +137,7 @@ fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_beats_a
 
 #[test]
 fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends_with_exit_0() {
+    let _one = one_at_a_time();
     let dir = temp_dir("kill-agent");
     let out = dir.join("run");
     let mut run = RunningRun::start(
@@ -194,6 +203,7 @@ fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends
 
 #[test]
 fn a_killed_agent_of_a_realtime_run_is_replaced_on_the_wall_clock_counted_measured_exit_0() {
+    let _one = one_at_a_time();
     let dir = temp_dir("kill-agent-realtime");
     let out = dir.join("run");
     let mut run = RunningRun::start(
@@ -285,6 +295,7 @@ fn a_killed_plant_or_leader_ends_the_run_with_a_non_zero_exit_naming_it_even_und
 
 #[test]
 fn a_stopped_agent_is_named_within_1_5_s_replaced_and_the_run_completes() {
+    let _one = one_at_a_time();
     let dir = temp_dir("stop-agent");
     let out = dir.join("run");
     let mut run = RunningRun::start(
@@ -329,6 +340,7 @@ fn a_stopped_agent_is_named_within_1_5_s_replaced_and_the_run_completes() {
 
 #[test]
 fn a_stopped_agent_of_a_realtime_run_is_named_by_its_silence_replaced_and_the_run_completes() {
+    let _one = one_at_a_time();
     let dir = temp_dir("stop-agent-realtime");
     let out = dir.join("run");
     let mut run = RunningRun::start(
