@@ -86,10 +86,9 @@ impl Ports {
     }
 }
 
-/// How often the children are checked for an unexpected exit.
-/// Index of agent i among the children (plant, leader, then the agents).
-const FIRST_AGENT: usize = 2;
+use super::takeover::FIRST_AGENT;
 
+/// How often the children are checked for an unexpected exit.
 const SUPERVISE_EVERY: Duration = Duration::from_millis(50);
 /// Longest wait for every role process to be ready.
 const START_TIMEOUT: Duration = Duration::from_secs(30);

@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 const RESTART_WINDOW_S: f64 = 2.0;
 
 /// Index of agent i among the children (plant, leader, then the agents).
-const FIRST_AGENT: usize = 2;
+pub(super) const FIRST_AGENT: usize = 2;
 
 /// One handled incident, for `summary.json` (`events`).
 #[derive(Debug, Clone, PartialEq)]
