@@ -18,8 +18,10 @@ pub struct Mission {
     climb_rate: f64,
     descent: f64,
     descent_sharpness: f64,
-    cover_radius: f64,
-    enclose_radius: f64,
+    /// R_c of each agent's ring (one ring: R_c for every agent; concentric rings: R_c,j), m.
+    cover_radius: [f64; MAX_AGENTS],
+    /// R_e of each agent's ring, m.
+    enclose_radius: [f64; MAX_AGENTS],
     radius_sharpness: f64,
     spin_rate: f64,
     spin_sharpness: f64,
@@ -45,8 +47,12 @@ impl Mission {
             [0.0, 0.0]
         };
         let mut phases = [0.0; MAX_AGENTS];
-        for (i, p) in phases.iter_mut().enumerate().take(n) {
-            *p = m.formation.first_phase_rad + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+        let mut cover_radius = [0.0; MAX_AGENTS];
+        let mut enclose_radius = [0.0; MAX_AGENTS];
+        for i in 0..n {
+            // A validated scenario has a slot for every agent.
+            let (c, e, p) = m.formation.slot(i, n).unwrap_or_default();
+            (cover_radius[i], enclose_radius[i], phases[i]) = (c, e, p);
         }
         Mission {
             n,
@@ -58,8 +64,8 @@ impl Mission {
             climb_rate: m.leader.climb_rate,
             descent: m.leader.descent_m,
             descent_sharpness: m.leader.descent_sharpness,
-            cover_radius: m.formation.cover_radius_m,
-            enclose_radius: m.formation.enclose_radius_m,
+            cover_radius,
+            enclose_radius,
             radius_sharpness: m.formation.radius_sharpness,
             spin_rate: m.formation.spin_rate_rad_s,
             spin_sharpness: m.formation.spin_onset_sharpness,
@@ -97,14 +103,14 @@ impl Mission {
         [x, y, z]
     }
 
-    /// Ring radius A_t with derivatives.
-    pub fn radius(&self, t: f64) -> Jet {
+    /// Ring radius A_t of agent `i`'s ring (0-based) with derivatives.
+    pub fn radius(&self, i: usize, t: f64) -> Jet {
         // atan(k (T1 - t))/pi + 1/2 = 1 - smooth_step(k, T1, t)
         let down = smooth_step(self.radius_sharpness, self.t1, t)
             .scale(-1.0)
             .add(Jet::constant(1.0));
-        down.scale(self.cover_radius - self.enclose_radius)
-            .add(Jet::constant(self.enclose_radius))
+        down.scale(self.cover_radius[i] - self.enclose_radius[i])
+            .add(Jet::constant(self.enclose_radius[i]))
     }
 
     /// Spin angle w_t (t - T2) with derivatives (without the phase phi_i).
@@ -120,7 +126,7 @@ impl Mission {
 
     /// Lambda_i(t) of agent `i` (0-based), per axis (z is 0).
     pub fn lambda(&self, i: usize, t: f64) -> [Jet; 2] {
-        let a = self.radius(t);
+        let a = self.radius(i, t);
         let angle = self.spin_angle(t).add(Jet::constant(self.phases[i]));
         let (s, c) = angle.sin_cos();
         [a.mul(c), a.mul(s)]

@@ -64,7 +64,7 @@ fn offsets_are_centred_and_on_the_ring() {
     let mut c = [0.0; 3];
     for i in 0..s.n_agents() {
         let r = (f.offset[i][0].powi(2) + f.offset[i][1].powi(2)).sqrt();
-        assert!((r - m.radius(20.0).v).abs() < 1e-12, "radius {r}");
+        assert!((r - m.radius(i, 20.0).v).abs() < 1e-12, "radius {r}");
         assert!(
             (r - s.mission.formation.cover_radius_m).abs() < 0.03,
             "radius {r}"
@@ -96,4 +96,39 @@ fn paper_exact_leader_starts_at_the_origin_and_ours_at_the_initial_centroid() {
     let (fe, fo) = (frame(&exact, 30.0), frame(&ours, 30.0));
     assert!((fe.p_d[0] - fe.target[0]).abs() < 1e-9 && (fo.p_d[1] - fo.target[1]).abs() < 1e-9);
     assert!((fo.p_d[2] - 5.0).abs() < 0.05, "altitude {}", fo.p_d[2]);
+}
+
+#[test]
+fn concentric_rings_put_each_agent_on_its_own_ring_radius_in_both_phases_and_stay_centred() {
+    use formation_config::scenario::FormationRing;
+    let mut s = Scenario::paper();
+    // 2 agents on a 1 m / 0.5 m ring, 3 on a 3 m / 2 m ring.
+    s.mission.formation.rings = vec![
+        FormationRing {
+            agents: 2,
+            cover_radius_m: 1.0,
+            enclose_radius_m: 0.5,
+            phase_rad: 0.0,
+        },
+        FormationRing {
+            agents: 3,
+            cover_radius_m: 3.0,
+            enclose_radius_m: 2.0,
+            phase_rad: 0.3,
+        },
+    ];
+    check_derivatives(&s);
+    let m = Mission::from_scenario(&s);
+    for (t, radii) in [(20.0, [1.0, 1.0, 3.0, 3.0, 3.0]), (58.0, [0.5, 0.5, 2.0, 2.0, 2.0])] {
+        let f = frame(&m, t);
+        let mut c = [0.0; 2];
+        for i in 0..5 {
+            let r = f.offset[i][0].hypot(f.offset[i][1]);
+            assert!((r - radii[i]).abs() < 0.03, "agent {} at t = {t}: radius {r}", i + 1);
+            for k in 0..2 {
+                c[k] += f.offset[i][k];
+            }
+        }
+        assert!(c.iter().all(|x| x.abs() < 1e-12), "centre {c:?}");
+    }
 }

@@ -168,6 +168,55 @@ pub struct FormationSpec {
     pub t2_s: f64,
     /// T3: the formation lowers its altitude, s. Paper: 45.
     pub t3_s: f64,
+    /// Concentric rings (`[[mission.formation.rings]]`), for formations too large for one ring to
+    /// cover the target (docs/scaling.md). Empty (the paper, and the default): one ring of all N
+    /// agents with `cover_radius_m`, `enclose_radius_m` and `first_phase_rad`. Not empty: the rings
+    /// take the agents in order (the first ring agents 1..=n_1, the next the following n_2, ...), every
+    /// ring's radius A_j(t) moves from its own R_c,j to its own R_e,j with the shared transition of
+    /// A_t, every slot spins with the shared w_t, and the three ring-wide values above are not used.
+    /// Not in the paper (N = 5 is one ring); see docs/deviations.md (D21).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub rings: Vec<FormationRing>,
+}
+
+/// One ring of a concentric formation: Lambda_i = A_j(t) [cos(w_t (t - T2) + phi_i), sin(...), 0]
+/// for the k-th agent (k = 0..n_j - 1) of ring j, with A_j(t) = R_e,j + (R_c,j - R_e,j)
+/// (atan(k_r (T1 - t)) / pi + 1/2) and phi_i = phi_j + 2 pi k / n_j. Not in the paper (D21).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FormationRing {
+    /// Number n_j of quadrotors on this ring (>= 1).
+    pub agents: usize,
+    /// Radius R_c,j of the ring while covering (before T1), m.
+    pub cover_radius_m: f64,
+    /// Radius R_e,j of the ring while enclosing (after T1), m.
+    pub enclose_radius_m: f64,
+    /// Phase phi_j of the ring's first slot, rad.
+    pub phase_rad: f64,
+}
+
+impl FormationSpec {
+    /// Cover radius, enclose radius and phase of the slot of agent `i` (0-based) of `n`: its ring's
+    /// values, or the single ring's when `rings` is empty. `None` for an agent no ring holds.
+    pub fn slot(&self, i: usize, n: usize) -> Option<(f64, f64, f64)> {
+        use std::f64::consts::PI;
+        if self.rings.is_empty() {
+            return (i < n).then(|| {
+                let phase = self.first_phase_rad + 2.0 * PI * i as f64 / n as f64;
+                (self.cover_radius_m, self.enclose_radius_m, phase)
+            });
+        }
+        let mut first = 0;
+        for r in &self.rings {
+            if i < first + r.agents {
+                let k = i - first;
+                let phase = r.phase_rad + 2.0 * PI * k as f64 / r.agents as f64;
+                return Some((r.cover_radius_m, r.enclose_radius_m, phase));
+            }
+            first += r.agents;
+        }
+        None
+    }
 }
 
 /// One undirected edge (q_a, q_b) with weight a_ab = a_ba > 0. Agents are numbered from 1.

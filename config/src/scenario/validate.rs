@@ -470,6 +470,51 @@ fn check_metrics(s: &Scenario, c: &mut Collector) {
     }
 }
 
+/// Checks the concentric rings of the formation function: one slot per agent, radii >= 0.
+fn check_rings(s: &Scenario, c: &mut Collector) {
+    let rings = &s.mission.formation.rings;
+    if rings.is_empty() {
+        return;
+    }
+    for (j, r) in rings.iter().enumerate() {
+        if r.agents == 0 {
+            c.push(
+                format!("mission.formation.rings[{j}].agents"),
+                MISSION,
+                "a ring holds at least one agent".to_string(),
+            );
+        }
+        c.non_negative(
+            &format!("mission.formation.rings[{j}].cover_radius_m"),
+            r.cover_radius_m,
+            MISSION,
+        );
+        c.non_negative(
+            &format!("mission.formation.rings[{j}].enclose_radius_m"),
+            r.enclose_radius_m,
+            MISSION,
+        );
+        if !r.phase_rad.is_finite() {
+            c.push(
+                format!("mission.formation.rings[{j}].phase_rad"),
+                FINITE,
+                format!("{} is not a finite number", r.phase_rad),
+            );
+        }
+    }
+    let total: usize = rings.iter().map(|r| r.agents).sum();
+    if total != s.n_agents() {
+        c.push(
+            "mission.formation.rings",
+            MISSION,
+            format!(
+                "the rings hold {total} slots for {} agents: Lambda_F needs exactly one slot per agent",
+                s.n_agents()
+            ),
+        );
+    }
+}
+
 /// Checks the mission section: leader and formation.
 fn check_mission(s: &Scenario, c: &mut Collector) {
     // Mission.
@@ -498,6 +543,7 @@ fn check_mission(s: &Scenario, c: &mut Collector) {
     ] {
         c.non_negative(name, val, MISSION);
     }
+    check_rings(s, c);
 }
 
 /// Checks the vehicle section: mass, inertia, thrust and torque limits.

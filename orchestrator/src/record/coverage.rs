@@ -5,11 +5,18 @@
 #[derive(Debug, Clone)]
 pub struct CoverageGrid {
     points: Vec<[f64; 2]>,
+    radius: f64,
     half_fov_tan: f64,
+    /// Footprints of this step that can reach the disk: centre x, y and squared radius.
+    reaching: Vec<[f64; 3]>,
 }
 
 /// Points per radius of the square grid (about pi * 12² = 450 points in the disk).
 const GRID_PER_RADIUS: i32 = 12;
+
+/// Slack of the reach test, m: a footprint whose centre is farther than R + r + this from the
+/// disk's centre cannot hold a grid point (whose distance from the centre is R up to rounding).
+const REACH_SLACK_M: f64 = 1e-6;
 
 impl CoverageGrid {
     /// A grid over the disk of radius `radius` for sensors of full angle of view `fov_deg`.
@@ -26,28 +33,90 @@ impl CoverageGrid {
         }
         CoverageGrid {
             points,
+            radius,
             half_fov_tan: (fov_deg.to_radians() * 0.5).tan(),
+            reaching: Vec::new(),
         }
     }
 
-    /// Covered share (0..1) of the disk centred on `target` by sensors at `positions`.
+    /// Covered share (0..1) of the disk centred on `target` by sensors at `positions`. A grid point
+    /// is covered when it lies in at least one footprint (distance to [P_i1, P_i2] at most
+    /// P_i3 tan(theta_S / 2)); footprints that cannot reach the disk are left out before the points
+    /// are tested, which changes no point's answer.
     pub fn covered_fraction(
-        &self,
+        &mut self,
         target: [f64; 2],
-        positions: impl Iterator<Item = [f64; 3]> + Clone,
+        positions: impl Iterator<Item = [f64; 3]>,
     ) -> f64 {
+        self.reaching.clear();
+        for q in positions {
+            let r = q[2].max(0.0) * self.half_fov_tan;
+            let (dx, dy) = (q[0] - target[0], q[1] - target[1]);
+            let reach = self.radius + r + REACH_SLACK_M;
+            if dx * dx + dy * dy <= reach * reach {
+                self.reaching.push([q[0], q[1], r * r]);
+            }
+        }
         let mut covered = 0usize;
         for p in &self.points {
             let (x, y) = (target[0] + p[0], target[1] + p[1]);
-            let hit = positions.clone().any(|q| {
-                let r = q[2].max(0.0) * self.half_fov_tan;
-                let (dx, dy) = (x - q[0], y - q[1]);
-                dx * dx + dy * dy <= r * r
+            let hit = self.reaching.iter().any(|f| {
+                let (dx, dy) = (x - f[0], y - f[1]);
+                dx * dx + dy * dy <= f[2]
             });
             if hit {
                 covered += 1;
             }
         }
         covered as f64 / self.points.len() as f64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The definition, point by point over every footprint.
+    fn brute_force(g: &CoverageGrid, target: [f64; 2], positions: &[[f64; 3]]) -> f64 {
+        let hits = g
+            .points
+            .iter()
+            .filter(|p| {
+                let (x, y) = (target[0] + p[0], target[1] + p[1]);
+                positions.iter().any(|q| {
+                    let r = q[2].max(0.0) * g.half_fov_tan;
+                    let (dx, dy) = (x - q[0], y - q[1]);
+                    dx * dx + dy * dy <= r * r
+                })
+            })
+            .count();
+        hits as f64 / g.points.len() as f64
+    }
+
+    #[test]
+    fn leaving_out_footprints_that_cannot_reach_the_disk_changes_no_coverage_value() {
+        let mut g = CoverageGrid::new(3.5, 50.0);
+        let target = [1.25, -14.75];
+        let mut positions = Vec::new();
+        // Rings of sensors from inside the disk to far outside it, at several heights.
+        for k in 0..120 {
+            let (a, rad) = (k as f64 * 0.7, 0.3 * k as f64);
+            let h = [5.0, 3.0, 0.0, -1.0, 8.0][k % 5];
+            positions.push([target[0] + rad * a.cos(), target[1] + rad * a.sin(), h]);
+        }
+        for n in [1, 3, 5, 20, 60, 120] {
+            let want = brute_force(&g, target, &positions[..n]);
+            let got = g.covered_fraction(target, positions[..n].iter().copied());
+            assert_eq!(got.to_bits(), want.to_bits(), "n = {n}: {got} vs {want}");
+        }
+        // The paper's five cover slots at 5 m cover the whole disk; nobody at all covers nothing.
+        let five: Vec<[f64; 3]> = (0..5)
+            .map(|i| {
+                let a = std::f64::consts::FRAC_PI_2 + 0.4 * std::f64::consts::PI * i as f64;
+                [target[0] + 2.0 * a.cos(), target[1] + 2.0 * a.sin(), 5.0]
+            })
+            .collect();
+        assert_eq!(g.covered_fraction(target, five.into_iter()), 1.0);
+        assert_eq!(g.covered_fraction(target, std::iter::empty()), 0.0);
     }
 }

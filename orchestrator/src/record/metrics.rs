@@ -229,6 +229,9 @@ struct Derived {
     rate_norm: f64,
 }
 
+/// The exponent field of an IEEE 754 double: all ones for +-inf and NaN, and only for them.
+const F64_EXPONENT_BITS: u64 = 0x7ff0_0000_0000_0000;
+
 /// The first output of agent `i` at this step that is not a finite number, if any: every value
 /// `trajectory.csv` writes for it (state, reference, errors, commands, constraint bounds, barrier
 /// values, faults, estimates) and the rest of the controller's telemetry but the barrier widths
@@ -291,13 +294,16 @@ fn non_finite_output(
         ("auxiliary state E_i2", &tm.e2),
         ("estimate Delta F-hat_i", &model_dev),
     ];
-    // x * 0.0 is 0 for every finite x and NaN for NaN and +-inf: one branch-free sum says whether
-    // any value is not finite; only then is the first one looked for.
-    let probe = groups
-        .iter()
-        .flat_map(|(_, vals)| vals.iter())
-        .fold(0.0, |acc, v| acc + v * 0.0);
-    if probe == 0.0 {
+    // A value is not finite iff its exponent bits are all ones: one branch-free OR over the
+    // values (no chain of dependent floating-point additions) says whether any is; only then is
+    // the first one looked for.
+    let mut any_not_finite = false;
+    for (_, vals) in &groups {
+        for v in *vals {
+            any_not_finite |= v.to_bits() & F64_EXPONENT_BITS == F64_EXPONENT_BITS;
+        }
+    }
+    if !any_not_finite {
         return None;
     }
     groups

@@ -10,6 +10,7 @@
 
 pub mod graphs;
 pub mod radii;
+pub mod rings;
 
 use crate::cli::EXIT_INVALID;
 use formation_config::scenario::validate::validate;
@@ -105,16 +106,15 @@ pub fn radii_inputs(
     }
 }
 
-/// Places every quadrotor `outside_m` radially outside its cover slot at t = 0 (slot phase
-/// phi_i = phi_0 + 2 pi (i - 1)/N around T_g(0)), on the ground.
+/// Places every quadrotor `outside_m` radially outside its cover slot at t = 0 (its ring's cover
+/// radius, at its slot's phase around T_g(0); one ring: phi_i = phi_0 + 2 pi (i - 1)/N), on the ground.
 pub fn place_starts(s: &mut Scenario, outside_m: f64) {
     let n = s.n_agents();
-    let f = &s.mission.formation;
-    let r = f.cover_radius_m + outside_m;
-    let phi0 = f.first_phase_rad;
+    let f = s.mission.formation.clone();
     let centre = [0.0, s.mission.target.path_radius_m]; // T_g(0)
     for (i, a) in s.agents.iter_mut().enumerate() {
-        let phi = phi0 + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+        let (cover, _, phi) = f.slot(i, n).unwrap_or_default();
+        let r = cover + outside_m;
         a.initial_position_m = [centre[0] + r * phi.cos(), centre[1] + r * phi.sin(), 0.0];
     }
 }
@@ -149,10 +149,47 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
         ));
     }
     let mut s = template.clone();
-    let r = radii::radii(&radii_inputs(template, n, opts.min_spacing_m));
+    let inputs = radii_inputs(template, n, opts.min_spacing_m);
+    let r = radii::radii(&inputs);
     s.mission.formation.cover_radius_m = r.cover_m;
     s.mission.formation.enclose_radius_m = r.enclose_m;
     s.mission.formation.spin_rate_rad_s = r.spin_rad_s;
+    s.mission.formation.rings.clear();
+    let n_tpl = template.n_agents().max(2);
+    let inner = radii::radii(&radii_inputs(template, n_tpl, opts.min_spacing_m));
+    let layout = if rings::one_ring_cannot_cover(&r) && !rings::one_ring_cannot_cover(&inner) && n > n_tpl
+    {
+        // Concentric rings (rings.rs): the template's ring inside, covering; the rest around it.
+        let f = &mut s.mission.formation;
+        f.rings = rings::concentric(
+            n,
+            n_tpl,
+            inner.cover_m,
+            inner.enclose_m,
+            inputs.min_spacing_m,
+            f.first_phase_rad,
+        );
+        f.cover_radius_m = inner.cover_m;
+        f.enclose_radius_m = inner.enclose_m;
+        let outer = &f.rings[f.rings.len() - 1];
+        f.spin_rate_rad_s = rings::spin_rate(
+            inputs.template_spin_rad_s,
+            inputs.template_enclose_m,
+            outer.enclose_radius_m,
+        );
+        let counts: Vec<String> = f.rings.iter().map(|r| r.agents.to_string()).collect();
+        format!(
+            "{} concentric rings ({} agents), cover radii {}..{} m, enclose radii {}..{} m",
+            f.rings.len(),
+            counts.join(" + "),
+            f.rings[0].cover_radius_m,
+            outer.cover_radius_m,
+            f.rings[0].enclose_radius_m,
+            outer.enclose_radius_m
+        )
+    } else {
+        format!("cover radius {} m, enclose radius {} m", r.cover_m, r.enclose_m)
+    };
     s.agents = (0..n)
         .map(|i| template.agents[i % template.agents.len()].clone())
         .collect();
@@ -163,7 +200,7 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
         None => graphs::default_leader_agents(opts.graph, n),
     };
     let (a_w, b_w) = graphs::weights(n, &e, &leaders);
-    s.graph.edges = graphs::to_scenario_edges(&e, a_w);
+    s.graph.edges = graphs::to_scenario_edges(&e, &a_w);
     let mut b = vec![0.0; n];
     for &id in &leaders {
         if !(1..=n).contains(&id) {
@@ -175,9 +212,9 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
     let g = opts.graph.name();
     s.name = format!("gen{n}-{g}");
     s.description = format!(
-        "Generated from '{}': {n} agents on a {g} graph (leaders {leaders:?}), cover radius {} m, \
-         enclose radius {} m, spin {:.4} rad/s, agent specs reused cyclically.",
-        template.name, r.cover_m, r.enclose_m, r.spin_rad_s
+        "Generated from '{}': {n} agents on a {g} graph (leaders {leaders:?}), {layout}, spin {:.4} \
+         rad/s, agent specs reused cyclically.",
+        template.name, s.mission.formation.spin_rate_rad_s
     );
     Ok(s)
 }
@@ -248,12 +285,13 @@ pub fn main(args: ScenarioArgs) -> ExitCode {
 mod tests {
     use super::*;
 
-    fn slots(s: &Scenario, r: f64) -> Vec<[f64; 2]> {
+    /// Every agent's slot at transition level `level` (1: covering, 0: enclosing), before the spin.
+    fn slots(s: &Scenario, level: f64) -> Vec<[f64; 2]> {
         let n = s.n_agents();
         (0..n)
             .map(|i| {
-                let phi = s.mission.formation.first_phase_rad
-                    + 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+                let (c, e, phi) = s.mission.formation.slot(i, n).unwrap();
+                let r = e + (c - e) * level;
                 [r * phi.cos(), r * phi.sin()]
             })
             .collect()
@@ -304,10 +342,12 @@ mod tests {
     fn generated_twenty_ring_neighbours_are_at_least_the_minimum_spacing_apart_at_their_slots() {
         let s = generate(&GenOptions::new(20, GraphKind::Ring)).unwrap();
         let s_min = radii::ring_spacing(5, 1.0);
-        let f = &s.mission.formation;
-        for r in [f.cover_radius_m, f.enclose_radius_m] {
-            let d = min_distance(&slots(&s, r));
-            assert!(d >= s_min - 1e-3, "radius {r}: slots {d} m apart");
+        // Twenty agents fly concentric rings (5 + 11 + 4), whose inner ring is the paper's.
+        let counts: Vec<usize> = s.mission.formation.rings.iter().map(|r| r.agents).collect();
+        assert_eq!(counts, vec![5, 11, 4]);
+        for level in [1.0, 0.5, 0.0] {
+            let d = min_distance(&slots(&s, level));
+            assert!(d >= s_min - 1e-3, "level {level}: slots {d} m apart");
         }
         // Starts are farther apart still.
         let starts: Vec<[f64; 2]> = s
