@@ -35,7 +35,8 @@ pub struct ScenarioArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Agents that receive the leader (b_i = 1), 1-based, e.g. `1,5`. Default: the paper's share
-    /// (2 in 5) spread evenly, from end to end on a path (N = 5 path: 1,5).
+    /// (2 in 5) spread evenly, from end to end on a path (N = 5 path: 1,5); on a random-connected
+    /// graph the agents of the lowest degree first.
     #[arg(long, value_name = "IDS")]
     pub leader_agents: Option<String>,
     /// Minimum distance between two formation slots s_min, m. Default: the spacing of the paper's
@@ -65,7 +66,8 @@ pub struct GenOptions {
     pub k: usize,
     /// Seed of random-connected.
     pub seed: u64,
-    /// Agents with b_i = 1 (1-based); `None`: [`graphs::default_leader_agents`].
+    /// Agents with b_i = 1 (1-based); `None`: [`graphs::default_leader_agents`]
+    /// ([`graphs::least_coupled_leader_agents`] for random-connected graphs).
     pub leader_agents: Option<Vec<usize>>,
     /// s_min, m; `None`: the template's enclosing spacing.
     pub min_spacing_m: Option<f64>,
@@ -197,6 +199,9 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
     let e = graphs::edges(opts.graph, n, opts.k, opts.seed);
     let leaders = match &opts.leader_agents {
         Some(l) => l.clone(),
+        None if opts.graph == GraphKind::RandomConnected => {
+            graphs::least_coupled_leader_agents(n, &e)
+        }
         None => graphs::default_leader_agents(opts.graph, n),
     };
     let (a_w, b_w) = graphs::weights(n, &e, &leaders);
