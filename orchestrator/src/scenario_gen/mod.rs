@@ -287,7 +287,7 @@ pub fn main(args: ScenarioArgs) -> ExitCode {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// Every agent's slot at transition level `level` (1: covering, 0: enclosing), before the spin.
@@ -302,7 +302,8 @@ mod tests {
             .collect()
     }
 
-    fn min_distance(p: &[[f64; 2]]) -> f64 {
+    /// The smallest distance between two of the points `p`, m.
+    pub(crate) fn min_distance(p: &[[f64; 2]]) -> f64 {
         let mut m = f64::INFINITY;
         for i in 0..p.len() {
             for j in i + 1..p.len() {

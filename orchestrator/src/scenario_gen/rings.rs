@@ -103,6 +103,7 @@ pub fn spin_rate(template_spin_rad_s: f64, template_enclose_m: f64, outer_enclos
 mod tests {
     use super::*;
     use crate::record::coverage::CoverageGrid;
+    use crate::scenario_gen::tests::min_distance;
 
     const S_MIN: f64 = 1.1755705045849463; // 2 sin(pi/5): the paper's enclosing spacing
 
@@ -117,16 +118,6 @@ mod tests {
             }
         }
         out
-    }
-
-    fn min_distance(p: &[[f64; 2]]) -> f64 {
-        let mut m = f64::INFINITY;
-        for i in 0..p.len() {
-            for j in i + 1..p.len() {
-                m = m.min((p[i][0] - p[j][0]).hypot(p[i][1] - p[j][1]));
-            }
-        }
-        m
     }
 
     #[test]
