@@ -27,7 +27,8 @@ use std::f64::consts::PI;
 /// The largest number of slots a ring of radius `radius` holds with neighbours at least `s_min`
 /// apart (at least 1).
 pub fn ring_capacity(radius: f64, s_min: f64) -> usize {
-    if !(radius > 0.0) || 2.0 * radius < s_min {
+    // Written so that a NaN radius also gives 1.
+    if radius.is_nan() || radius <= 0.0 || 2.0 * radius < s_min {
         return 1;
     }
     let n = (PI / (s_min / (2.0 * radius)).asin()).floor();
