@@ -57,7 +57,6 @@ struct HostRun {
     dir: PathBuf,
     variant: String,
     children: HashMap<usize, Child>,
-    seen_orchestrator: bool,
     prepared: Instant,
     // Dropped in this order: bridge, node, membership (see `end`).
     bridge: Option<Bridge>,
@@ -146,6 +145,8 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
         me,
         runs: HashMap::new(),
     };
+    // Runs whose orchestrator's token is alive (its Put may come before its run is prepared).
+    let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
     while !stop.load(Ordering::SeqCst) {
         if let Ok(Some(q)) = queries.recv_timeout(Duration::from_millis(20)) {
             let bytes = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
@@ -165,11 +166,10 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
                 .to_string();
             match sample.kind() {
                 SampleKind::Put => {
-                    if let Some(r) = d.runs.get_mut(&run) {
-                        r.seen_orchestrator = true;
-                    }
+                    alive.insert(run);
                 }
                 SampleKind::Delete => {
+                    alive.remove(&run);
                     if d.runs.contains_key(&run) {
                         eprintln!("formation host: run {run}: its orchestrator is gone; ending it");
                         d.end(&run);
@@ -181,7 +181,7 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
         let stale: Vec<String> = d
             .runs
             .iter()
-            .filter(|(_, r)| !r.seen_orchestrator && r.prepared.elapsed() > ORCHESTRATOR_WAIT)
+            .filter(|(id, r)| !alive.contains(*id) && r.prepared.elapsed() > ORCHESTRATOR_WAIT)
             .map(|(k, _)| k.clone())
             .collect();
         for run in stale {
@@ -375,7 +375,6 @@ impl Daemon {
                 req: r,
                 dir,
                 children: HashMap::new(),
-                seen_orchestrator: false,
                 prepared: Instant::now(),
                 bridge: Some(bridge),
                 node: Some(node),
@@ -436,7 +435,10 @@ impl Daemon {
     }
 
     fn kill(&mut self, run_id: &str, agent: usize) -> Result<(), String> {
-        let r = self.run(run_id)?;
+        // Idempotent: a run already ended has no process left to kill.
+        let Some(r) = self.runs.get_mut(run_id) else {
+            return Ok(());
+        };
         if let Some(mut c) = r.children.remove(&agent) {
             let _ = c.kill();
             let _ = c.wait();

@@ -102,6 +102,14 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         }
     }
     formation_config::node::ipc::quiet_log();
+    // The daemon's and its bridges' warnings on stderr (`RUST_LOG`, default warn).
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .try_init();
     let root = a.root.clone().unwrap_or_else(|| formation_net::daemon::default_root(&name));
     let o = formation_net::daemon::DaemonOptions { name, session: opts, exe, root };
     match formation_net::daemon::serve(o, &stop) {
