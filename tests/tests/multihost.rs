@@ -81,7 +81,7 @@ fn work_dir(tag: &str) -> PathBuf {
 struct Hosts {
     names: Vec<String>,
     addrs: Vec<String>,
-    daemons: Vec<(Child, PathBuf)>,
+    daemons: Vec<Child>,
     auth: PathBuf,
 }
 
@@ -96,7 +96,10 @@ impl Hosts {
             auth: dir.join("auth"),
         };
         for n in &names {
-            let _ = Command::new("ip").args(["netns", "del", n]).status();
+            let _ = Command::new("ip")
+                .args(["netns", "del", n])
+                .stderr(Stdio::null())
+                .status();
             ip(&["netns", "add", n]);
             ip(&["-n", n, "link", "set", "lo", "up"]);
         }
@@ -120,16 +123,23 @@ impl Hosts {
     }
 
     /// A command running in namespace `h` with a private /dev/shm and /tmp; `residue` receives
-    /// what is left in that /dev/shm and /tmp/iceoryx2 when the command ends.
-    fn command(&self, h: usize, residue: &Path, args: &[&str]) -> Command {
-        let script = r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
+    /// what is left in that /dev/shm and /tmp/iceoryx2 when the command ends (`None`: the
+    /// command replaces the shell, so its pid is the child's; see [`residue_of`]).
+    fn command(&self, h: usize, residue: Option<&Path>, args: &[&str]) -> Command {
+        let script = match residue {
+            Some(_) => r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
 res="$1"; shift
 "$@"; rc=$?
 find /dev/shm -mindepth 1 > "$res"; find /tmp/iceoryx2 -type f >> "$res" 2>/dev/null
-exit $rc"#;
+exit $rc"#,
+            None => r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
+shift
+exec "$@""#,
+        };
+        let residue = residue.map_or_else(|| "-".into(), |p| p.display().to_string());
         let mut c = Command::new("ip");
         c.args(["netns", "exec", &self.names[h], "unshare", "--mount", "--propagation", "private", "sh", "-c", script, "sh"])
-            .arg(residue)
+            .arg(&residue)
             .arg(bin("formation"))
             .args(args)
             .env_remove("CARGO")
@@ -140,13 +150,12 @@ exit $rc"#;
     /// Starts `formation host --name h<h>` in namespace h, listening on its link address.
     fn start_daemon(&mut self, h: usize, dir: &Path, extra_env: &[(&str, &str)]) {
         let log = dir.join(format!("daemon-{h}.log"));
-        let residue = dir.join(format!("residue-{h}.txt"));
         let ep = format!("tcp/{}:7447", self.addrs[h]);
         let auth = self.auth.display().to_string();
         let name = format!("h{h}");
         let mut c = self.command(
             h,
-            &residue,
+            None,
             &["host", "--name", &name, "--listen", &ep, "--auth", &auth],
         );
         for (k, v) in extra_env {
@@ -162,13 +171,15 @@ exit $rc"#;
             assert!(t0.elapsed() < Duration::from_secs(20), "daemon {h} did not start: {}", std::fs::read_to_string(&log).unwrap_or_default());
             std::thread::sleep(Duration::from_millis(50));
         }
-        self.daemons.push((child, residue));
+        self.daemons.push(child);
     }
 
-    /// Stops the daemons (SIGTERM) and returns what each left in its /dev/shm and /tmp/iceoryx2.
+    /// What each daemon's namespace holds in /dev/shm and /tmp/iceoryx2 now (read through
+    /// /proc/<pid>/root, its view of its own mounts), then stops the daemons (SIGTERM).
     fn stop_daemons(&mut self) -> Vec<String> {
         let mut out = Vec::new();
-        for (c, residue) in self.daemons.iter_mut() {
+        for c in self.daemons.iter_mut() {
+            out.push(residue_of(c.id()));
             // SAFETY: kill(2) on our own child.
             unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGTERM) };
             let t0 = Instant::now();
@@ -180,7 +191,6 @@ exit $rc"#;
             }
             let _ = c.kill();
             let _ = c.wait();
-            out.push(std::fs::read_to_string(&residue).unwrap_or_else(|_| "(no residue report)".into()));
         }
         self.daemons.clear();
         out
@@ -198,7 +208,7 @@ exit $rc"#;
 
 impl Drop for Hosts {
     fn drop(&mut self) {
-        for (c, _) in self.daemons.iter_mut() {
+        for c in self.daemons.iter_mut() {
             let _ = c.kill();
             let _ = c.wait();
         }
@@ -223,7 +233,7 @@ fn run_in(hosts: &Hosts, dir: &Path, args: &[&str], out: &Path, with_auth: bool)
     v.push(out.display().to_string());
     let refs: Vec<&str> = v.iter().map(String::as_str).collect();
     let mut child = hosts
-        .command(0, &residue, &refs)
+        .command(0, Some(&residue), &refs)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -232,6 +242,28 @@ fn run_in(hosts: &Hosts, dir: &Path, args: &[&str], out: &Path, with_auth: bool)
     child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
     let st = child.wait().unwrap();
     (st.code().unwrap_or(-1), err, std::fs::read_to_string(&residue).unwrap_or_default())
+}
+
+/// Files in /dev/shm and /tmp/iceoryx2 as process `pid` sees them (its mount namespace).
+fn residue_of(pid: u32) -> String {
+    fn walk(d: &Path, out: &mut Vec<String>) {
+        if let Ok(rd) = std::fs::read_dir(d) {
+            for e in rd.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    walk(&p, out);
+                } else {
+                    out.push(p.display().to_string());
+                }
+            }
+        }
+    }
+    let root = PathBuf::from(format!("/proc/{pid}/root"));
+    assert!(root.join("dev/shm").is_dir(), "process {pid} is gone");
+    let mut v = Vec::new();
+    walk(&root.join("dev/shm"), &mut v);
+    walk(&root.join("tmp/iceoryx2"), &mut v);
+    v.join("\n")
 }
 
 fn assert_no_residue(what: &str, residue: &str) {
