@@ -355,3 +355,60 @@ fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_l
     assert!(String::from_utf8_lossy(&o.stderr).contains("requires authentication"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly() {
+    if !available("a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly") {
+        return;
+    }
+    let dir = work_dir("lost");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let mut v: Vec<String> = ["run", "paper", "--hosts", "h1", "--place", "4,5@h1"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    v.extend(hosts.connect_args());
+    v.extend(["--auth".to_string(), hosts.auth.display().to_string()]);
+    v.extend(["--out".to_string(), out.display().to_string()]);
+    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+    let err_path = dir.join("run.err");
+    let mut run = hosts
+        .command(0, Some(&residue), &refs)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .expect("formation run starts");
+    // Let it fly a little, then SIGKILL the daemon (and with it its agents).
+    let t0 = Instant::now();
+    while !std::fs::read_to_string(&err_path).unwrap_or_default().contains("steps/s") {
+        assert!(t0.elapsed() < Duration::from_secs(30), "the run did not start");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let daemon = hosts.daemons.remove(0);
+    let mut daemon = daemon;
+    let killed = Instant::now();
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGKILL) };
+    let _ = daemon.wait();
+    let st = loop {
+        if let Some(st) = run.try_wait().unwrap() {
+            break st;
+        }
+        assert!(killed.elapsed() < Duration::from_secs(15), "the run did not stop after its host was lost");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let stopped_after = killed.elapsed();
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    assert_eq!(st.code(), Some(1), "{err}");
+    assert!(err.contains("lost with host h1"), "the lost host is named: {err}");
+    // Named and stopped well within the lease (a killed daemon's TCP link closes at once).
+    assert!(stopped_after < Duration::from_secs(5), "stopped {stopped_after:?} after the kill");
+    eprintln!("run stopped {:.0} ms after the daemon's SIGKILL", stopped_after.as_secs_f64() * 1e3);
+    assert_no_residue("the launcher", &std::fs::read_to_string(&residue).unwrap_or_default());
+    assert!(out.join("trajectory.csv").exists(), "the recorded prefix is kept");
+    let _ = std::fs::remove_dir_all(&dir);
+}
