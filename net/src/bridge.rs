@@ -159,7 +159,12 @@ impl Opener<'_> {
         let dests = r
             .out_to
             .iter()
-            .map(|h| self.hosts.iter().position(|x| x == h).expect("a host of the placement"))
+            .map(|h| {
+                self.hosts
+                    .iter()
+                    .position(|x| x == h)
+                    .expect("a host of the placement")
+            })
             .collect();
         Ok((dests, r.inbound))
     }
@@ -177,8 +182,13 @@ impl Visitor for Opener<'_> {
                 .map_err(err("cannot create", &s.name))?;
             self.keep.push(Box::new(f));
         }
-        let (dests, inbound) =
-            self.route(&s.name, s.spec.pattern, s.spec.publishers, s.spec.subscribers, s.spec.scope)?;
+        let (dests, inbound) = self.route(
+            &s.name,
+            s.spec.pattern,
+            s.spec.publishers,
+            s.spec.subscribers,
+            s.spec.scope,
+        )?;
         let type_name = wire_type_name::<T>();
         if self.out && !dests.is_empty() {
             let sub = ports::subscriber(self.node, &s).map_err(|e| e.to_string())?;
@@ -239,14 +249,22 @@ impl Visitor for Opener<'_> {
     fn slices<T: Message>(&mut self, s: Named<Topic<T, Slice>>, l: Limits) -> Result<(), String> {
         if self.cfg.create && !self.out {
             let sn = service_name(&s.name).map_err(err("name", &s.name))?;
-            let f = pubsub_with_limits(self.node.service_builder(&sn).publish_subscribe::<[T]>(), &l)
-                .history_size(s.spec.history)
-                .create()
-                .map_err(err("cannot create", &s.name))?;
+            let f = pubsub_with_limits(
+                self.node.service_builder(&sn).publish_subscribe::<[T]>(),
+                &l,
+            )
+            .history_size(s.spec.history)
+            .create()
+            .map_err(err("cannot create", &s.name))?;
             self.keep.push(Box::new(f));
         }
-        let (dests, inbound) =
-            self.route(&s.name, s.spec.pattern, s.spec.publishers, s.spec.subscribers, s.spec.scope)?;
+        let (dests, inbound) = self.route(
+            &s.name,
+            s.spec.pattern,
+            s.spec.publishers,
+            s.spec.subscribers,
+            s.spec.scope,
+        )?;
         if !dests.is_empty() || inbound {
             return Err(format!(
                 "bridge: {} (slices) cannot cross hosts: its publisher and subscriber must share a host",
@@ -265,8 +283,13 @@ impl Visitor for Opener<'_> {
                     .map_err(err("cannot create", &s.name))?;
             self.keep.push(Box::new(f));
         }
-        let (dests, inbound) =
-            self.route(&s.name, s.spec.pattern, s.spec.notifiers, s.spec.listeners, s.spec.scope)?;
+        let (dests, inbound) = self.route(
+            &s.name,
+            s.spec.pattern,
+            s.spec.notifiers,
+            s.spec.listeners,
+            s.spec.scope,
+        )?;
         if self.out && !dests.is_empty() {
             let listener = self
                 .node
@@ -329,7 +352,10 @@ pub enum Record<'a> {
 pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
     fn take<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a [u8], String> {
         if f.len() < n {
-            return Err(format!("truncated frame: {} bytes left, {n} needed", f.len()));
+            return Err(format!(
+                "truncated frame: {} bytes left, {n} needed",
+                f.len()
+            ));
         }
         let (a, b) = f.split_at(n);
         *f = b;
@@ -372,8 +398,13 @@ impl Bridge {
         let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
         let mut threads = Vec::new();
         {
-            let (cfg, stop, stats, hosts, session) =
-                (cfg.clone(), stop.clone(), stats.clone(), hosts.clone(), session.clone());
+            let (cfg, stop, stats, hosts, session) = (
+                cfg.clone(),
+                stop.clone(),
+                stats.clone(),
+                hosts.clone(),
+                session.clone(),
+            );
             let tx = ready_tx.clone();
             threads.push(
                 std::thread::Builder::new()
@@ -615,10 +646,8 @@ fn run_out(
         if guards.is_empty() {
             std::thread::sleep(IDLE_WAKE);
         } else {
-            let _ = waitset.wait_and_process_once_with_timeout(
-                |_| CallbackProgression::Continue,
-                IDLE_WAKE,
-            );
+            let _ = waitset
+                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, IDLE_WAKE);
         }
     }
     drop(guards);
@@ -635,7 +664,12 @@ mod tests {
     #[test]
     fn a_frame_round_trips_its_records_in_order_and_truncation_is_an_error() {
         let mut f = Vec::new();
-        put_sample(&mut f, "formation/agent/3/state", "formation.v1.VehicleState", &[1, 2, 3, 4]);
+        put_sample(
+            &mut f,
+            "formation/agent/3/state",
+            "formation.v1.VehicleState",
+            &[1, 2, 3, 4],
+        );
         put_event(&mut f, "formation/wake/agent/3");
         let r = parse_frame(&f).unwrap();
         assert_eq!(

@@ -64,7 +64,9 @@ pub struct Cluster {
 impl Cluster {
     /// Opens the session.
     pub fn open(o: &session::Options) -> Result<Cluster, HandshakeError> {
-        let session = o.open().map_err(|e| HandshakeError::Session(e.to_string()))?;
+        let session = o
+            .open()
+            .map_err(|e| HandshakeError::Session(e.to_string()))?;
         Ok(Cluster {
             session,
             seen: Arc::new(Mutex::new(Seen::default())),
@@ -81,7 +83,13 @@ impl Cluster {
     /// Names of the daemons whose liveliness token is visible.
     pub fn names(&self, timeout: Duration) -> Vec<String> {
         let mut v = Vec::new();
-        if let Ok(replies) = self.session.liveliness().get(proto::HOSTS).timeout(timeout).wait() {
+        if let Ok(replies) = self
+            .session
+            .liveliness()
+            .get(proto::HOSTS)
+            .timeout(timeout)
+            .wait()
+        {
             while let Ok(r) = replies.recv() {
                 if let Ok(s) = r.result() {
                     if let Some(n) = s.key_expr().as_str().strip_prefix("formation/host/") {
@@ -98,7 +106,12 @@ impl Cluster {
     /// A daemon's info, and the round trip it took (for the clock offset estimate).
     pub fn info(&self, name: &str, timeout: Duration) -> Option<(HostInfo, Duration)> {
         let t0 = Instant::now();
-        let replies = self.session.get(proto::host_info(name)).timeout(timeout).wait().ok()?;
+        let replies = self
+            .session
+            .get(proto::host_info(name))
+            .timeout(timeout)
+            .wait()
+            .ok()?;
         while let Ok(r) = replies.recv() {
             if let Ok(s) = r.result() {
                 if let Ok(i) = serde_json::from_slice::<HostInfo>(&s.payload().to_bytes()) {
@@ -131,7 +144,11 @@ impl Cluster {
             }
             std::thread::sleep(Duration::from_millis(100));
         }
-        let missing: Vec<String> = names.iter().filter(|n| !found.contains_key(*n)).cloned().collect();
+        let missing: Vec<String> = names
+            .iter()
+            .filter(|n| !found.contains_key(*n))
+            .cloned()
+            .collect();
         if !missing.is_empty() {
             return Err(HandshakeError::Missing(missing));
         }
@@ -145,7 +162,13 @@ impl Cluster {
     }
 
     /// Sends a request to a daemon and waits for its reply (with the bytes after it, if any).
-    pub fn request(&self, host: &str, req: &Request, bytes: &[u8], timeout: Duration) -> Result<(Reply, Vec<u8>), String> {
+    pub fn request(
+        &self,
+        host: &str,
+        req: &Request,
+        bytes: &[u8],
+        timeout: Duration,
+    ) -> Result<(Reply, Vec<u8>), String> {
         let replies = self
             .session
             .get(proto::host_req(host))
@@ -164,7 +187,10 @@ impl Cluster {
                     let (reply, rest): (Reply, &[u8]) = proto::unframe(&data)?;
                     Ok((reply, rest.to_vec()))
                 }
-                Err(e) => Err(format!("host {host}: {}", String::from_utf8_lossy(&e.payload().to_bytes()))),
+                Err(e) => Err(format!(
+                    "host {host}: {}",
+                    String::from_utf8_lossy(&e.payload().to_bytes())
+                )),
             },
             Err(_) => Err(format!("host {host} did not answer within {timeout:?}")),
         }
@@ -199,7 +225,10 @@ impl Cluster {
             .callback(move |s| {
                 if s.kind() == SampleKind::Delete {
                     if let Some(n) = s.key_expr().as_str().strip_prefix("formation/host/") {
-                        seen.lock().unwrap().lost.push((n.to_string(), Instant::now()));
+                        seen.lock()
+                            .unwrap()
+                            .lost
+                            .push((n.to_string(), Instant::now()));
                     }
                 }
             })
@@ -221,6 +250,12 @@ impl Cluster {
 
     /// When `host`'s daemon was seen to go (its liveliness token vanished), if it did.
     pub fn lost(&self, host: &str) -> Option<Instant> {
-        self.seen.lock().unwrap().lost.iter().find(|(h, _)| h == host).map(|(_, t)| *t)
+        self.seen
+            .lock()
+            .unwrap()
+            .lost
+            .iter()
+            .find(|(h, _)| h == host)
+            .map(|(_, t)| *t)
     }
 }

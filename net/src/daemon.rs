@@ -78,15 +78,22 @@ pub fn describe(status: ExitStatus) -> String {
 /// `/tmp/formation-host-<uid>-<name>`.
 pub fn default_root(name: &str) -> PathBuf {
     match std::env::var_os("XDG_RUNTIME_DIR") {
-        Some(d) if !d.is_empty() => PathBuf::from(d).join("formation").join(format!("host-{name}")),
+        Some(d) if !d.is_empty() => PathBuf::from(d)
+            .join("formation")
+            .join(format!("host-{name}")),
         // SAFETY: getuid has no preconditions.
-        _ => std::env::temp_dir().join(format!("formation-host-{}-{name}", unsafe { libc::getuid() })),
+        _ => std::env::temp_dir().join(format!("formation-host-{}-{name}", unsafe {
+            libc::getuid()
+        })),
     }
 }
 
 fn private_dir(dir: &Path) -> Result<(), String> {
     use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
-    let _ = std::fs::DirBuilder::new().recursive(true).mode(0o700).create(dir);
+    let _ = std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir);
     let m = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     // SAFETY: getuid has no preconditions.
     if !m.is_dir() || m.uid() != unsafe { libc::getuid() } {
@@ -149,7 +156,10 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
     let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
     while !stop.load(Ordering::SeqCst) {
         if let Ok(Some(q)) = queries.recv_timeout(Duration::from_millis(20)) {
-            let bytes = q.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
+            let bytes = q
+                .payload()
+                .map(|p| p.to_bytes().into_owned())
+                .unwrap_or_default();
             let answer = if q.key_expr().as_str().ends_with("/info") {
                 serde_json::to_vec(&d.info()).unwrap()
             } else {
@@ -198,7 +208,9 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
 
 /// Removes run folders a killed daemon left (their members lock is free: nobody is in the run).
 fn sweep_stale(root: &Path) {
-    let Ok(rd) = std::fs::read_dir(root) else { return };
+    let Ok(rd) = std::fs::read_dir(root) else {
+        return;
+    };
     for e in rd.flatten() {
         let dir = e.path();
         let lock = formation_config::node::members::lock_path(&dir);
@@ -262,7 +274,9 @@ impl Daemon {
                 run_id,
                 agent,
                 rejoin_at,
-            } => self.spawn(&run_id, agent, rejoin_at, rest).map(|pid| ok(Some(pid))),
+            } => self
+                .spawn(&run_id, agent, rejoin_at, rest)
+                .map(|pid| ok(Some(pid))),
             Request::Kill { run_id, agent } => self.kill(&run_id, agent).map(|_| ok(None)),
             Request::Signal {
                 run_id,
@@ -298,24 +312,43 @@ impl Daemon {
                 diff.join("; ")
             ));
         }
-        if r.run_id.is_empty() || r.run_id.len() > 16 || !r.run_id.bytes().all(|b| b.is_ascii_hexdigit()) {
-            return Err(format!("run id '{}': expected 1..=16 hexadecimal digits", r.run_id));
+        if r.run_id.is_empty()
+            || r.run_id.len() > 16
+            || !r.run_id.bytes().all(|b| b.is_ascii_hexdigit())
+        {
+            return Err(format!(
+                "run id '{}': expected 1..=16 hexadecimal digits",
+                r.run_id
+            ));
         }
         if r.prefix != services::run_prefix(&r.run_id) {
-            return Err(format!("prefix '{}' is not the run's ({})", r.prefix, services::run_prefix(&r.run_id)));
+            return Err(format!(
+                "prefix '{}' is not the run's ({})",
+                r.prefix,
+                services::run_prefix(&r.run_id)
+            ));
         }
         if self.runs.contains_key(&r.run_id) {
             return Err(format!("run {} is already prepared here", r.run_id));
         }
-        let scenario = Scenario::from_toml_str(&r.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
-        formation_config::scenario::validate::validate(&scenario).map_err(|e| format!("scenario: {e}"))?;
+        let scenario =
+            Scenario::from_toml_str(&r.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
+        formation_config::scenario::validate::validate(&scenario)
+            .map_err(|e| format!("scenario: {e}"))?;
         let n = scenario.n_agents();
         if n > formation_config::MAX_AGENTS {
-            return Err(format!("{n} agents: at most {} are supported", formation_config::MAX_AGENTS));
+            return Err(format!(
+                "{n} agents: at most {} are supported",
+                formation_config::MAX_AGENTS
+            ));
         }
-        let variant = Variant::parse(&r.variant).ok_or_else(|| format!("unknown variant '{}'", r.variant))?;
+        let variant =
+            Variant::parse(&r.variant).ok_or_else(|| format!("unknown variant '{}'", r.variant))?;
         if r.agent_hosts.len() != n {
-            return Err(format!("{} agent hosts for {n} agents", r.agent_hosts.len()));
+            return Err(format!(
+                "{} agent hosts for {n} agents",
+                r.agent_hosts.len()
+            ));
         }
         if !r.agent_hosts.iter().all(|h| proto::valid_name(h)) || !proto::valid_name(&r.launcher) {
             return Err("a host name of the placement is not key-safe".into());
@@ -324,7 +357,11 @@ impl Daemon {
             return Err(format!("no agent of the run is placed on {}", self.o.name));
         }
         if r.observers > services::MAX_OBSERVERS + 1 {
-            return Err(format!("{} observers: at most {}", r.observers, services::MAX_OBSERVERS + 1));
+            return Err(format!(
+                "{} observers: at most {}",
+                r.observers,
+                services::MAX_OBSERVERS + 1
+            ));
         }
         let dir = self.o.root.join(&r.run_id);
         private_dir(&dir)?;
@@ -334,12 +371,16 @@ impl Daemon {
         };
         std::fs::write(dir.join("scenario.toml"), &r.scenario_toml)
             .map_err(|e| fail(format!("cannot write the scenario: {e}"), &dir))?;
-        let membership = Membership::create(&dir, &r.prefix).map_err(|e| fail(e.to_string(), &dir))?;
+        let membership =
+            Membership::create(&dir, &r.prefix).map_err(|e| fail(e.to_string(), &dir))?;
         let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.to_string(), &dir))?;
         let placement = Placement {
             agent_hosts: r.agent_hosts.clone(),
             launcher: r.launcher.clone(),
-            neighbours: Placement::neighbours_of(n, scenario.graph.edges.iter().map(|e| (e.a, e.b))),
+            neighbours: Placement::neighbours_of(
+                n,
+                scenario.graph.edges.iter().map(|e| (e.a, e.b)),
+            ),
         };
         let bridge = Bridge::start(
             self.s.clone(),
@@ -364,7 +405,12 @@ impl Daemon {
         eprintln!(
             "formation host: run {} prepared: agents {:?} here, {} services forwarded out, {} in",
             r.run_id,
-            r.agent_hosts.iter().enumerate().filter(|(_, h)| **h == self.o.name).map(|(i, _)| i + 1).collect::<Vec<_>>(),
+            r.agent_hosts
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| **h == self.o.name)
+                .map(|(i, _)| i + 1)
+                .collect::<Vec<_>>(),
             bridge.forwarded.0,
             bridge.forwarded.1
         );
@@ -384,20 +430,33 @@ impl Daemon {
         Ok(())
     }
 
-    fn spawn(&mut self, run_id: &str, agent: usize, rejoin_at: Option<u64>, rejoin: &[u8]) -> Result<u32, String> {
+    fn spawn(
+        &mut self,
+        run_id: &str,
+        agent: usize,
+        rejoin_at: Option<u64>,
+        rejoin: &[u8],
+    ) -> Result<u32, String> {
         let exe = self.o.exe.clone();
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(format!("agent {} of run {run_id} is not placed on {me}", agent + 1));
+            return Err(format!(
+                "agent {} of run {run_id} is not placed on {me}",
+                agent + 1
+            ));
         }
         if r.children.contains_key(&agent) {
-            return Err(format!("agent {} of run {run_id} is already running here", agent + 1));
+            return Err(format!(
+                "agent {} of run {run_id} is already running here",
+                agent + 1
+            ));
         }
         if rejoin_at.is_some() {
             let path = restart::rejoin_path(&r.dir, agent);
             if let Some(parent) = path.parent() {
-                std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+                std::fs::create_dir_all(parent)
+                    .map_err(|e| format!("{}: {e}", parent.display()))?;
             }
             let tmp = path.with_extension("part");
             std::fs::write(&tmp, rejoin)
@@ -423,12 +482,20 @@ impl Daemon {
         // SAFETY: only async-signal-safe calls between fork and exec.
         unsafe {
             cmd.pre_exec(|| {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM as libc::c_ulong, 0, 0, 0);
+                libc::prctl(
+                    libc::PR_SET_PDEATHSIG,
+                    libc::SIGTERM as libc::c_ulong,
+                    0,
+                    0,
+                    0,
+                );
                 libc::signal(libc::SIGINT, libc::SIG_IGN);
                 Ok(())
             });
         }
-        let child = cmd.spawn().map_err(|e| format!("cannot start agent {}: {e}", agent + 1))?;
+        let child = cmd
+            .spawn()
+            .map_err(|e| format!("cannot start agent {}: {e}", agent + 1))?;
         let pid = child.id();
         r.children.insert(agent, child);
         Ok(pid)
@@ -451,10 +518,15 @@ impl Daemon {
 
     fn signal(&mut self, run_id: &str, agent: usize, signal: i32) -> Result<(), String> {
         if signal != libc::SIGSTOP && signal != libc::SIGCONT {
-            return Err(format!("signal {signal}: only SIGSTOP and SIGCONT are sent on request"));
+            return Err(format!(
+                "signal {signal}: only SIGSTOP and SIGCONT are sent on request"
+            ));
         }
         let r = self.run(run_id)?;
-        let c = r.children.get(&agent).ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+        let c = r
+            .children
+            .get(&agent)
+            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
         // SAFETY: kill(2) on our own unreaped child.
         unsafe { libc::kill(c.id() as libc::pid_t, signal) };
         Ok(())
@@ -507,9 +579,15 @@ impl Daemon {
     /// Ends a run: its processes get [`STOP_GRACE`] to exit, then SIGKILL; bridge stopped; every
     /// iceoryx2 file of its prefix and its folder removed.
     fn end(&mut self, run_id: &str) {
-        let Some(mut r) = self.runs.remove(run_id) else { return };
+        let Some(mut r) = self.runs.remove(run_id) else {
+            return;
+        };
         let deadline = Instant::now() + STOP_GRACE;
-        while Instant::now() < deadline && r.children.values_mut().any(|c| matches!(c.try_wait(), Ok(None))) {
+        while Instant::now() < deadline
+            && r.children
+                .values_mut()
+                .any(|c| matches!(c.try_wait(), Ok(None)))
+        {
             std::thread::sleep(Duration::from_millis(10));
         }
         for c in r.children.values_mut() {

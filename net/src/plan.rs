@@ -47,7 +47,10 @@ pub fn agent_index(pattern: &str, name: &str) -> Option<usize> {
 
 impl Placement {
     /// Neighbour lists from the scenario's undirected edges (1-based in the scenario).
-    pub fn neighbours_of(n: usize, edges: impl IntoIterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
+    pub fn neighbours_of(
+        n: usize,
+        edges: impl IntoIterator<Item = (usize, usize)>,
+    ) -> Vec<Vec<usize>> {
         let mut v = vec![Vec::new(); n];
         for (a, b) in edges {
             if a >= 1 && b >= 1 && a <= n && b <= n && a != b {
@@ -97,7 +100,11 @@ impl Placement {
                 },
                 Party::Neighbours => {
                     if let Some(ns) = i.and_then(|i| self.neighbours.get(i)) {
-                        s.extend(ns.iter().filter_map(|&j| self.agent_hosts.get(j)).map(String::as_str));
+                        s.extend(
+                            ns.iter()
+                                .filter_map(|&j| self.agent_hosts.get(j))
+                                .map(String::as_str),
+                        );
                     }
                 }
             }
@@ -120,7 +127,11 @@ impl Placement {
         let to = self.hosts_of(receivers, scope, i);
         let mut r = Route::default();
         if from.contains(me) {
-            r.out_to = to.iter().filter(|h| **h != me).map(|h| h.to_string()).collect();
+            r.out_to = to
+                .iter()
+                .filter(|h| **h != me)
+                .map(|h| h.to_string())
+                .collect();
         }
         r.inbound = to.contains(me) && from.iter().any(|h| *h != me);
         if r.inbound && !r.out_to.is_empty() {
@@ -135,27 +146,50 @@ impl Placement {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use formation_config::protocol::services::{self, Event, Limits, Message, Named, Sizing, Slice, Topic, Visitor};
+    use formation_config::protocol::services::{
+        self, Event, Limits, Message, Named, Sizing, Slice, Topic, Visitor,
+    };
 
     /// (name, senders, receivers, scope, index) of every service.
     #[derive(Default)]
-    struct All(Vec<(String, &'static [Party], &'static [Party], Scope, Option<usize>)>);
+    struct All(
+        Vec<(
+            String,
+            &'static [Party],
+            &'static [Party],
+            Scope,
+            Option<usize>,
+        )>,
+    );
 
     impl Visitor for All {
         type Error = ();
         fn topic<T: Message>(&mut self, s: Named<Topic<T>>, _: Limits) -> Result<(), ()> {
             let i = agent_index(s.spec.pattern, &s.name);
-            self.0.push((s.name, s.spec.publishers, s.spec.subscribers, s.spec.scope, i));
+            self.0.push((
+                s.name,
+                s.spec.publishers,
+                s.spec.subscribers,
+                s.spec.scope,
+                i,
+            ));
             Ok(())
         }
         fn slices<T: Message>(&mut self, s: Named<Topic<T, Slice>>, _: Limits) -> Result<(), ()> {
             let i = agent_index(s.spec.pattern, &s.name);
-            self.0.push((s.name, s.spec.publishers, s.spec.subscribers, s.spec.scope, i));
+            self.0.push((
+                s.name,
+                s.spec.publishers,
+                s.spec.subscribers,
+                s.spec.scope,
+                i,
+            ));
             Ok(())
         }
         fn event(&mut self, s: Named<Event>, _: Limits) -> Result<(), ()> {
             let i = agent_index(s.spec.pattern, &s.name);
-            self.0.push((s.name, s.spec.notifiers, s.spec.listeners, s.spec.scope, i));
+            self.0
+                .push((s.name, s.spec.notifiers, s.spec.listeners, s.spec.scope, i));
             Ok(())
         }
     }
@@ -166,9 +200,18 @@ mod tests {
 
     #[test]
     fn the_agent_index_is_read_from_a_per_agent_name() {
-        assert_eq!(agent_index("formation/agent/{i}/state", "formation/agent/12/state"), Some(12));
-        assert_eq!(agent_index("formation/wake/agent/{i}", "formation/wake/agent/0"), Some(0));
-        assert_eq!(agent_index("formation/reference", "formation/reference"), None);
+        assert_eq!(
+            agent_index("formation/agent/{i}/state", "formation/agent/12/state"),
+            Some(12)
+        );
+        assert_eq!(
+            agent_index("formation/wake/agent/{i}", "formation/wake/agent/0"),
+            Some(0)
+        );
+        assert_eq!(
+            agent_index("formation/reference", "formation/reference"),
+            None
+        );
     }
 
     #[test]

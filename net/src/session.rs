@@ -66,14 +66,17 @@ pub fn parse_endpoint(ep: &str) -> Result<bool, OptionError> {
         .strip_prefix("tcp/")
         .ok_or_else(|| bad("only tcp endpoints are supported"))?;
     let (host, port) = rest.rsplit_once(':').ok_or_else(|| bad("no port"))?;
-    port.parse::<u16>().map_err(|_| bad("port is not a number in 0..=65535"))?;
+    port.parse::<u16>()
+        .map_err(|_| bad("port is not a number in 0..=65535"))?;
     if host.is_empty() {
         return Err(bad("no host"));
     }
     let host = host.trim_start_matches('[').trim_end_matches(']');
     Ok(host == "localhost"
         || host == "::1"
-        || host.parse::<std::net::Ipv4Addr>().is_ok_and(|a| a.is_loopback()))
+        || host
+            .parse::<std::net::Ipv4Addr>()
+            .is_ok_and(|a| a.is_loopback()))
 }
 
 impl Options {
@@ -110,8 +113,16 @@ impl Options {
         };
         set(&mut c, "mode", format!("\"{mode}\""))?;
         set(&mut c, "scouting/multicast/enabled", "false".into())?;
-        set(&mut c, "listen/endpoints", serde_json::to_string(&self.listen).unwrap())?;
-        set(&mut c, "connect/endpoints", serde_json::to_string(&self.connect).unwrap())?;
+        set(
+            &mut c,
+            "listen/endpoints",
+            serde_json::to_string(&self.listen).unwrap(),
+        )?;
+        set(
+            &mut c,
+            "connect/endpoints",
+            serde_json::to_string(&self.connect).unwrap(),
+        )?;
         set(&mut c, "transport/link/tx/lease", self.lease_ms.to_string())?;
         // Four keep-alives per lease (Zenoh's default ratio).
         set(&mut c, "transport/link/tx/keep_alive", "4".into())?;
@@ -125,8 +136,16 @@ impl Options {
         }
         if let Some(path) = &self.auth {
             let (user, password) = read_credentials(path)?;
-            set(&mut c, "transport/auth/usrpwd/user", serde_json::to_string(&user).unwrap())?;
-            set(&mut c, "transport/auth/usrpwd/password", serde_json::to_string(&password).unwrap())?;
+            set(
+                &mut c,
+                "transport/auth/usrpwd/user",
+                serde_json::to_string(&user).unwrap(),
+            )?;
+            set(
+                &mut c,
+                "transport/auth/usrpwd/password",
+                serde_json::to_string(&password).unwrap(),
+            )?;
             if self.mode == Mode::Daemon {
                 set(
                     &mut c,

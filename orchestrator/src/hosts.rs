@@ -66,16 +66,30 @@ pub fn machine_name() -> String {
     let s: String = raw
         .trim()
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '-' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '-'
+            }
+        })
         .take(32)
         .collect();
-    if s.is_empty() { "host".into() } else { s }
+    if s.is_empty() {
+        "host".into()
+    } else {
+        s
+    }
 }
 
 /// `formation host`.
 pub fn host_main(a: HostArgs) -> ExitCode {
     let name = a.name.clone().unwrap_or_else(machine_name);
-    let listen = if a.listen.is_empty() { vec![session::default_endpoint()] } else { a.listen.clone() };
+    let listen = if a.listen.is_empty() {
+        vec![session::default_endpoint()]
+    } else {
+        a.listen.clone()
+    };
     let opts = Options {
         mode: Mode::Daemon,
         listen,
@@ -110,8 +124,16 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .try_init();
-    let root = a.root.clone().unwrap_or_else(|| formation_net::daemon::default_root(&name));
-    let o = formation_net::daemon::DaemonOptions { name, session: opts, exe, root };
+    let root = a
+        .root
+        .clone()
+        .unwrap_or_else(|| formation_net::daemon::default_root(&name));
+    let o = formation_net::daemon::DaemonOptions {
+        name,
+        session: opts,
+        exe,
+        root,
+    };
     match formation_net::daemon::serve(o, &stop) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -123,7 +145,11 @@ pub fn host_main(a: HostArgs) -> ExitCode {
 
 /// `formation hosts`.
 pub fn hosts_main(a: HostsArgs) -> ExitCode {
-    let connect = if a.connect.is_empty() { vec![session::default_endpoint()] } else { a.connect.clone() };
+    let connect = if a.connect.is_empty() {
+        vec![session::default_endpoint()]
+    } else {
+        a.connect.clone()
+    };
     let opts = Options {
         mode: Mode::Client,
         listen: vec![],
@@ -147,7 +173,10 @@ pub fn hosts_main(a: HostsArgs) -> ExitCode {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&infos).unwrap());
     } else {
-        println!("{:<16} {:<28} {:>4} {:>4}  BUILD", "NAME", "ADDRESS", "CPUS", "RUNS");
+        println!(
+            "{:<16} {:<28} {:>4} {:>4}  BUILD",
+            "NAME", "ADDRESS", "CPUS", "RUNS"
+        );
         for i in &infos {
             println!(
                 "{:<16} {:<28} {:>4} {:>4}  {} (protocol {})",

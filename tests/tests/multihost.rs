@@ -21,7 +21,10 @@ static NEXT: AtomicUsize = AtomicUsize::new(0);
 fn unavailable() -> Option<String> {
     // SAFETY: geteuid has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
-        return Some("not root (network namespaces and veth pairs need CAP_NET_ADMIN and CAP_SYS_ADMIN)".into());
+        return Some(
+            "not root (network namespaces and veth pairs need CAP_NET_ADMIN and CAP_SYS_ADMIN)"
+                .into(),
+        );
     }
     let ok = |c: &str, a: &[&str]| {
         Command::new(c)
@@ -110,8 +113,24 @@ impl Hosts {
             ip(&["link", "add", &a, "type", "veth", "peer", "name", &b]);
             ip(&["link", "set", &a, "netns", &names[0]]);
             ip(&["link", "set", &b, "netns", &names[h]]);
-            ip(&["-n", &names[0], "addr", "add", &format!("10.{k}.{h}.1/24"), "dev", &a]);
-            ip(&["-n", &names[h], "addr", "add", &format!("10.{k}.{h}.2/24"), "dev", &b]);
+            ip(&[
+                "-n",
+                &names[0],
+                "addr",
+                "add",
+                &format!("10.{k}.{h}.1/24"),
+                "dev",
+                &a,
+            ]);
+            ip(&[
+                "-n",
+                &names[h],
+                "addr",
+                "add",
+                &format!("10.{k}.{h}.2/24"),
+                "dev",
+                &b,
+            ]);
             ip(&["-n", &names[0], "link", "set", &a, "up"]);
             ip(&["-n", &names[h], "link", "set", &b, "up"]);
             hosts.addrs.push(format!("10.{k}.{h}.2"));
@@ -127,23 +146,39 @@ impl Hosts {
     /// command replaces the shell, so its pid is the child's; see [`residue_of`]).
     fn command(&self, h: usize, residue: Option<&Path>, args: &[&str]) -> Command {
         let script = match residue {
-            Some(_) => r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
+            Some(_) => {
+                r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
 res="$1"; shift
 "$@"; rc=$?
 find /dev/shm -mindepth 1 > "$res"; find /tmp/iceoryx2 -type f >> "$res" 2>/dev/null
-exit $rc"#,
-            None => r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
+exit $rc"#
+            }
+            None => {
+                r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
 shift
-exec "$@""#,
+exec "$@""#
+            }
         };
         let residue = residue.map_or_else(|| "-".into(), |p| p.display().to_string());
         let mut c = Command::new("ip");
-        c.args(["netns", "exec", &self.names[h], "unshare", "--mount", "--propagation", "private", "sh", "-c", script, "sh"])
-            .arg(&residue)
-            .arg(bin("formation"))
-            .args(args)
-            .env_remove("CARGO")
-            .env("RUST_LOG", "warn");
+        c.args([
+            "netns",
+            "exec",
+            &self.names[h],
+            "unshare",
+            "--mount",
+            "--propagation",
+            "private",
+            "sh",
+            "-c",
+            script,
+            "sh",
+        ])
+        .arg(&residue)
+        .arg(bin("formation"))
+        .args(args)
+        .env_remove("CARGO")
+        .env("RUST_LOG", "warn");
         c
     }
 
@@ -167,8 +202,15 @@ exec "$@""#,
             .spawn()
             .expect("formation host starts");
         let t0 = Instant::now();
-        while !std::fs::read_to_string(&log).unwrap_or_default().contains("listening on") {
-            assert!(t0.elapsed() < Duration::from_secs(20), "daemon {h} did not start: {}", std::fs::read_to_string(&log).unwrap_or_default());
+        while !std::fs::read_to_string(&log)
+            .unwrap_or_default()
+            .contains("listening on")
+        {
+            assert!(
+                t0.elapsed() < Duration::from_secs(20),
+                "daemon {h} did not start: {}",
+                std::fs::read_to_string(&log).unwrap_or_default()
+            );
             std::thread::sleep(Duration::from_millis(50));
         }
         self.daemons.push(child);
@@ -220,7 +262,13 @@ impl Drop for Hosts {
 }
 
 /// Runs `formation run ARGS --out OUT` in the launcher namespace; (exit code, stderr, residue).
-fn run_in(hosts: &Hosts, dir: &Path, args: &[&str], out: &Path, with_auth: bool) -> (i32, String, String) {
+fn run_in(
+    hosts: &Hosts,
+    dir: &Path,
+    args: &[&str],
+    out: &Path,
+    with_auth: bool,
+) -> (i32, String, String) {
     let residue = dir.join("residue-launcher.txt");
     let mut v: Vec<String> = vec!["run".into()];
     v.extend(args.iter().map(|s| s.to_string()));
@@ -239,9 +287,18 @@ fn run_in(hosts: &Hosts, dir: &Path, args: &[&str], out: &Path, with_auth: bool)
         .spawn()
         .expect("formation run starts");
     let mut err = String::new();
-    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
     let st = child.wait().unwrap();
-    (st.code().unwrap_or(-1), err, std::fs::read_to_string(&residue).unwrap_or_default())
+    (
+        st.code().unwrap_or(-1),
+        err,
+        std::fs::read_to_string(&residue).unwrap_or_default(),
+    )
 }
 
 /// Files in /dev/shm and /tmp/iceoryx2 as process `pid` sees them (its mount namespace).
@@ -267,7 +324,10 @@ fn residue_of(pid: u32) -> String {
 }
 
 fn assert_no_residue(what: &str, residue: &str) {
-    assert!(residue.trim().is_empty(), "{what} left files in /dev/shm or /tmp/iceoryx2: {residue}");
+    assert!(
+        residue.trim().is_empty(),
+        "{what} left files in /dev/shm or /tmp/iceoryx2: {residue}"
+    );
 }
 
 fn split_run_matches_sim(tag: &str, scenario: &str, duration: &str, place: &str) {
@@ -284,7 +344,10 @@ fn split_run_matches_sim(tag: &str, scenario: &str, duration: &str, place: &str)
         true,
     );
     assert_eq!(code, 0, "formation run over two hosts failed:\n{err}");
-    assert!(err.contains("on h1"), "the run names the remote host: {err}");
+    assert!(
+        err.contains("on h1"),
+        "the run names the remote host: {err}"
+    );
     assert_no_residue("the launcher", &residue);
     let left = hosts.stop_daemons();
     assert_no_residue("host h1", &left[0]);
@@ -294,7 +357,9 @@ fn split_run_matches_sim(tag: &str, scenario: &str, duration: &str, place: &str)
 
 #[test]
 fn paper_split_three_two_over_two_hosts_is_byte_identical_to_sim_and_leaves_nothing() {
-    if !available("paper_split_three_two_over_two_hosts_is_byte_identical_to_sim_and_leaves_nothing") {
+    if !available(
+        "paper_split_three_two_over_two_hosts_is_byte_identical_to_sim_and_leaves_nothing",
+    ) {
         return;
     }
     split_run_matches_sim("split", "paper", "5", "4,5@h1");
@@ -302,7 +367,8 @@ fn paper_split_three_two_over_two_hosts_is_byte_identical_to_sim_and_leaves_noth
 
 #[test]
 fn a_crash_of_a_remote_agent_is_taken_over_warm_on_its_host_byte_identical_to_sim() {
-    if !available("a_crash_of_a_remote_agent_is_taken_over_warm_on_its_host_byte_identical_to_sim") {
+    if !available("a_crash_of_a_remote_agent_is_taken_over_warm_on_its_host_byte_identical_to_sim")
+    {
         return;
     }
     // crash-warm.toml crashes agent 3 at t = 20 s for 0.5 s; agent 3 is on the second host.
@@ -321,8 +387,14 @@ fn a_mismatched_build_is_refused_before_anything_starts_naming_both_hosts() {
     let out = dir.join("run");
     let (code, err, residue) = run_in(&hosts, &dir, &["paper", "--hosts", "h1"], &out, true);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("h1") && err.contains("local"), "both hosts named: {err}");
-    assert!(err.contains("0.0.0+other-build"), "what differs is named: {err}");
+    assert!(
+        err.contains("h1") && err.contains("local"),
+        "both hosts named: {err}"
+    );
+    assert!(
+        err.contains("0.0.0+other-build"),
+        "what differs is named: {err}"
+    );
     assert!(!out.join("trajectory.csv").exists(), "nothing started");
     assert_no_residue("the launcher", &residue);
     let left = hosts.stop_daemons();
@@ -332,7 +404,9 @@ fn a_mismatched_build_is_refused_before_anything_starts_naming_both_hosts() {
 
 #[test]
 fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback() {
-    if !available("an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback") {
+    if !available(
+        "an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback",
+    ) {
         return;
     }
     let dir = work_dir("noauth");
@@ -383,8 +457,14 @@ fn a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly() {
         .expect("formation run starts");
     // Let it fly a little, then SIGKILL the daemon (and with it its agents).
     let t0 = Instant::now();
-    while !std::fs::read_to_string(&err_path).unwrap_or_default().contains("steps/s") {
-        assert!(t0.elapsed() < Duration::from_secs(30), "the run did not start");
+    while !std::fs::read_to_string(&err_path)
+        .unwrap_or_default()
+        .contains("steps/s")
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the run did not start"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     std::thread::sleep(Duration::from_millis(500));
@@ -398,17 +478,35 @@ fn a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly() {
         if let Some(st) = run.try_wait().unwrap() {
             break st;
         }
-        assert!(killed.elapsed() < Duration::from_secs(15), "the run did not stop after its host was lost");
+        assert!(
+            killed.elapsed() < Duration::from_secs(15),
+            "the run did not stop after its host was lost"
+        );
         std::thread::sleep(Duration::from_millis(20));
     };
     let stopped_after = killed.elapsed();
     let err = std::fs::read_to_string(&err_path).unwrap();
     assert_eq!(st.code(), Some(1), "{err}");
-    assert!(err.contains("lost with host h1"), "the lost host is named: {err}");
+    assert!(
+        err.contains("lost with host h1"),
+        "the lost host is named: {err}"
+    );
     // Named and stopped well within the lease (a killed daemon's TCP link closes at once).
-    assert!(stopped_after < Duration::from_secs(5), "stopped {stopped_after:?} after the kill");
-    eprintln!("run stopped {:.0} ms after the daemon's SIGKILL", stopped_after.as_secs_f64() * 1e3);
-    assert_no_residue("the launcher", &std::fs::read_to_string(&residue).unwrap_or_default());
-    assert!(out.join("trajectory.csv").exists(), "the recorded prefix is kept");
+    assert!(
+        stopped_after < Duration::from_secs(5),
+        "stopped {stopped_after:?} after the kill"
+    );
+    eprintln!(
+        "run stopped {:.0} ms after the daemon's SIGKILL",
+        stopped_after.as_secs_f64() * 1e3
+    );
+    assert_no_residue(
+        "the launcher",
+        &std::fs::read_to_string(&residue).unwrap_or_default(),
+    );
+    assert!(
+        out.join("trajectory.csv").exists(),
+        "the recorded prefix is kept"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

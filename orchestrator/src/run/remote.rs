@@ -51,7 +51,9 @@ pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<Str
         }
     }
     if place.is_empty() {
-        let all: Vec<&str> = std::iter::once(LAUNCHER).chain(hosts.iter().map(String::as_str)).collect();
+        let all: Vec<&str> = std::iter::once(LAUNCHER)
+            .chain(hosts.iter().map(String::as_str))
+            .collect();
         return Ok((0..n).map(|i| all[i % all.len()].to_string()).collect());
     }
     let mut v = vec![LAUNCHER.to_string(); n];
@@ -69,7 +71,9 @@ pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<Str
                 .parse()
                 .map_err(|_| format!("--place {p}: '{id}' is not an agent id"))?;
             if k == 0 || k > n {
-                return Err(format!("--place {p}: agent {k} does not exist (ids 1..={n})"));
+                return Err(format!(
+                    "--place {p}: agent {k} does not exist (ids 1..={n})"
+                ));
             }
             if placed[k - 1] {
                 return Err(format!("--place {p}: agent {k} is placed twice"));
@@ -108,7 +112,11 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
     let opts = Options {
         mode: Mode::Orchestrator,
         listen: vec![],
-        connect: if a.connect.is_empty() { vec![session::default_endpoint()] } else { a.connect.clone() },
+        connect: if a.connect.is_empty() {
+            vec![session::default_endpoint()]
+        } else {
+            a.connect.clone()
+        },
         auth: a.link.auth.clone(),
         lease_ms: a.link.lease_ms,
     };
@@ -162,9 +170,16 @@ impl Remote {
         };
         let mut run = run;
         for h in &self.hosts {
-            match run.cluster.request(h, &Request::Prepare(req.clone()), &[], session::REPLY_TIMEOUT) {
+            match run.cluster.request(
+                h,
+                &Request::Prepare(req.clone()),
+                &[],
+                session::REPLY_TIMEOUT,
+            ) {
                 Ok((Reply::Ok { .. }, _)) => run.hosts.push(h.clone()),
-                Ok((Reply::Refused(why), _)) => return Err(format!("host {h} refused the run: {why}")),
+                Ok((Reply::Refused(why), _)) => {
+                    return Err(format!("host {h} refused the run: {why}"))
+                }
                 Err(e) => return Err(e),
             }
         }
@@ -223,22 +238,33 @@ impl RemoteRun {
                 create: false,
             },
         )?;
-        tracing::info!(out = b.forwarded.0, inbound = b.forwarded.1, "bridge started");
+        tracing::info!(
+            out = b.forwarded.0,
+            inbound = b.forwarded.1,
+            "bridge started"
+        );
         *self.bridge.borrow_mut() = Some(b);
         Ok(())
     }
 
     /// Whether agent i (0-based) runs on another host.
     pub fn is_remote(&self, i: usize) -> bool {
-        self.placement.agent_hosts.get(i).is_some_and(|h| h != LAUNCHER)
+        self.placement
+            .agent_hosts
+            .get(i)
+            .is_some_and(|h| h != LAUNCHER)
     }
 
     /// `agents 1,2,3 here, 4,5 on b`.
     pub fn describe(&self) -> String {
         let mut parts = Vec::new();
         for h in self.placement.hosts() {
-            let ids: Vec<String> =
-                self.placement.agents_on(&h).iter().map(|i| (i + 1).to_string()).collect();
+            let ids: Vec<String> = self
+                .placement
+                .agents_on(&h)
+                .iter()
+                .map(|i| (i + 1).to_string())
+                .collect();
             if !ids.is_empty() {
                 parts.push(format!("{} on {h}", ids.join(",")));
             }
@@ -247,7 +273,12 @@ impl RemoteRun {
     }
 
     /// Starts agent `agent` on its host (with its rejoin file, for a process taking over).
-    pub fn spawn(&self, agent: usize, label: String, args: &ChildArgs) -> Result<RoleProcess, String> {
+    pub fn spawn(
+        &self,
+        agent: usize,
+        label: String,
+        args: &ChildArgs,
+    ) -> Result<RoleProcess, String> {
         let host = self.placement.agent_hosts[agent].clone();
         let rejoin = match args.rejoin_at {
             Some(_) => {
@@ -261,7 +292,10 @@ impl RemoteRun {
             agent,
             rejoin_at: args.rejoin_at,
         };
-        match self.cluster.request(&host, &req, &rejoin, session::REPLY_TIMEOUT)? {
+        match self
+            .cluster
+            .request(&host, &req, &rejoin, session::REPLY_TIMEOUT)?
+        {
             (Reply::Ok { pid: Some(pid) }, _) => Ok(RoleProcess::remote(
                 format!("{label} on {host}"),
                 Box::new(RemoteAgent {
@@ -272,7 +306,9 @@ impl RemoteRun {
                     pid,
                 }),
             )),
-            (Reply::Ok { pid: None }, _) => Err(format!("host {host} started {label} without a pid")),
+            (Reply::Ok { pid: None }, _) => {
+                Err(format!("host {host} started {label} without a pid"))
+            }
             (Reply::Refused(why), _) => Err(format!("host {host} cannot start {label}: {why}")),
         }
     }
@@ -285,7 +321,10 @@ impl RemoteRun {
             run_id: self.run_id.clone(),
             agent,
         };
-        match self.cluster.request(host, &req, &[], session::REPLY_TIMEOUT)? {
+        match self
+            .cluster
+            .request(host, &req, &[], session::REPLY_TIMEOUT)?
+        {
             (Reply::Ok { .. }, bytes) => {
                 let p = restart::checkpoint_path(run_dir, agent);
                 if let Some(d) = p.parent() {
@@ -324,7 +363,10 @@ impl RemoteProcess for RemoteAgent {
             run_id: self.run_id.clone(),
             agent: self.agent,
         };
-        if let Err(e) = self.cluster.request(&self.host, &req, &[], session::REPLY_TIMEOUT) {
+        if let Err(e) = self
+            .cluster
+            .request(&self.host, &req, &[], session::REPLY_TIMEOUT)
+        {
             tracing::warn!("cannot kill agent {} on {}: {e}", self.agent + 1, self.host);
         }
     }
@@ -335,8 +377,15 @@ impl RemoteProcess for RemoteAgent {
             agent: self.agent,
             signal,
         };
-        if let Err(e) = self.cluster.request(&self.host, &req, &[], session::REPLY_TIMEOUT) {
-            tracing::warn!("cannot signal agent {} on {}: {e}", self.agent + 1, self.host);
+        if let Err(e) = self
+            .cluster
+            .request(&self.host, &req, &[], session::REPLY_TIMEOUT)
+        {
+            tracing::warn!(
+                "cannot signal agent {} on {}: {e}",
+                self.agent + 1,
+                self.host
+            );
         }
     }
 
@@ -360,7 +409,10 @@ mod tests {
     #[test]
     fn agents_go_round_robin_over_this_machine_and_the_hosts_unless_placed() {
         let h = vec!["b".to_string()];
-        assert_eq!(placement(5, &h, &[]).unwrap(), ["local", "b", "local", "b", "local"]);
+        assert_eq!(
+            placement(5, &h, &[]).unwrap(),
+            ["local", "b", "local", "b", "local"]
+        );
         assert_eq!(
             placement(5, &h, &["4,5@b".into()]).unwrap(),
             ["local", "local", "local", "b", "b"]
@@ -375,11 +427,21 @@ mod tests {
     #[test]
     fn a_bad_placement_is_named() {
         let h = vec!["b".to_string()];
-        assert!(placement(5, &h, &["6@b".into()]).unwrap_err().contains("agent 6 does not exist"));
-        assert!(placement(5, &h, &["4@c".into()]).unwrap_err().contains("not in --hosts"));
-        assert!(placement(5, &h, &["4@b".into(), "4@b".into()]).unwrap_err().contains("placed twice"));
-        assert!(placement(5, &h, &["x@b".into()]).unwrap_err().contains("not an agent id"));
-        assert!(placement(5, &h, &["4b".into()]).unwrap_err().contains("IDS@HOST"));
+        assert!(placement(5, &h, &["6@b".into()])
+            .unwrap_err()
+            .contains("agent 6 does not exist"));
+        assert!(placement(5, &h, &["4@c".into()])
+            .unwrap_err()
+            .contains("not in --hosts"));
+        assert!(placement(5, &h, &["4@b".into(), "4@b".into()])
+            .unwrap_err()
+            .contains("placed twice"));
+        assert!(placement(5, &h, &["x@b".into()])
+            .unwrap_err()
+            .contains("not an agent id"));
+        assert!(placement(5, &h, &["4b".into()])
+            .unwrap_err()
+            .contains("IDS@HOST"));
         assert!(placement(5, &["local".into()], &[]).is_err());
         assert!(placement(5, &["a/b".into()], &[]).is_err());
     }

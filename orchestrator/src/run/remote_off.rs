@@ -24,7 +24,15 @@ pub fn connect(_: &PlaceArgs, _: &Scenario) -> Result<Option<Remote>, String> {
 
 impl Remote {
     /// Unreachable.
-    pub fn prepare(self, _: &str, _: &str, _: &Scenario, _: &str, _: bool, _: usize) -> Result<RemoteRun, String> {
+    pub fn prepare(
+        self,
+        _: &str,
+        _: &str,
+        _: &Scenario,
+        _: &str,
+        _: bool,
+        _: usize,
+    ) -> Result<RemoteRun, String> {
         match self {}
     }
 }
