@@ -202,7 +202,10 @@ pub fn check_indexed(children: &mut [RoleProcess]) -> Option<(usize, String)> {
     for (idx, c) in children.iter_mut().enumerate() {
         if let Some(how) = c.poll_exit() {
             if first.is_none() {
-                let on = c.host().map(|h| format!(" on host {h}")).unwrap_or_default();
+                let on = c
+                    .host()
+                    .map(|h| format!(" on host {h}"))
+                    .unwrap_or_default();
                 first = Some((idx, format!("{} (pid {}{on}) {how}", c.label, c.pid())));
             }
         }
