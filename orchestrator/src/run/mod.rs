@@ -416,16 +416,18 @@ fn run(
     )?);
     for i in 0..n {
         let label = format!("agent {} (--agent {i})", i + 1);
-        children.0.push(match remote.as_ref().filter(|r| r.is_remote(i)) {
-            Some(r) => r.spawn(i, label, &child_args(Some(i)))?,
-            None => spawn::spawn(
-                &exe,
-                Role::Agent,
-                label,
-                &child_args(Some(i)),
-                placement.map(|p| p.agent(i)),
-            )?,
-        });
+        children
+            .0
+            .push(match remote.as_ref().filter(|r| r.is_remote(i)) {
+                Some(r) => r.spawn(i, label, &child_args(Some(i)))?,
+                None => spawn::spawn(
+                    &exe,
+                    Role::Agent,
+                    label,
+                    &child_args(Some(i)),
+                    placement.map(|p| p.agent(i)),
+                )?,
+            });
     }
     // Every child is started (they keep the normal priority): from here on the orchestrator records
     // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
