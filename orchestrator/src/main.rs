@@ -98,6 +98,9 @@ enum Command {
     Host(formation::hosts::HostArgs),
     /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
     #[cfg(feature = "multihost")]
+    #[command(
+        after_help = "Examples:\n  formation hosts\n  formation hosts --connect tcp/10.0.0.2:7447 --auth auth.txt --json"
+    )]
     Hosts(formation::hosts::HostsArgs),
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.

@@ -31,6 +31,7 @@ pub trait RemoteProcess {
 
 enum Proc {
     Local(Child, Option<ExitStatus>),
+    #[cfg_attr(not(feature = "multihost"), allow(dead_code))]
     Remote(Box<dyn RemoteProcess>, Option<String>),
 }
 
@@ -43,6 +44,7 @@ pub struct RoleProcess {
 
 impl RoleProcess {
     /// A process on another host.
+    #[cfg_attr(not(feature = "multihost"), allow(dead_code))]
     pub fn remote(label: String, p: Box<dyn RemoteProcess>) -> RoleProcess {
         RoleProcess {
             label,
