@@ -18,6 +18,8 @@ pub mod cli;
 pub mod closed_loop;
 pub mod cpus;
 pub mod history;
+#[cfg(feature = "multihost")]
+pub mod hosts;
 pub mod live;
 pub mod out_lock;
 pub mod plot;

@@ -89,6 +89,19 @@ enum Command {
     /// Internal: one agent process of `formation bench`.
     #[command(hide = true)]
     BenchPeer(bench::PeerArgs),
+    /// Lend this machine's CPUs to runs of other machines: a daemon that starts agents on request
+    /// (docs/multi-host.md).
+    #[cfg(feature = "multihost")]
+    #[command(
+        after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tcp/0.0.0.0:7447 --auth /etc/formation/auth"
+    )]
+    Host(formation::hosts::HostArgs),
+    /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
+    #[cfg(feature = "multihost")]
+    #[command(
+        after_help = "Examples:\n  formation hosts\n  formation hosts --connect tcp/10.0.0.2:7447 --auth auth.txt --json"
+    )]
+    Hosts(formation::hosts::HostsArgs),
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.
     #[command(hide = true)]
@@ -133,6 +146,10 @@ fn main() -> ExitCode {
         }
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
         Some(Command::Node(a)) => role::main(a),
+        #[cfg(feature = "multihost")]
+        Some(Command::Host(a)) => formation::hosts::host_main(a),
+        #[cfg(feature = "multihost")]
+        Some(Command::Hosts(a)) => formation::hosts::hosts_main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
         None => run::main(cli::defaults::<run::RunArgs>("run")),
     }

@@ -11,6 +11,11 @@ mod driver;
 pub(crate) mod injections;
 pub(crate) mod placement;
 mod progress;
+#[cfg(feature = "multihost")]
+pub(crate) mod remote;
+#[cfg(not(feature = "multihost"))]
+#[path = "remote_off.rs"]
+pub(crate) mod remote;
 mod services;
 mod spawn;
 pub(crate) mod step_timing;
@@ -77,7 +82,12 @@ pub struct RunArgs {
         allow_negative_numbers = true
     )]
     pub observers: usize,
+    /// Other machines (`formation host` daemons) and the agents placed on them.
+    #[command(flatten)]
+    pub place: remote::PlaceArgs,
 }
+
+pub use spawn::self_exe;
 
 /// How a run is paced.
 #[derive(Debug, Clone, Copy)]
@@ -159,12 +169,22 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(cli::EXIT_INVALID);
         }
     };
+    // Hosts reached and checked before anything is created (exit 2 naming what is missing or
+    // differs).
+    let remote = match remote::connect(&args.place, &scenario) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
     let mode = Mode {
         realtime: args.realtime,
         wait: args.wait,
         spin_us: args.spin_us,
         rt_priority: args.rt_priority,
-        observers: args.observers,
+        // The bridges take one observer slot of every service.
+        observers: args.observers + usize::from(remote.is_some()),
     };
     let out = args.common.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
@@ -183,6 +203,26 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
     let run_id = new_run_id();
     let prefix = names::run_prefix(&run_id);
+    // Every host prepares the run (services, bridge) before any process starts anywhere.
+    let remote = match remote
+        .map(|r| {
+            r.prepare(
+                &run_id,
+                &prefix,
+                &scenario,
+                variant.name(),
+                mode.realtime,
+                mode.observers,
+            )
+        })
+        .transpose()
+    {
+        Ok(r) => r.map(std::rc::Rc::new),
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
     // Held until the outputs are complete: a second run into the same folder is refused.
     let out_lock = match crate::out_lock::acquire(&out, Some(&run_id), "formation run") {
         Ok(l) => l,
@@ -221,6 +261,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         &run_id,
         &prefix,
         &interrupted,
+        remote,
     );
     match cleanup::remove(&prefix, cleanup::OUTSIDE_GRACE) {
         Ok(cleanup::Cleaned::All) => {}
@@ -307,6 +348,7 @@ fn run(
     run_id: &str,
     prefix: &str,
     interrupted: &AtomicBool,
+    remote: Option<std::rc::Rc<remote::RemoteRun>>,
 ) -> Result<(Outcome, crate::record::Summary), String> {
     if !mode.realtime {
         // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
@@ -331,6 +373,12 @@ fn run(
     }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
     let services = services::RunServices::create(&node, n, mode.realtime, mode.observers)?;
+    if let Some(r) = &remote {
+        r.start_bridge(
+            prefix,
+            names::Sizing::run(n, mode.realtime).with_observers(mode.observers),
+        )?;
+    }
     let ports = driver::Ports::open(&node, n, !mode.realtime)?;
     let timing_dir = formation_config::node::timing::dir(&run_dir);
     if mode.realtime {
@@ -367,19 +415,28 @@ fn run(
         None,
     )?);
     for i in 0..n {
-        children.0.push(spawn::spawn(
-            &exe,
-            Role::Agent,
-            format!("agent {} (--agent {i})", i + 1),
-            &child_args(Some(i)),
-            placement.map(|p| p.agent(i)),
-        )?);
+        let label = format!("agent {} (--agent {i})", i + 1);
+        children
+            .0
+            .push(match remote.as_ref().filter(|r| r.is_remote(i)) {
+                Some(r) => r.spawn(i, label, &child_args(Some(i)))?,
+                None => spawn::spawn(
+                    &exe,
+                    Role::Agent,
+                    label,
+                    &child_args(Some(i)),
+                    placement.map(|p| p.agent(i)),
+                )?,
+            });
     }
     // Every child is started (they keep the normal priority): from here on the orchestrator records
     // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
     formation_config::node::sched::background_thread();
     let pids: Vec<String> = children.0.iter().map(|c| c.pid().to_string()).collect();
-    let pinned = placement.map_or("not pinned".to_string(), |p| p.describe(n));
+    let mut pinned = placement.map_or("not pinned".to_string(), |p| p.describe(n));
+    if let Some(r) = &remote {
+        pinned = format!("{}; {pinned}", r.describe());
+    }
     eprintln!(
         "formation run: id {run_id}, iceoryx2 prefix {prefix}, {n} agents, {} steps; pids {}; {pinned}",
         scenario.n_steps(),
@@ -436,6 +493,7 @@ fn run(
         child_args(None),
         (0..n).map(|i| placement.map(|p| p.agent(i))).collect(),
         formation_config::protocol::pacing::PLANT_LEAD + injections::SLACK,
+        remote.clone(),
     )?;
     takeover.set_realtime(mode.realtime);
     let mut step_timing = step_timing::StepTiming::default();

@@ -14,44 +14,123 @@ pub fn self_exe() -> Result<PathBuf, String> {
     std::env::current_exe().map_err(|e| format!("cannot locate the formation executable: {e}"))
 }
 
+/// A role process started on another host by its daemon (`formation host`, crate
+/// `formation-net`): what the supervision needs of it.
+pub trait RemoteProcess {
+    /// Its process id on its host.
+    fn pid(&self) -> u32;
+    /// Its host's name.
+    fn host(&self) -> &str;
+    /// SIGKILLs it and waits until its daemon has reaped it.
+    fn kill_and_reap(&mut self);
+    /// Sends SIGSTOP or SIGCONT.
+    fn signal(&self, signal: i32);
+    /// How it ended, once its daemon reported its exit (or the host was lost).
+    fn try_wait(&mut self) -> Option<String>;
+}
+
+enum Proc {
+    Local(Child, Option<ExitStatus>),
+    #[cfg_attr(not(feature = "multihost"), allow(dead_code))]
+    Remote(Box<dyn RemoteProcess>, Option<String>),
+}
+
 /// One role process of the run.
 pub struct RoleProcess {
     /// "plant", "leader" or "agent i" (1-based, as in the paper and the CSV).
     pub label: String,
-    child: Child,
-    status: Option<ExitStatus>,
+    proc: Proc,
 }
 
 impl RoleProcess {
-    /// Process id.
+    /// A process on another host.
+    #[cfg_attr(not(feature = "multihost"), allow(dead_code))]
+    pub fn remote(label: String, p: Box<dyn RemoteProcess>) -> RoleProcess {
+        RoleProcess {
+            label,
+            proc: Proc::Remote(p, None),
+        }
+    }
+
+    /// Process id (on its host).
     pub fn pid(&self) -> u32 {
-        self.child.id()
+        match &self.proc {
+            Proc::Local(c, _) => c.id(),
+            Proc::Remote(p, _) => p.pid(),
+        }
+    }
+
+    /// The host it runs on (`None`: this one).
+    pub fn host(&self) -> Option<&str> {
+        match &self.proc {
+            Proc::Local(..) => None,
+            Proc::Remote(p, _) => Some(p.host()),
+        }
+    }
+
+    fn done(&self) -> bool {
+        match &self.proc {
+            Proc::Local(_, st) => st.is_some(),
+            Proc::Remote(_, st) => st.is_some(),
+        }
+    }
+
+    /// Reaps it if it exited; how it ended (once).
+    fn poll_exit(&mut self) -> Option<String> {
+        match &mut self.proc {
+            Proc::Local(c, st @ None) => match c.try_wait() {
+                Ok(Some(s)) => {
+                    *st = Some(s);
+                    Some(describe(s))
+                }
+                _ => None,
+            },
+            Proc::Remote(p, st @ None) => {
+                let how = p.try_wait()?;
+                *st = Some(how.clone());
+                Some(how)
+            }
+            _ => None,
+        }
     }
 
     /// SIGKILLs the process (if it is still running) and reaps it.
     pub fn kill_and_reap(&mut self) {
-        if self.status.is_none() {
-            let _ = self.child.kill();
-            if let Ok(st) = self.child.wait() {
-                self.status = Some(st);
+        match &mut self.proc {
+            Proc::Local(c, st @ None) => {
+                let _ = c.kill();
+                if let Ok(s) = c.wait() {
+                    *st = Some(s);
+                }
             }
+            Proc::Remote(p, st @ None) => {
+                p.kill_and_reap();
+                *st = Some("was killed (SIGKILL)".into());
+            }
+            _ => {}
         }
     }
 
     /// Sends `signal` (SIGSTOP for a timeline hang) to the running process.
     pub fn signal(&self, signal: i32) {
-        if self.status.is_none() {
+        match &self.proc {
             // SAFETY: kill(2) on our own child's pid, which is not reaped yet (no reuse).
-            unsafe {
-                libc::kill(self.child.id() as libc::pid_t, signal);
-            }
+            Proc::Local(c, None) => unsafe {
+                libc::kill(c.id() as libc::pid_t, signal);
+            },
+            Proc::Remote(p, None) => p.signal(signal),
+            _ => {}
         }
     }
 
-    /// Whether the process is stopped (state `T` in /proc/<pid>/stat: SIGSTOP, a debugger).
+    /// Whether the process is stopped (state `T` in /proc/<pid>/stat: SIGSTOP, a debugger); a
+    /// remote process is never seen stopped here.
     pub fn is_stopped(&self) -> bool {
+        if self.host().is_some() {
+            return false;
+        }
         let stat =
-            std::fs::read_to_string(format!("/proc/{}/stat", self.child.id())).unwrap_or_default();
+            std::fs::read_to_string(format!("/proc/{}/stat", self.pid())).unwrap_or_default();
         // The state follows the parenthesised command name.
         stat.rsplit_once(')')
             .and_then(|(_, rest)| rest.split_whitespace().next())
@@ -100,8 +179,7 @@ pub fn spawn(
         .map_err(|e| format!("cannot start {label} ({}): {e}", exe.display()))?;
     Ok(RoleProcess {
         label,
-        child,
-        status: None,
+        proc: Proc::Local(child, None),
     })
 }
 
@@ -124,16 +202,13 @@ pub fn check(children: &mut [RoleProcess]) -> Option<String> {
 pub fn check_indexed(children: &mut [RoleProcess]) -> Option<(usize, String)> {
     let mut first = None;
     for (idx, c) in children.iter_mut().enumerate() {
-        if c.status.is_some() {
-            continue;
-        }
-        if let Ok(Some(st)) = c.child.try_wait() {
-            c.status = Some(st);
+        if let Some(how) = c.poll_exit() {
             if first.is_none() {
-                first = Some((
-                    idx,
-                    format!("{} (pid {}) {}", c.label, c.child.id(), describe(st)),
-                ));
+                let on = c
+                    .host()
+                    .map(|h| format!(" on host {h}"))
+                    .unwrap_or_default();
+                first = Some((idx, format!("{} (pid {}{on}) {how}", c.label, c.pid())));
             }
         }
     }
@@ -143,14 +218,11 @@ pub fn check_indexed(children: &mut [RoleProcess]) -> Option<(usize, String)> {
 /// Waits up to `grace` for every child to exit by itself, then kills and reaps the rest.
 pub fn stop_all(children: &mut [RoleProcess], grace: Duration) {
     let deadline = Instant::now() + grace;
-    while children.iter().any(|c| c.status.is_none()) && Instant::now() < deadline {
+    while children.iter().any(|c| !c.done()) && Instant::now() < deadline {
         check(children);
         std::thread::sleep(Duration::from_millis(5));
     }
-    for c in children.iter_mut().filter(|c| c.status.is_none()) {
-        let _ = c.child.kill();
-        if let Ok(st) = c.child.wait() {
-            c.status = Some(st);
-        }
+    for c in children.iter_mut().filter(|c| !c.done()) {
+        c.kill_and_reap();
     }
 }

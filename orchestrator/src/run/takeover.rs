@@ -63,6 +63,8 @@ pub struct Takeover {
     capacity: usize,
     /// A realtime run: a dead agent is replaced at once, without take-down or announcement.
     realtime: bool,
+    /// Agents on other hosts are respawned there, with their checkpoints fetched first.
+    remote: Option<std::rc::Rc<super::remote::RemoteRun>>,
     /// What happened, in order.
     pub incidents: Vec<Incident>,
 }
@@ -79,6 +81,7 @@ impl Takeover {
         args: ChildArgs,
         pins: Vec<Option<usize>>,
         lead: u64,
+        remote: Option<std::rc::Rc<super::remote::RemoteRun>>,
     ) -> Result<Takeover, String> {
         let n = scenario.n_agents();
         let timeline = scenario.timeline();
@@ -107,6 +110,7 @@ impl Takeover {
             n,
             capacity,
             realtime: false,
+            remote,
             incidents: Vec::new(),
         })
     }
@@ -348,6 +352,12 @@ impl Takeover {
         node.try_cleanup_dead_nodes();
         let run_dir = self.args.run_dir.clone();
         let mut checkpoint = None;
+        let remote = self.remote.clone().filter(|r| r.is_remote(i));
+        if let (true, Some(r)) = (plan.warm, &remote) {
+            if let Err(e) = r.fetch_checkpoint(i, &run_dir) {
+                eprintln!("warning: agent {}: cannot fetch its checkpoint: {e}", i + 1);
+            }
+        }
         if plan.warm {
             match restart::read::<Checkpoint>(&restart::checkpoint_path(&run_dir, i)) {
                 Ok(c) if c.step < plan.down_from && c.step >= self.history.oldest() => {
@@ -393,13 +403,17 @@ impl Takeover {
             rejoin_at: Some(plan.rejoin_at),
             ..self.args.clone()
         };
-        let child = spawn::spawn(
-            &self.exe,
-            Role::Agent,
-            format!("agent {} (--agent {i})", i + 1),
-            &args,
-            self.pins.get(i).copied().flatten(),
-        )?;
+        let label = format!("agent {} (--agent {i})", i + 1);
+        let child = match &remote {
+            Some(r) => r.spawn(i, label, &args)?,
+            None => spawn::spawn(
+                &self.exe,
+                Role::Agent,
+                label,
+                &args,
+                self.pins.get(i).copied().flatten(),
+            )?,
+        };
         eprintln!(
             "formation run: agent {} taken over at step {} (t = {:.3} s) by pid {} ({}, down from step {})",
             i + 1,

@@ -1,0 +1,689 @@
+//! The per-host bridge: forwards exactly the services of a run that have a sender on this host and
+//! a receiver on another ([`crate::plan`]), as the same `#[repr(C)]` bytes with their wire type name,
+//! and re-raises the wake-up events on the receiving host so the lockstep pacing is unchanged.
+//!
+//! Two threads, each with its own iceoryx2 node under the run's prefix:
+//!
+//! * **out** sleeps on a WaitSet of the local listeners of the forwarded events (and wakes every
+//!   [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry). After a wake-up it
+//!   drains the listeners *first*, then every forwarded subscriber, and sends one frame per
+//!   destination host with the samples before the events: a sample published before a
+//!   notification is therefore always delivered before that notification is re-raised.
+//! * **in** receives this host's frames (one Zenoh subscriber, so frames stay in order) and
+//!   publishes each sample into the local service, then notifies each event. On a host other
+//!   than the launcher it first creates every service of the run (limits as the orchestrator's).
+//!
+//! Frame (little endian), records back to back: `u8 kind` (0 sample, 1 event), `u16` name
+//! length, name; for a sample also `u8` type-name length, type name, `u32` size, bytes. The
+//! receiver checks the type name and size against its own service before it publishes.
+//! Publishers use `CongestionControl::Block` (nothing is dropped), `express` (no batching delay:
+//! the frame is the batch) and `Locality::Remote`; nothing is re-forwarded (see `plan`).
+
+use crate::plan::{agent_index, Placement};
+use crate::proto;
+use formation_config::node::ipc::{self, event_with_limits, pubsub_with_limits, service_name};
+use formation_config::node::ports::{self, RunNode, Svc};
+use formation_config::protocol::services::{
+    self, wire_type_name, Event, Limits, Message, Named, Sizing, Slice, Topic, Visitor,
+};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::*;
+use std::any::Any;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{mpsc, Arc};
+use std::thread::JoinHandle;
+use std::time::Duration;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::Locality;
+use zenoh::Wait;
+
+/// How long the out thread sleeps at most without a wake-up (samples that come without one).
+pub const IDLE_WAKE: Duration = Duration::from_millis(50);
+
+/// What a bridge is for.
+#[derive(Debug, Clone)]
+pub struct BridgeConfig {
+    /// Run id.
+    pub run_id: String,
+    /// iceoryx2 prefix of the run.
+    pub prefix: String,
+    /// This host.
+    pub me: String,
+    /// Where every process lives.
+    pub placement: Placement,
+    /// What the services are sized for.
+    pub sizing: Sizing,
+    /// Create every service first (every host but the launcher, where the orchestrator does).
+    pub create: bool,
+}
+
+/// Counters of a bridge.
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// Frames sent.
+    pub frames_out: AtomicU64,
+    /// Samples sent.
+    pub samples_out: AtomicU64,
+    /// Events sent.
+    pub events_out: AtomicU64,
+    /// Frames received.
+    pub frames_in: AtomicU64,
+    /// Records refused (unknown service, type or size mismatch).
+    pub refused: AtomicU64,
+}
+
+/// A running bridge; stopped and joined on drop.
+pub struct Bridge {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+    /// Its counters.
+    pub stats: Arc<Stats>,
+    /// Services it forwards out and receives in.
+    pub forwarded: (usize, usize),
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+type Drain = Box<dyn FnMut(&mut dyn FnMut(&[u8])) -> Result<usize, String>>;
+type Inject = Box<dyn FnMut(&[u8]) -> Result<(), String>>;
+
+/// One forwarded publish-subscribe service on the sending side.
+struct OutTopic {
+    name: String,
+    type_name: &'static str,
+    dests: Vec<usize>,
+    drain: Drain,
+}
+
+/// One forwarded event on the sending side.
+struct OutEvent {
+    name: String,
+    dests: Vec<usize>,
+    listener: Listener<Svc>,
+}
+
+/// One service on the receiving side.
+enum InPort {
+    Topic {
+        type_name: &'static str,
+        size: usize,
+        inject: Inject,
+    },
+    Event(Notifier<Svc>),
+}
+
+/// Walks the service table: creates services (optionally), and opens the bridge's ports.
+struct Opener<'a> {
+    node: &'a RunNode,
+    cfg: &'a BridgeConfig,
+    hosts: &'a [String],
+    /// Open the out side (true) or the in side (false).
+    out: bool,
+    keep: Vec<Box<dyn Any>>,
+    topics: Vec<OutTopic>,
+    events: Vec<OutEvent>,
+    ins: HashMap<String, InPort>,
+}
+
+fn err<'a, E: std::fmt::Debug>(what: &'a str, name: &'a str) -> impl FnOnce(E) -> String + 'a {
+    let what = what.to_string();
+    move |e| format!("bridge: {what} {name}: {e:?}")
+}
+
+impl Opener<'_> {
+    fn route(
+        &self,
+        name: &str,
+        pattern: &str,
+        senders: &[services::Party],
+        receivers: &[services::Party],
+        scope: services::Scope,
+    ) -> Result<(Vec<usize>, bool), String> {
+        let r = self.cfg.placement.route(
+            &self.cfg.me,
+            name,
+            senders,
+            receivers,
+            scope,
+            agent_index(pattern, name),
+        )?;
+        let dests = r
+            .out_to
+            .iter()
+            .map(|h| {
+                self.hosts
+                    .iter()
+                    .position(|x| x == h)
+                    .expect("a host of the placement")
+            })
+            .collect();
+        Ok((dests, r.inbound))
+    }
+}
+
+impl Visitor for Opener<'_> {
+    type Error = String;
+
+    fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), String> {
+        if self.cfg.create && !self.out {
+            let sn = service_name(&s.name).map_err(err("name", &s.name))?;
+            let f = pubsub_with_limits(self.node.service_builder(&sn).publish_subscribe::<T>(), &l)
+                .history_size(s.spec.history)
+                .create()
+                .map_err(err("cannot create", &s.name))?;
+            self.keep.push(Box::new(f));
+        }
+        let (dests, inbound) = self.route(
+            &s.name,
+            s.spec.pattern,
+            s.spec.publishers,
+            s.spec.subscribers,
+            s.spec.scope,
+        )?;
+        let type_name = wire_type_name::<T>();
+        if self.out && !dests.is_empty() {
+            let sub = ports::subscriber(self.node, &s).map_err(|e| e.to_string())?;
+            let drain: Drain = Box::new(move |f| {
+                let mut n = 0;
+                while let Some(sample) = sub.receive().map_err(|e| e.to_string())? {
+                    let p: &T = sample.payload();
+                    // SAFETY: T is a `#[repr(C)]`, `Copy` wire type; its bytes are read as they lie
+                    // in the sample (the wire contract has no uninitialised padding).
+                    let bytes = unsafe {
+                        std::slice::from_raw_parts(p as *const T as *const u8, size_of::<T>())
+                    };
+                    f(bytes);
+                    n += 1;
+                }
+                Ok(n)
+            });
+            self.topics.push(OutTopic {
+                name: s.name.clone(),
+                type_name,
+                dests,
+                drain,
+            });
+        } else if !self.out && inbound {
+            let publisher = ports::publisher(self.node, &s).map_err(|e| e.to_string())?;
+            let name = s.name.clone();
+            let inject: Inject = Box::new(move |bytes| {
+                let mut sample = publisher
+                    .loan_uninit()
+                    .map_err(|e| format!("bridge: cannot loan on {name}: {e:?}"))?;
+                // SAFETY: the size was checked against T's; the bytes are a T's bytes from the
+                // sending host (same build and wire layout, checked at the handshake).
+                let sample = unsafe {
+                    std::ptr::copy_nonoverlapping(
+                        bytes.as_ptr(),
+                        sample.payload_mut().as_mut_ptr() as *mut u8,
+                        size_of::<T>(),
+                    );
+                    sample.assume_init()
+                };
+                sample
+                    .send()
+                    .map(|_| ())
+                    .map_err(|e| format!("bridge: cannot publish on {name}: {e:?}"))
+            });
+            self.ins.insert(
+                s.name.clone(),
+                InPort::Topic {
+                    type_name,
+                    size: size_of::<T>(),
+                    inject,
+                },
+            );
+        }
+        Ok(())
+    }
+
+    fn slices<T: Message>(&mut self, s: Named<Topic<T, Slice>>, l: Limits) -> Result<(), String> {
+        if self.cfg.create && !self.out {
+            let sn = service_name(&s.name).map_err(err("name", &s.name))?;
+            let f = pubsub_with_limits(
+                self.node.service_builder(&sn).publish_subscribe::<[T]>(),
+                &l,
+            )
+            .history_size(s.spec.history)
+            .create()
+            .map_err(err("cannot create", &s.name))?;
+            self.keep.push(Box::new(f));
+        }
+        let (dests, inbound) = self.route(
+            &s.name,
+            s.spec.pattern,
+            s.spec.publishers,
+            s.spec.subscribers,
+            s.spec.scope,
+        )?;
+        if !dests.is_empty() || inbound {
+            return Err(format!(
+                "bridge: {} (slices) cannot cross hosts: its publisher and subscriber must share a host",
+                s.name
+            ));
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), String> {
+        let sn = service_name(&s.name).map_err(err("name", &s.name))?;
+        if self.cfg.create && !self.out {
+            let f: iceoryx2::service::port_factory::event::PortFactory<Svc> =
+                event_with_limits(self.node.service_builder(&sn).event(), &l)
+                    .create()
+                    .map_err(err("cannot create", &s.name))?;
+            self.keep.push(Box::new(f));
+        }
+        let (dests, inbound) = self.route(
+            &s.name,
+            s.spec.pattern,
+            s.spec.notifiers,
+            s.spec.listeners,
+            s.spec.scope,
+        )?;
+        if self.out && !dests.is_empty() {
+            let listener = self
+                .node
+                .service_builder(&sn)
+                .event()
+                .open()
+                .map_err(err("cannot open", &s.name))?
+                .listener_builder()
+                .create()
+                .map_err(err("cannot listen on", &s.name))?;
+            self.events.push(OutEvent {
+                name: s.name.clone(),
+                dests,
+                listener,
+            });
+        } else if !self.out && inbound {
+            let n = ports::notifier(self.node, &s).map_err(|e| e.to_string())?;
+            self.ins.insert(s.name.clone(), InPort::Event(n));
+        }
+        Ok(())
+    }
+}
+
+const KIND_SAMPLE: u8 = 0;
+const KIND_EVENT: u8 = 1;
+
+fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
+    frame.push(KIND_SAMPLE);
+    frame.extend_from_slice(&(name.len() as u16).to_le_bytes());
+    frame.extend_from_slice(name.as_bytes());
+    frame.push(type_name.len() as u8);
+    frame.extend_from_slice(type_name.as_bytes());
+    frame.extend_from_slice(&(bytes.len() as u32).to_le_bytes());
+    frame.extend_from_slice(bytes);
+}
+
+fn put_event(frame: &mut Vec<u8>, name: &str) {
+    frame.push(KIND_EVENT);
+    frame.extend_from_slice(&(name.len() as u16).to_le_bytes());
+    frame.extend_from_slice(name.as_bytes());
+}
+
+/// One record of a frame.
+#[derive(Debug, PartialEq, Eq)]
+pub enum Record<'a> {
+    /// A sample of `name` with its wire type name and bytes.
+    Sample {
+        /// Service name.
+        name: &'a str,
+        /// Wire type name.
+        type_name: &'a str,
+        /// The `#[repr(C)]` bytes.
+        bytes: &'a [u8],
+    },
+    /// A wake-up of `name`.
+    Event(&'a str),
+}
+
+/// Parses a frame into its records; `Err` names what is malformed.
+pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
+    fn take<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a [u8], String> {
+        if f.len() < n {
+            return Err(format!(
+                "truncated frame: {} bytes left, {n} needed",
+                f.len()
+            ));
+        }
+        let (a, b) = f.split_at(n);
+        *f = b;
+        Ok(a)
+    }
+    fn text<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a str, String> {
+        std::str::from_utf8(take(f, n)?).map_err(|_| "a name is not UTF-8".to_string())
+    }
+    let mut v = Vec::new();
+    while !f.is_empty() {
+        let kind = take(&mut f, 1)?[0];
+        let len = u16::from_le_bytes(take(&mut f, 2)?.try_into().unwrap()) as usize;
+        let name = text(&mut f, len)?;
+        match kind {
+            KIND_SAMPLE => {
+                let tl = take(&mut f, 1)?[0] as usize;
+                let type_name = text(&mut f, tl)?;
+                let size = u32::from_le_bytes(take(&mut f, 4)?.try_into().unwrap()) as usize;
+                let bytes = take(&mut f, size)?;
+                v.push(Record::Sample {
+                    name,
+                    type_name,
+                    bytes,
+                });
+            }
+            KIND_EVENT => v.push(Record::Event(name)),
+            k => return Err(format!("unknown record kind {k}")),
+        }
+    }
+    Ok(v)
+}
+
+impl Bridge {
+    /// Starts the bridge; returns once every service exists on this host (`cfg.create`) and every
+    /// port of the bridge is open, so role processes may start.
+    pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, String> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let stats = Arc::new(Stats::default());
+        let hosts = cfg.placement.hosts();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
+        let mut threads = Vec::new();
+        {
+            let (cfg, stop, stats, hosts, session) = (
+                cfg.clone(),
+                stop.clone(),
+                stats.clone(),
+                hosts.clone(),
+                session.clone(),
+            );
+            let tx = ready_tx.clone();
+            threads.push(
+                std::thread::Builder::new()
+                    .name("bridge-in".into())
+                    .spawn(move || run_in(session, cfg, hosts, stop, stats, tx))
+                    .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
+            );
+        }
+        let mut bridge = Bridge {
+            stop: stop.clone(),
+            threads,
+            stats: stats.clone(),
+            forwarded: (0, 0),
+        };
+        let inbound = ready_rx
+            .recv()
+            .map_err(|_| "bridge: the receiving thread ended".to_string())??;
+        {
+            let tx = ready_tx;
+            bridge.threads.push(
+                std::thread::Builder::new()
+                    .name("bridge-out".into())
+                    .spawn(move || run_out(session, cfg, hosts, stop, stats, tx))
+                    .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
+            );
+        }
+        let outbound = ready_rx
+            .recv()
+            .map_err(|_| "bridge: the sending thread ended".to_string())??;
+        bridge.forwarded = (outbound, inbound);
+        Ok(bridge)
+    }
+}
+
+fn run_in(
+    session: zenoh::Session,
+    cfg: BridgeConfig,
+    hosts: Vec<String>,
+    stop: Arc<AtomicBool>,
+    stats: Arc<Stats>,
+    ready: mpsc::Sender<Result<usize, String>>,
+) {
+    let setup = || -> Result<_, String> {
+        let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
+        let mut o = Opener {
+            node: &node,
+            cfg: &cfg,
+            hosts: &hosts,
+            out: false,
+            keep: Vec::new(),
+            topics: Vec::new(),
+            events: Vec::new(),
+            ins: HashMap::new(),
+        };
+        services::visit(&cfg.sizing, &mut o)?;
+        let (keep, ins) = (o.keep, o.ins);
+        let sub = session
+            .declare_subscriber(proto::run_to(&cfg.run_id, &cfg.me))
+            .with(zenoh::handlers::FifoChannel::new(4096))
+            .allowed_origin(Locality::Remote)
+            .wait()
+            .map_err(|e| format!("bridge: cannot subscribe: {e}"))?;
+        Ok((node, keep, ins, sub))
+    };
+    let (node, _keep, mut ins, sub) = match setup() {
+        Ok(v) => v,
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let _ = ready.send(Ok(ins.len()));
+    while !stop.load(Ordering::SeqCst) {
+        let sample = match sub.recv_timeout(Duration::from_millis(100)) {
+            Ok(Some(s)) => s,
+            Ok(None) => continue,
+            Err(_) => break,
+        };
+        stats.frames_in.fetch_add(1, Ordering::Relaxed);
+        let payload = sample.payload().to_bytes();
+        let records = match parse_frame(&payload) {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::warn!("bridge: frame refused: {e}");
+                stats.refused.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+        };
+        for r in records {
+            let key: &str = match &r {
+                Record::Sample { name, .. } => name,
+                Record::Event(name) => name,
+            };
+            match (r, ins.get_mut(key)) {
+                (
+                    Record::Sample {
+                        name,
+                        type_name,
+                        bytes,
+                    },
+                    Some(InPort::Topic {
+                        type_name: t,
+                        size,
+                        inject,
+                    }),
+                ) => {
+                    if type_name != *t || bytes.len() != *size {
+                        tracing::warn!(
+                            "bridge: {name}: refused a {type_name} of {} bytes (expected {t} of {size})",
+                            bytes.len()
+                        );
+                        stats.refused.fetch_add(1, Ordering::Relaxed);
+                    } else if let Err(e) = inject(bytes) {
+                        tracing::warn!("{e}");
+                    }
+                }
+                (Record::Event(_), Some(InPort::Event(n))) => ports::poke(n),
+                (r, _) => {
+                    tracing::warn!("bridge: no such forwarded service here: {r:?}");
+                    stats.refused.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+    }
+    drop(ins);
+    drop(node);
+}
+
+fn run_out(
+    session: zenoh::Session,
+    cfg: BridgeConfig,
+    hosts: Vec<String>,
+    stop: Arc<AtomicBool>,
+    stats: Arc<Stats>,
+    ready: mpsc::Sender<Result<usize, String>>,
+) {
+    let setup = || -> Result<_, String> {
+        let node = ipc::node(&cfg.prefix, "fm-bridge-out").map_err(|e| e.to_string())?;
+        let mut o = Opener {
+            node: &node,
+            cfg: &cfg,
+            hosts: &hosts,
+            out: true,
+            keep: Vec::new(),
+            topics: Vec::new(),
+            events: Vec::new(),
+            ins: HashMap::new(),
+        };
+        services::visit(&cfg.sizing, &mut o)?;
+        let (topics, events) = (o.topics, o.events);
+        let mut pubs = Vec::new();
+        for h in &hosts {
+            pubs.push(
+                session
+                    .declare_publisher(proto::run_to(&cfg.run_id, h))
+                    .congestion_control(CongestionControl::Block)
+                    .priority(Priority::RealTime)
+                    .express(true)
+                    .allowed_destination(Locality::Remote)
+                    .wait()
+                    .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))?,
+            );
+        }
+        Ok((node, topics, events, pubs))
+    };
+    let (node, mut topics, events, pubs) = match setup() {
+        Ok(v) => v,
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let waitset = match WaitSetBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Svc>()
+    {
+        Ok(w) => w,
+        Err(e) => {
+            let _ = ready.send(Err(format!("bridge: cannot create a WaitSet: {e:?}")));
+            return;
+        }
+    };
+    let mut guards = Vec::new();
+    for e in &events {
+        match waitset.attach_notification(&e.listener) {
+            Ok(g) => guards.push(g),
+            Err(x) => {
+                let _ = ready.send(Err(format!("bridge: cannot wait on {}: {x:?}", e.name)));
+                return;
+            }
+        }
+    }
+    let _ = ready.send(Ok(topics.len() + events.len()));
+    let mut frames: Vec<Vec<u8>> = vec![Vec::new(); hosts.len()];
+    let mut fired = vec![false; events.len()];
+    while !stop.load(Ordering::SeqCst) {
+        // Events first: any sample published before a notification we saw is in its queue now.
+        let mut any = false;
+        for (k, e) in events.iter().enumerate() {
+            let mut got = false;
+            let _ = e.listener.try_wait(|_| got = true);
+            fired[k] = got;
+            any |= got;
+        }
+        for t in topics.iter_mut() {
+            let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
+            let r = (t.drain)(&mut |bytes| {
+                for &d in dests {
+                    put_sample(&mut frames[d], name, type_name, bytes);
+                }
+            });
+            match r {
+                Ok(n) => {
+                    any |= n > 0;
+                    stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
+                }
+                Err(e) => tracing::warn!("bridge: {name}: {e}"),
+            }
+        }
+        for (k, e) in events.iter().enumerate() {
+            if fired[k] {
+                for &d in &e.dests {
+                    put_event(&mut frames[d], &e.name);
+                }
+                stats.events_out.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        for (d, f) in frames.iter_mut().enumerate() {
+            if !f.is_empty() {
+                if let Err(e) = pubs[d].put(std::mem::take(f)).wait() {
+                    tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
+                }
+                stats.frames_out.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if any {
+            continue;
+        }
+        if guards.is_empty() {
+            std::thread::sleep(IDLE_WAKE);
+        } else {
+            let _ = waitset
+                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, IDLE_WAKE);
+        }
+    }
+    drop(guards);
+    drop(waitset);
+    drop(events);
+    drop(topics);
+    drop(node);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_frame_round_trips_its_records_in_order_and_truncation_is_an_error() {
+        let mut f = Vec::new();
+        put_sample(
+            &mut f,
+            "formation/agent/3/state",
+            "formation.v1.VehicleState",
+            &[1, 2, 3, 4],
+        );
+        put_event(&mut f, "formation/wake/agent/3");
+        let r = parse_frame(&f).unwrap();
+        assert_eq!(
+            r,
+            vec![
+                Record::Sample {
+                    name: "formation/agent/3/state",
+                    type_name: "formation.v1.VehicleState",
+                    bytes: &[1, 2, 3, 4]
+                },
+                Record::Event("formation/wake/agent/3"),
+            ]
+        );
+        assert!(parse_frame(&f[..f.len() - 3]).is_err());
+        assert!(parse_frame(&[7, 0, 0]).is_err());
+    }
+}

@@ -1,0 +1,261 @@
+//! The orchestrator's side: reach the daemons, compare identities, prepare a run on each host,
+//! start and stop its remote processes, and hear of their exits.
+
+use crate::identity::{self, Identity};
+use crate::proto::{self, ExitReport, HostInfo, Reply, Request};
+use crate::session;
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use zenoh::sample::SampleKind;
+use zenoh::Wait;
+
+/// The name of the launching host in placements and keys (reserved: no daemon may take it).
+pub const LAUNCHER: &str = "local";
+
+/// What went wrong before anything started; the run exits 2 with this.
+#[derive(Debug, Clone, PartialEq)]
+pub enum HandshakeError {
+    /// Hosts that did not answer within the timeout.
+    Missing(Vec<String>),
+    /// A host whose identity differs from this one: (host, what differs).
+    Mismatch(String, Vec<String>),
+    /// A host refused the run (why).
+    Refused(String, String),
+    /// Zenoh could not be opened.
+    Session(String),
+}
+
+impl std::fmt::Display for HandshakeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            HandshakeError::Missing(h) => write!(
+                f,
+                "host(s) {} did not answer within {:?} (is `formation host --name NAME` running there, reachable through --connect, and given the same --auth credentials?)",
+                h.join(", "),
+                session::REPLY_TIMEOUT
+            ),
+            HandshakeError::Mismatch(h, d) => write!(
+                f,
+                "this host ({LAUNCHER}) and host {h} cannot run together: {}",
+                d.join("; ")
+            ),
+            HandshakeError::Refused(h, why) => write!(f, "host {h} refused the run: {why}"),
+            HandshakeError::Session(e) => f.write_str(e),
+        }
+    }
+}
+
+/// A host's link state as the orchestrator sees it (liveliness).
+#[derive(Debug, Default)]
+struct Seen {
+    exits: Vec<(String, ExitReport)>,
+    lost: Vec<(String, Instant)>,
+}
+
+/// An orchestrator's Zenoh session and what it hears.
+pub struct Cluster {
+    session: zenoh::Session,
+    seen: Arc<Mutex<Seen>>,
+    _token: Option<zenoh::liveliness::LivelinessToken>,
+    _subs: Vec<zenoh::pubsub::Subscriber<()>>,
+}
+
+impl Cluster {
+    /// Opens the session.
+    pub fn open(o: &session::Options) -> Result<Cluster, HandshakeError> {
+        let session = o
+            .open()
+            .map_err(|e| HandshakeError::Session(e.to_string()))?;
+        Ok(Cluster {
+            session,
+            seen: Arc::new(Mutex::new(Seen::default())),
+            _token: None,
+            _subs: Vec::new(),
+        })
+    }
+
+    /// The session (for the bridge).
+    pub fn session(&self) -> zenoh::Session {
+        self.session.clone()
+    }
+
+    /// Names of the daemons whose liveliness token is visible.
+    pub fn names(&self, timeout: Duration) -> Vec<String> {
+        let mut v = Vec::new();
+        if let Ok(replies) = self
+            .session
+            .liveliness()
+            .get(proto::HOSTS)
+            .timeout(timeout)
+            .wait()
+        {
+            while let Ok(r) = replies.recv() {
+                if let Ok(s) = r.result() {
+                    if let Some(n) = s.key_expr().as_str().strip_prefix("formation/host/") {
+                        v.push(n.to_string());
+                    }
+                }
+            }
+        }
+        v.sort();
+        v.dedup();
+        v
+    }
+
+    /// A daemon's info, and the round trip it took (for the clock offset estimate).
+    pub fn info(&self, name: &str, timeout: Duration) -> Option<(HostInfo, Duration)> {
+        let t0 = Instant::now();
+        let replies = self
+            .session
+            .get(proto::host_info(name))
+            .timeout(timeout)
+            .wait()
+            .ok()?;
+        while let Ok(r) = replies.recv() {
+            if let Ok(s) = r.result() {
+                if let Ok(i) = serde_json::from_slice::<HostInfo>(&s.payload().to_bytes()) {
+                    return Some((i, t0.elapsed()));
+                }
+            }
+        }
+        None
+    }
+
+    /// Waits until every host in `names` answers (up to `timeout`) and has this identity.
+    pub fn handshake(
+        &self,
+        names: &[String],
+        me: &Identity,
+        timeout: Duration,
+    ) -> Result<BTreeMap<String, HostInfo>, HandshakeError> {
+        let deadline = Instant::now() + timeout;
+        let mut found = BTreeMap::new();
+        loop {
+            for n in names {
+                if !found.contains_key(n) {
+                    if let Some((i, _)) = self.info(n, Duration::from_millis(500)) {
+                        found.insert(n.clone(), i);
+                    }
+                }
+            }
+            if found.len() == names.len() || Instant::now() >= deadline {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let missing: Vec<String> = names
+            .iter()
+            .filter(|n| !found.contains_key(*n))
+            .cloned()
+            .collect();
+        if !missing.is_empty() {
+            return Err(HandshakeError::Missing(missing));
+        }
+        for (n, i) in &found {
+            let d = identity::differences(me, &i.identity);
+            if !d.is_empty() {
+                return Err(HandshakeError::Mismatch(n.clone(), d));
+            }
+        }
+        Ok(found)
+    }
+
+    /// Sends a request to a daemon and waits for its reply (with the bytes after it, if any).
+    pub fn request(
+        &self,
+        host: &str,
+        req: &Request,
+        bytes: &[u8],
+        timeout: Duration,
+    ) -> Result<(Reply, Vec<u8>), String> {
+        let replies = self
+            .session
+            .get(proto::host_req(host))
+            .payload(proto::frame(req, bytes))
+            .timeout(timeout)
+            .wait()
+            .map_err(|e| format!("host {host}: {e}"))?;
+        match replies.recv() {
+            Ok(r) => match r.result() {
+                Ok(s) => {
+                    let data = s.payload().to_bytes();
+                    // A plain JSON reply, or a framed one carrying bytes.
+                    if let Ok(reply) = serde_json::from_slice::<Reply>(&data) {
+                        return Ok((reply, Vec::new()));
+                    }
+                    let (reply, rest): (Reply, &[u8]) = proto::unframe(&data)?;
+                    Ok((reply, rest.to_vec()))
+                }
+                Err(e) => Err(format!(
+                    "host {host}: {}",
+                    String::from_utf8_lossy(&e.payload().to_bytes())
+                )),
+            },
+            Err(_) => Err(format!("host {host} did not answer within {timeout:?}")),
+        }
+    }
+
+    /// Declares this run's orchestrator (its liveliness token: the daemons end the run when it
+    /// disappears) and starts hearing exit reports and lost hosts.
+    pub fn announce(&mut self, run_id: &str) -> Result<(), String> {
+        self._token = Some(
+            self.session
+                .liveliness()
+                .declare_token(proto::run_token(run_id))
+                .wait()
+                .map_err(|e| format!("cannot declare the run's token: {e}"))?,
+        );
+        let seen = self.seen.clone();
+        let exits = self
+            .session
+            .declare_subscriber(proto::run_exit(run_id))
+            .callback(move |s| {
+                if let Ok(r) = serde_json::from_slice::<ExitReport>(&s.payload().to_bytes()) {
+                    seen.lock().unwrap().exits.push((r.host.clone(), r));
+                }
+            })
+            .wait()
+            .map_err(|e| format!("cannot subscribe to exits: {e}"))?;
+        let seen = self.seen.clone();
+        let hosts = self
+            .session
+            .liveliness()
+            .declare_subscriber(proto::HOSTS)
+            .callback(move |s| {
+                if s.kind() == SampleKind::Delete {
+                    if let Some(n) = s.key_expr().as_str().strip_prefix("formation/host/") {
+                        seen.lock()
+                            .unwrap()
+                            .lost
+                            .push((n.to_string(), Instant::now()));
+                    }
+                }
+            })
+            .wait()
+            .map_err(|e| format!("cannot watch the hosts: {e}"))?;
+        self._subs.push(exits);
+        self._subs.push(hosts);
+        Ok(())
+    }
+
+    /// The exit report of `pid` of agent `agent` on `host`, if one came.
+    pub fn exit_of(&self, host: &str, agent: usize, pid: u32) -> Option<String> {
+        let seen = self.seen.lock().unwrap();
+        seen.exits
+            .iter()
+            .find(|(h, r)| h == host && r.agent == agent && r.pid == pid)
+            .map(|(_, r)| r.how.clone())
+    }
+
+    /// When `host`'s daemon was seen to go (its liveliness token vanished), if it did.
+    pub fn lost(&self, host: &str) -> Option<Instant> {
+        self.seen
+            .lock()
+            .unwrap()
+            .lost
+            .iter()
+            .find(|(h, _)| h == host)
+            .map(|(_, t)| *t)
+    }
+}

@@ -1,0 +1,607 @@
+//! `formation host`: a machine's daemon that lends its CPUs to runs.
+//!
+//! It announces itself with a liveliness token (`formation/host/<name>`) and answers
+//! `formation/host/<name>/info` ([`HostInfo`]) and `formation/host/<name>/req` ([`Request`]).
+//! For a run it creates a private run folder (mode 0700) with the validated scenario, every
+//! iceoryx2 service of the run and the bridge ([`crate::bridge`]), then starts the agent processes
+//! the orchestrator asks for — only `formation node agent ...` from its own executable — and
+//! reports each one's exit. A run ends when its orchestrator says so, or when the orchestrator's
+//! liveliness token disappears (it died, or its link was lost): the processes are stopped, the
+//! run's iceoryx2 files and its folder removed. The daemon is a single-threaded state machine:
+//! one loop serves requests, reaps children and watches the orchestrators.
+
+use crate::bridge::{Bridge, BridgeConfig};
+use crate::identity::{self, Identity};
+use crate::plan::Placement;
+use crate::proto::{self, ExitReport, HostInfo, Reply, Request, RunRequest};
+use crate::session;
+use formation_config::node::args::ChildArgs;
+use formation_config::node::ipc;
+use formation_config::node::members::Membership;
+use formation_config::node::ports::RunNode;
+use formation_config::node::restart;
+use formation_config::protocol::messages::Role;
+use formation_config::protocol::services::{self, Sizing};
+use formation_config::{Scenario, Variant};
+use std::collections::HashMap;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use zenoh::sample::SampleKind;
+use zenoh::Wait;
+
+/// How long a prepared run waits for its orchestrator's liveliness token before it is dropped.
+pub const ORCHESTRATOR_WAIT: Duration = Duration::from_secs(10);
+
+/// How long the processes of an ending run get to exit by themselves before SIGKILL.
+pub const STOP_GRACE: Duration = Duration::from_millis(1000);
+
+/// How a daemon is started.
+#[derive(Debug, Clone)]
+pub struct DaemonOptions {
+    /// Its name (key-safe, see [`proto::valid_name`]).
+    pub name: String,
+    /// Zenoh session (mode [`session::Mode::Daemon`]).
+    pub session: session::Options,
+    /// The executable the role processes are started from (the running `formation`).
+    pub exe: PathBuf,
+    /// Folder of the run folders (private: mode 0700).
+    pub root: PathBuf,
+}
+
+/// A run's share of this host.
+struct HostRun {
+    req: RunRequest,
+    dir: PathBuf,
+    variant: String,
+    children: HashMap<usize, Child>,
+    prepared: Instant,
+    // Dropped in this order: bridge, node, membership (see `end`).
+    bridge: Option<Bridge>,
+    node: Option<RunNode>,
+    membership: Option<Membership>,
+}
+
+/// Describes how a process ended, as the orchestrator prints it.
+pub fn describe(status: ExitStatus) -> String {
+    match (status.code(), status.signal()) {
+        (Some(c), _) => format!("exited with code {c}"),
+        (None, Some(9)) => "was killed (SIGKILL)".to_string(),
+        (None, Some(s)) => format!("was killed by signal {s}"),
+        _ => "exited".to_string(),
+    }
+}
+
+/// The default folder of a daemon's runs: `$XDG_RUNTIME_DIR/formation/host-<name>`, else
+/// `/tmp/formation-host-<uid>-<name>`.
+pub fn default_root(name: &str) -> PathBuf {
+    match std::env::var_os("XDG_RUNTIME_DIR") {
+        Some(d) if !d.is_empty() => PathBuf::from(d)
+            .join("formation")
+            .join(format!("host-{name}")),
+        // SAFETY: getuid has no preconditions.
+        _ => std::env::temp_dir().join(format!("formation-host-{}-{name}", unsafe {
+            libc::getuid()
+        })),
+    }
+}
+
+fn private_dir(dir: &Path) -> Result<(), String> {
+    use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
+    let _ = std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir);
+    let m = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // SAFETY: getuid has no preconditions.
+    if !m.is_dir() || m.uid() != unsafe { libc::getuid() } {
+        return Err(format!(
+            "{}: not a folder of this user (refusing a symbolic link or another user's folder)",
+            dir.display()
+        ));
+    }
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
+        .map_err(|e| format!("{}: {e}", dir.display()))
+}
+
+/// Runs the daemon until `stop` is set (SIGINT/SIGTERM). `Err`: it could not start.
+pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
+    if !proto::valid_name(&o.name) || o.name == crate::cluster::LAUNCHER {
+        return Err(format!(
+            "--name '{}': use 1..=32 characters of [A-Za-z0-9_-] (and not '{}')",
+            o.name,
+            crate::cluster::LAUNCHER
+        ));
+    }
+    private_dir(&o.root)?;
+    sweep_stale(&o.root);
+    let s = o.session.open().map_err(|e| e.to_string())?;
+    let _token = s
+        .liveliness()
+        .declare_token(proto::host_token(&o.name))
+        .wait()
+        .map_err(|e| format!("cannot declare the liveliness token: {e}"))?;
+    let queries = s
+        .declare_queryable(format!("formation/host/{}/*", o.name))
+        .with(zenoh::handlers::FifoChannel::new(64))
+        .wait()
+        .map_err(|e| format!("cannot declare the queryable: {e}"))?;
+    let orchestrators = s
+        .liveliness()
+        .declare_subscriber("formation/run/*/orchestrator")
+        .history(true)
+        .with(zenoh::handlers::FifoChannel::new(256))
+        .wait()
+        .map_err(|e| format!("cannot watch the orchestrators: {e}"))?;
+    let me = identity::local();
+    eprintln!(
+        "formation host: {} listening on {} (pid {}, build {}, protocol {}, {} CPUs); runs in {}",
+        o.name,
+        o.session.listen.join(" "),
+        std::process::id(),
+        me.build,
+        me.protocol,
+        cpus(),
+        o.root.display()
+    );
+    let mut d = Daemon {
+        o,
+        s: s.clone(),
+        me,
+        runs: HashMap::new(),
+    };
+    // Runs whose orchestrator's token is alive (its Put may come before its run is prepared).
+    let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
+    while !stop.load(Ordering::SeqCst) {
+        if let Ok(Some(q)) = queries.recv_timeout(Duration::from_millis(20)) {
+            let bytes = q
+                .payload()
+                .map(|p| p.to_bytes().into_owned())
+                .unwrap_or_default();
+            let answer = if q.key_expr().as_str().ends_with("/info") {
+                serde_json::to_vec(&d.info()).unwrap()
+            } else {
+                d.request(&bytes)
+            };
+            let _ = q.reply(q.key_expr().clone(), answer).wait();
+        }
+        while let Ok(Some(sample)) = orchestrators.try_recv() {
+            let key = sample.key_expr().as_str().to_string();
+            let run = key
+                .strip_prefix("formation/run/")
+                .and_then(|r| r.strip_suffix("/orchestrator"))
+                .unwrap_or("")
+                .to_string();
+            match sample.kind() {
+                SampleKind::Put => {
+                    alive.insert(run);
+                }
+                SampleKind::Delete => {
+                    alive.remove(&run);
+                    if d.runs.contains_key(&run) {
+                        eprintln!("formation host: run {run}: its orchestrator is gone; ending it");
+                        d.end(&run);
+                    }
+                }
+            }
+        }
+        d.reap();
+        let stale: Vec<String> = d
+            .runs
+            .iter()
+            .filter(|(id, r)| !alive.contains(*id) && r.prepared.elapsed() > ORCHESTRATOR_WAIT)
+            .map(|(k, _)| k.clone())
+            .collect();
+        for run in stale {
+            eprintln!("formation host: run {run}: no orchestrator within {ORCHESTRATOR_WAIT:?}; ending it");
+            d.end(&run);
+        }
+    }
+    let ids: Vec<String> = d.runs.keys().cloned().collect();
+    for run in ids {
+        d.end(&run);
+    }
+    Ok(())
+}
+
+/// Removes run folders a killed daemon left (their members lock is free: nobody is in the run).
+fn sweep_stale(root: &Path) {
+    let Ok(rd) = std::fs::read_dir(root) else {
+        return;
+    };
+    for e in rd.flatten() {
+        let dir = e.path();
+        let lock = formation_config::node::members::lock_path(&dir);
+        let prefix = services::run_prefix(&e.file_name().to_string_lossy());
+        match Membership::join(&dir, &prefix) {
+            Ok(m) => {
+                if let Some(r) = m.leave_last() {
+                    let _ = r;
+                    let _ = std::fs::remove_dir_all(&dir);
+                }
+            }
+            Err(_) if !lock.exists() => {
+                let _ = std::fs::remove_dir_all(&dir);
+            }
+            Err(_) => {}
+        }
+    }
+}
+
+fn cpus() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+struct Daemon {
+    o: DaemonOptions,
+    s: zenoh::Session,
+    me: Identity,
+    runs: HashMap<String, HostRun>,
+}
+
+fn refused(why: String) -> Vec<u8> {
+    serde_json::to_vec(&Reply::Refused(why)).unwrap()
+}
+
+fn ok(pid: Option<u32>) -> Vec<u8> {
+    serde_json::to_vec(&Reply::Ok { pid }).unwrap()
+}
+
+impl Daemon {
+    fn info(&self) -> HostInfo {
+        HostInfo {
+            name: self.o.name.clone(),
+            cpus: cpus(),
+            listen: self.o.session.listen.clone(),
+            runs: self.runs.len(),
+            pid: std::process::id(),
+            identity: self.me.clone(),
+            clock_us: proto::now_us(),
+        }
+    }
+
+    /// Serves one request; a refusal changes nothing.
+    fn request(&mut self, bytes: &[u8]) -> Vec<u8> {
+        let (req, rest): (Request, &[u8]) = match proto::unframe(bytes) {
+            Ok(v) => v,
+            Err(e) => return refused(e),
+        };
+        let result = match req {
+            Request::Prepare(r) => self.prepare(r).map(|_| ok(None)),
+            Request::Spawn {
+                run_id,
+                agent,
+                rejoin_at,
+            } => self
+                .spawn(&run_id, agent, rejoin_at, rest)
+                .map(|pid| ok(Some(pid))),
+            Request::Kill { run_id, agent } => self.kill(&run_id, agent).map(|_| ok(None)),
+            Request::Signal {
+                run_id,
+                agent,
+                signal,
+            } => self.signal(&run_id, agent, signal).map(|_| ok(None)),
+            Request::Checkpoint { run_id, agent } => self.checkpoint(&run_id, agent),
+            Request::End { run_id } => {
+                if self.runs.contains_key(&run_id) {
+                    self.end(&run_id);
+                }
+                Ok(ok(None))
+            }
+        };
+        result.unwrap_or_else(|e| {
+            eprintln!("formation host: refused: {e}");
+            refused(e)
+        })
+    }
+
+    fn run(&mut self, run_id: &str) -> Result<&mut HostRun, String> {
+        self.runs
+            .get_mut(run_id)
+            .ok_or_else(|| format!("no run {run_id} on host {}", self.o.name))
+    }
+
+    fn prepare(&mut self, r: RunRequest) -> Result<(), String> {
+        let diff = identity::differences(&r.identity, &self.me);
+        if !diff.is_empty() {
+            return Err(format!(
+                "the orchestrator and host {} differ: {}",
+                self.o.name,
+                diff.join("; ")
+            ));
+        }
+        if r.run_id.is_empty()
+            || r.run_id.len() > 16
+            || !r.run_id.bytes().all(|b| b.is_ascii_hexdigit())
+        {
+            return Err(format!(
+                "run id '{}': expected 1..=16 hexadecimal digits",
+                r.run_id
+            ));
+        }
+        if r.prefix != services::run_prefix(&r.run_id) {
+            return Err(format!(
+                "prefix '{}' is not the run's ({})",
+                r.prefix,
+                services::run_prefix(&r.run_id)
+            ));
+        }
+        if self.runs.contains_key(&r.run_id) {
+            return Err(format!("run {} is already prepared here", r.run_id));
+        }
+        let scenario =
+            Scenario::from_toml_str(&r.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
+        formation_config::scenario::validate::validate(&scenario)
+            .map_err(|e| format!("scenario: {e}"))?;
+        let n = scenario.n_agents();
+        if n > formation_config::MAX_AGENTS {
+            return Err(format!(
+                "{n} agents: at most {} are supported",
+                formation_config::MAX_AGENTS
+            ));
+        }
+        let variant =
+            Variant::parse(&r.variant).ok_or_else(|| format!("unknown variant '{}'", r.variant))?;
+        if r.agent_hosts.len() != n {
+            return Err(format!(
+                "{} agent hosts for {n} agents",
+                r.agent_hosts.len()
+            ));
+        }
+        if !r.agent_hosts.iter().all(|h| proto::valid_name(h)) || !proto::valid_name(&r.launcher) {
+            return Err("a host name of the placement is not key-safe".into());
+        }
+        if !r.agent_hosts.iter().any(|h| *h == self.o.name) {
+            return Err(format!("no agent of the run is placed on {}", self.o.name));
+        }
+        if r.observers > services::MAX_OBSERVERS + 1 {
+            return Err(format!(
+                "{} observers: at most {}",
+                r.observers,
+                services::MAX_OBSERVERS + 1
+            ));
+        }
+        let dir = self.o.root.join(&r.run_id);
+        private_dir(&dir)?;
+        let fail = |e: String, dir: &Path| {
+            let _ = std::fs::remove_dir_all(dir);
+            e
+        };
+        std::fs::write(dir.join("scenario.toml"), &r.scenario_toml)
+            .map_err(|e| fail(format!("cannot write the scenario: {e}"), &dir))?;
+        let membership =
+            Membership::create(&dir, &r.prefix).map_err(|e| fail(e.to_string(), &dir))?;
+        let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.to_string(), &dir))?;
+        let placement = Placement {
+            agent_hosts: r.agent_hosts.clone(),
+            launcher: r.launcher.clone(),
+            neighbours: Placement::neighbours_of(
+                n,
+                scenario.graph.edges.iter().map(|e| (e.a, e.b)),
+            ),
+        };
+        let bridge = Bridge::start(
+            self.s.clone(),
+            BridgeConfig {
+                run_id: r.run_id.clone(),
+                prefix: r.prefix.clone(),
+                me: self.o.name.clone(),
+                placement,
+                sizing: Sizing::run(n, r.realtime).with_observers(r.observers),
+                create: true,
+            },
+        );
+        let bridge = match bridge {
+            Ok(b) => b,
+            Err(e) => {
+                drop(node);
+                drop(membership);
+                let _ = ipc::remove_residue(&r.prefix);
+                return Err(fail(e, &dir));
+            }
+        };
+        eprintln!(
+            "formation host: run {} prepared: agents {:?} here, {} services forwarded out, {} in",
+            r.run_id,
+            r.agent_hosts
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| **h == self.o.name)
+                .map(|(i, _)| i + 1)
+                .collect::<Vec<_>>(),
+            bridge.forwarded.0,
+            bridge.forwarded.1
+        );
+        self.runs.insert(
+            r.run_id.clone(),
+            HostRun {
+                variant: variant.name().to_string(),
+                req: r,
+                dir,
+                children: HashMap::new(),
+                prepared: Instant::now(),
+                bridge: Some(bridge),
+                node: Some(node),
+                membership: Some(membership),
+            },
+        );
+        Ok(())
+    }
+
+    fn spawn(
+        &mut self,
+        run_id: &str,
+        agent: usize,
+        rejoin_at: Option<u64>,
+        rejoin: &[u8],
+    ) -> Result<u32, String> {
+        let exe = self.o.exe.clone();
+        let me = self.o.name.clone();
+        let r = self.run(run_id)?;
+        if r.req.agent_hosts.get(agent) != Some(&me) {
+            return Err(format!(
+                "agent {} of run {run_id} is not placed on {me}",
+                agent + 1
+            ));
+        }
+        if r.children.contains_key(&agent) {
+            return Err(format!(
+                "agent {} of run {run_id} is already running here",
+                agent + 1
+            ));
+        }
+        if rejoin_at.is_some() {
+            let path = restart::rejoin_path(&r.dir, agent);
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent)
+                    .map_err(|e| format!("{}: {e}", parent.display()))?;
+            }
+            let tmp = path.with_extension("part");
+            std::fs::write(&tmp, rejoin)
+                .and_then(|_| std::fs::rename(&tmp, &path))
+                .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        }
+        let args = ChildArgs {
+            run_id: r.req.run_id.clone(),
+            prefix: r.req.prefix.clone(),
+            run_dir: r.dir.clone(),
+            variant: r.variant.clone(),
+            agent: Some(agent),
+            realtime: r.req.realtime,
+            spin_us: 0,
+            rt_priority: 0,
+            rejoin_at,
+        };
+        let mut cmd = Command::new(&exe);
+        cmd.arg0(Role::Agent.process_name(Some(agent)))
+            .args(["node", Role::Agent.name()])
+            .args(args.to_args())
+            .stdin(Stdio::null());
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                libc::prctl(
+                    libc::PR_SET_PDEATHSIG,
+                    libc::SIGTERM as libc::c_ulong,
+                    0,
+                    0,
+                    0,
+                );
+                libc::signal(libc::SIGINT, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+        let child = cmd
+            .spawn()
+            .map_err(|e| format!("cannot start agent {}: {e}", agent + 1))?;
+        let pid = child.id();
+        r.children.insert(agent, child);
+        Ok(pid)
+    }
+
+    fn kill(&mut self, run_id: &str, agent: usize) -> Result<(), String> {
+        // Idempotent: a run already ended has no process left to kill.
+        let Some(r) = self.runs.get_mut(run_id) else {
+            return Ok(());
+        };
+        if let Some(mut c) = r.children.remove(&agent) {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+        if let Some(n) = &r.node {
+            n.try_cleanup_dead_nodes();
+        }
+        Ok(())
+    }
+
+    fn signal(&mut self, run_id: &str, agent: usize, signal: i32) -> Result<(), String> {
+        if signal != libc::SIGSTOP && signal != libc::SIGCONT {
+            return Err(format!(
+                "signal {signal}: only SIGSTOP and SIGCONT are sent on request"
+            ));
+        }
+        let r = self.run(run_id)?;
+        let c = r
+            .children
+            .get(&agent)
+            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+        // SAFETY: kill(2) on our own unreaped child.
+        unsafe { libc::kill(c.id() as libc::pid_t, signal) };
+        Ok(())
+    }
+
+    fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
+        let r = self.run(run_id)?;
+        let path = restart::checkpoint_path(&r.dir, agent);
+        let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(proto::frame(&Reply::Ok { pid: None }, &bytes))
+    }
+
+    /// Reaps exited children and reports them.
+    fn reap(&mut self) {
+        let mut reports = Vec::new();
+        for (id, r) in self.runs.iter_mut() {
+            let mut gone = Vec::new();
+            for (&agent, c) in r.children.iter_mut() {
+                if let Ok(Some(st)) = c.try_wait() {
+                    gone.push(agent);
+                    reports.push((
+                        id.clone(),
+                        ExitReport {
+                            host: self.o.name.clone(),
+                            agent,
+                            pid: c.id(),
+                            how: describe(st),
+                        },
+                    ));
+                }
+            }
+            for a in &gone {
+                r.children.remove(a);
+            }
+            if !gone.is_empty() {
+                if let Some(n) = &r.node {
+                    n.try_cleanup_dead_nodes();
+                }
+            }
+        }
+        for (id, rep) in reports {
+            let _ = self
+                .s
+                .put(proto::run_exit(&id), serde_json::to_vec(&rep).unwrap())
+                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .wait();
+        }
+    }
+
+    /// Ends a run: its processes get [`STOP_GRACE`] to exit, then SIGKILL; bridge stopped; every
+    /// iceoryx2 file of its prefix and its folder removed.
+    fn end(&mut self, run_id: &str) {
+        let Some(mut r) = self.runs.remove(run_id) else {
+            return;
+        };
+        let deadline = Instant::now() + STOP_GRACE;
+        while Instant::now() < deadline
+            && r.children
+                .values_mut()
+                .any(|c| matches!(c.try_wait(), Ok(None)))
+        {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        for c in r.children.values_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+        r.children.clear();
+        drop(r.bridge.take());
+        drop(r.node.take());
+        drop(r.membership.take());
+        let removed = ipc::remove_residue(&r.req.prefix).unwrap_or(0);
+        let _ = std::fs::remove_dir_all(&r.dir);
+        eprintln!(
+            "formation host: run {run_id} ended; {removed} iceoryx2 files and its folder removed"
+        );
+    }
+}

@@ -1,0 +1,25 @@
+//! Multi-host runs over Eclipse Zenoh: one formation across several machines.
+//!
+//! * [`session`]: Zenoh sessions of this project (topology, loopback default, authentication, a
+//!   bounded number of runtime threads).
+//! * [`proto`]: the keys and messages between an orchestrator and the host daemons.
+//! * [`identity`]: protocol version, build identity and wire-layout hash, compared at the handshake.
+//! * [`plan`]: which services cross hosts for a placement, and in which direction.
+//! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
+//!   bytes with their wire type name.
+//! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
+//! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
+//!
+//! The topology (docs/multi-host.md): every host daemon listens (loopback only unless
+//! authenticated); the launching orchestrator opens a Zenoh *router* session that connects to each
+//! daemon, so traffic between two remote hosts is relayed by the launching machine (Zenoh >= 1.9
+//! peers do not relay for each other). Multicast scouting is off everywhere.
+#![warn(missing_docs)]
+
+pub mod bridge;
+pub mod cluster;
+pub mod daemon;
+pub mod identity;
+pub mod plan;
+pub mod proto;
+pub mod session;

@@ -1,0 +1,224 @@
+//! Keys and messages between an orchestrator and the host daemons (JSON, with raw file bytes
+//! after it where a file travels: see [`frame`]).
+//!
+//! | key | what |
+//! |---|---|
+//! | `formation/host/<name>` | liveliness token of a daemon |
+//! | `formation/host/<name>/info` | queryable: [`HostInfo`] |
+//! | `formation/host/<name>/req` | queryable: a [`Request`], answered by a [`Reply`] |
+//! | `formation/run/<id>/orchestrator` | liveliness token of a run's orchestrator |
+//! | `formation/run/<id>/exit` | a daemon's [`ExitReport`] for a process of the run |
+//! | `formation/run/<id>/to/<host>` | the bridge's frames for that host ([`crate::bridge`]) |
+
+use crate::identity::Identity;
+use serde::{Deserialize, Serialize};
+
+/// Liveliness key of a daemon.
+pub fn host_token(name: &str) -> String {
+    format!("formation/host/{name}")
+}
+/// Every daemon's liveliness key.
+pub const HOSTS: &str = "formation/host/*";
+/// Info queryable of a daemon.
+pub fn host_info(name: &str) -> String {
+    format!("formation/host/{name}/info")
+}
+/// Request queryable of a daemon.
+pub fn host_req(name: &str) -> String {
+    format!("formation/host/{name}/req")
+}
+/// Liveliness key of a run's orchestrator.
+pub fn run_token(run: &str) -> String {
+    format!("formation/run/{run}/orchestrator")
+}
+/// Exit reports of a run.
+pub fn run_exit(run: &str) -> String {
+    format!("formation/run/{run}/exit")
+}
+/// Bridge frames of a run for `host`.
+pub fn run_to(run: &str, host: &str) -> String {
+    format!("formation/run/{run}/to/{host}")
+}
+
+/// True for a host name usable in keys: 1..=32 of `[A-Za-z0-9_-]`.
+pub fn valid_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 32
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+}
+
+/// What a daemon says about itself.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HostInfo {
+    /// Its name (`--name`, default the machine's host name).
+    pub name: String,
+    /// CPUs it may use.
+    pub cpus: usize,
+    /// Its endpoints (`--listen`).
+    pub listen: Vec<String>,
+    /// Runs it holds now.
+    pub runs: usize,
+    /// Daemon pid.
+    pub pid: u32,
+    /// Protocol, build, layout.
+    pub identity: Identity,
+    /// Its wall clock when it answered, µs since the Unix epoch (clock offset estimate).
+    pub clock_us: u64,
+}
+
+/// A run's share of one host: its agents, and what the daemon needs to start them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunRequest {
+    /// Run id (`[0-9a-f]`).
+    pub run_id: String,
+    /// iceoryx2 prefix.
+    pub prefix: String,
+    /// The resolved scenario (validated again by the daemon).
+    pub scenario_toml: String,
+    /// Controller variant.
+    pub variant: String,
+    /// Host of every agent (index = 0-based agent).
+    pub agent_hosts: Vec<String>,
+    /// The launching host (plant, leader, orchestrator, clients).
+    pub launcher: String,
+    /// Realtime mode.
+    pub realtime: bool,
+    /// Outside observer slots of every service (the run's, plus one for the bridge).
+    pub observers: usize,
+    /// The orchestrator's identity (checked again).
+    pub identity: Identity,
+}
+
+/// What an orchestrator asks a daemon.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Request {
+    /// Prepare a run: services, bridge; start nothing yet.
+    Prepare(RunRequest),
+    /// Start agent processes of a prepared run. `rejoin`: the rejoin file (after the JSON, see
+    /// [`frame`]) and the step a new process takes over at.
+    Spawn {
+        /// Run id.
+        run_id: String,
+        /// 0-based agent.
+        agent: usize,
+        /// `Some(step)`: a new process taking over, whose rejoin file follows the JSON.
+        rejoin_at: Option<u64>,
+    },
+    /// SIGKILL (and reap) an agent's process.
+    Kill {
+        /// Run id.
+        run_id: String,
+        /// 0-based agent.
+        agent: usize,
+    },
+    /// Send a signal to an agent's process (SIGSTOP for a timeline hang).
+    Signal {
+        /// Run id.
+        run_id: String,
+        /// 0-based agent.
+        agent: usize,
+        /// Signal number: only SIGSTOP and SIGCONT are accepted.
+        signal: i32,
+    },
+    /// The agent's latest checkpoint file (the reply carries its bytes).
+    Checkpoint {
+        /// Run id.
+        run_id: String,
+        /// 0-based agent.
+        agent: usize,
+    },
+    /// End the run: stop its processes, remove its files.
+    End {
+        /// Run id.
+        run_id: String,
+    },
+}
+
+/// A daemon's answer.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub enum Reply {
+    /// Done; a process id where one was started.
+    Ok {
+        /// The new process's pid (on that host).
+        pid: Option<u32>,
+    },
+    /// Refused, nothing changed; why.
+    Refused(String),
+}
+
+/// A process of a run that exited on a daemon's host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ExitReport {
+    /// Host name.
+    pub host: String,
+    /// 0-based agent.
+    pub agent: usize,
+    /// Its pid there.
+    pub pid: u32,
+    /// `exited with code 0`, `was killed (SIGKILL)`, ...
+    pub how: String,
+}
+
+/// JSON followed by raw bytes: `[u32 LE json length][json][bytes]`.
+pub fn frame<T: Serialize>(msg: &T, bytes: &[u8]) -> Vec<u8> {
+    let json = serde_json::to_vec(msg).expect("protocol messages serialise");
+    let mut v = Vec::with_capacity(4 + json.len() + bytes.len());
+    v.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    v.extend_from_slice(&json);
+    v.extend_from_slice(bytes);
+    v
+}
+
+/// Splits a [`frame`]; a clear error for anything else.
+pub fn unframe<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), String> {
+    if data.len() < 4 {
+        return Err(format!("malformed message: {} bytes", data.len()));
+    }
+    let n = u32::from_le_bytes(data[..4].try_into().unwrap()) as usize;
+    let json = data
+        .get(4..4 + n)
+        .ok_or_else(|| format!("malformed message: length {n} beyond {} bytes", data.len()))?;
+    let msg = serde_json::from_slice(json).map_err(|e| format!("malformed message: {e}"))?;
+    Ok((msg, &data[4 + n..]))
+}
+
+/// Wall clock, µs since the Unix epoch.
+pub fn now_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_micros() as u64)
+        .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_framed_request_round_trips_with_its_bytes_and_garbage_is_an_error() {
+        let r = Request::Spawn {
+            run_id: "ab12".into(),
+            agent: 3,
+            rejoin_at: Some(20_500),
+        };
+        let f = frame(&r, &[1, 2, 3]);
+        let (back, rest): (Request, &[u8]) = unframe(&f).unwrap();
+        assert_eq!(back, r);
+        assert_eq!(rest, &[1, 2, 3]);
+        assert!(unframe::<Request>(&[9, 0, 0, 0, b'{']).is_err());
+        assert!(unframe::<Request>(&[1]).is_err());
+        assert!(unframe::<Request>(&frame(&"x", &[])).is_err());
+    }
+
+    #[test]
+    fn host_names_are_key_safe() {
+        assert!(valid_name("b"));
+        assert!(valid_name("host-2_x"));
+        assert!(!valid_name(""));
+        assert!(!valid_name("a/b"));
+        assert!(!valid_name("*"));
+        assert!(!valid_name(&"x".repeat(33)));
+    }
+}

@@ -1,0 +1,448 @@
+//! `formation run --hosts`: agents on other machines, through their `formation host` daemons and
+//! one bridge per host (crate `formation-net`, docs/multi-host.md).
+//!
+//! Before anything starts: the handshake (every named host answers within its timeout, with the
+//! same protocol, build and wire layout; exit 2 naming the host and what differs otherwise), then
+//! every host prepares the run (services, bridge; a refusal ends the prepared ones, exit 2). Only
+//! then are processes started: plant, leader and this machine's agents here, the others by their
+//! daemons. Plant, leader and orchestrator always stay on the launching machine.
+
+use super::spawn::{RemoteProcess, RoleProcess};
+use crate::hosts::LinkArgs;
+use formation_config::node::args::ChildArgs;
+use formation_config::node::restart;
+use formation_config::protocol::services::Sizing;
+use formation_config::Scenario;
+use formation_net::bridge::{Bridge, BridgeConfig};
+use formation_net::cluster::{Cluster, LAUNCHER};
+use formation_net::plan::Placement;
+use formation_net::proto::{self, Reply, Request, RunRequest};
+use formation_net::session::{self, Mode, Options};
+use std::cell::RefCell;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Placement options of `formation run`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct PlaceArgs {
+    /// Hosts (daemons started with `formation host --name NAME`) that take agents: the agents are
+    /// spread round-robin over this machine and these hosts, unless placed with --place.
+    #[arg(long, value_delimiter = ',', value_name = "NAME,NAME...")]
+    pub hosts: Vec<String>,
+    /// Place agents on a host: `4,5@b` (1-based ids; repeatable). With --place, agents not placed
+    /// stay on this machine.
+    #[arg(long, value_name = "IDS@HOST")]
+    pub place: Vec<String>,
+    /// Endpoint of a host's daemon (repeatable); default tcp/127.0.0.1:7447.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Zenoh link options.
+    #[command(flatten)]
+    pub link: LinkArgs,
+}
+
+/// The host of every agent (0-based index), [`LAUNCHER`] for this machine.
+pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<String>, String> {
+    for h in hosts {
+        if !proto::valid_name(h) || h == LAUNCHER {
+            return Err(format!(
+                "--hosts: '{h}' is not a host name (1..=32 of [A-Za-z0-9_-], not '{LAUNCHER}')"
+            ));
+        }
+    }
+    if place.is_empty() {
+        let all: Vec<&str> = std::iter::once(LAUNCHER)
+            .chain(hosts.iter().map(String::as_str))
+            .collect();
+        return Ok((0..n).map(|i| all[i % all.len()].to_string()).collect());
+    }
+    let mut v = vec![LAUNCHER.to_string(); n];
+    let mut placed = vec![false; n];
+    for p in place {
+        let (ids, host) = p
+            .split_once('@')
+            .ok_or_else(|| format!("--place {p}: expected IDS@HOST, e.g. 4,5@b"))?;
+        if host != LAUNCHER && !hosts.iter().any(|h| h == host) {
+            return Err(format!("--place {p}: host '{host}' is not in --hosts"));
+        }
+        for id in ids.split(',') {
+            let k: usize = id
+                .trim()
+                .parse()
+                .map_err(|_| format!("--place {p}: '{id}' is not an agent id"))?;
+            if k == 0 || k > n {
+                return Err(format!(
+                    "--place {p}: agent {k} does not exist (ids 1..={n})"
+                ));
+            }
+            if placed[k - 1] {
+                return Err(format!("--place {p}: agent {k} is placed twice"));
+            }
+            placed[k - 1] = true;
+            v[k - 1] = host.to_string();
+        }
+    }
+    Ok(v)
+}
+
+/// Hosts reached and checked, before the run is prepared.
+pub struct Remote {
+    cluster: Cluster,
+    agent_hosts: Vec<String>,
+    hosts: Vec<String>,
+    neighbours: Vec<Vec<usize>>,
+}
+
+/// Opens the session and runs the handshake; `None` without `--hosts`.
+pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, String> {
+    if a.hosts.is_empty() {
+        if !a.place.is_empty() || !a.connect.is_empty() {
+            return Err("--place and --connect need --hosts".into());
+        }
+        return Ok(None);
+    }
+    let n = scenario.n_agents();
+    let agent_hosts = placement(n, &a.hosts, &a.place)?;
+    let mut hosts: Vec<String> = Vec::new();
+    for h in &agent_hosts {
+        if h != LAUNCHER && !hosts.contains(h) {
+            hosts.push(h.clone());
+        }
+    }
+    let opts = Options {
+        mode: Mode::Orchestrator,
+        listen: vec![],
+        connect: if a.connect.is_empty() {
+            vec![session::default_endpoint()]
+        } else {
+            a.connect.clone()
+        },
+        auth: a.link.auth.clone(),
+        lease_ms: a.link.lease_ms,
+    };
+    let cluster = Cluster::open(&opts).map_err(|e| e.to_string())?;
+    let me = formation_net::identity::local();
+    cluster
+        .handshake(&hosts, &me, session::REPLY_TIMEOUT)
+        .map_err(|e| e.to_string())?;
+    Ok(Some(Remote {
+        cluster,
+        agent_hosts,
+        hosts,
+        neighbours: Placement::neighbours_of(n, scenario.graph.edges.iter().map(|e| (e.a, e.b))),
+    }))
+}
+
+impl Remote {
+    /// Prepares the run on every host (services and bridge there; no process yet). A refusal
+    /// ends the hosts already prepared.
+    pub fn prepare(
+        mut self,
+        run_id: &str,
+        prefix: &str,
+        scenario: &Scenario,
+        variant: &str,
+        realtime: bool,
+        observers: usize,
+    ) -> Result<RemoteRun, String> {
+        self.cluster.announce(run_id)?;
+        let req = RunRequest {
+            run_id: run_id.to_string(),
+            prefix: prefix.to_string(),
+            scenario_toml: scenario.to_toml_string(),
+            variant: variant.to_string(),
+            agent_hosts: self.agent_hosts.clone(),
+            launcher: LAUNCHER.to_string(),
+            realtime,
+            observers,
+            identity: formation_net::identity::local(),
+        };
+        let run = RemoteRun {
+            cluster: Arc::new(self.cluster),
+            run_id: run_id.to_string(),
+            placement: Placement {
+                agent_hosts: self.agent_hosts,
+                launcher: LAUNCHER.to_string(),
+                neighbours: self.neighbours,
+            },
+            hosts: Vec::new(),
+            bridge: RefCell::new(None),
+        };
+        let mut run = run;
+        for h in &self.hosts {
+            match run.cluster.request(
+                h,
+                &Request::Prepare(req.clone()),
+                &[],
+                session::REPLY_TIMEOUT,
+            ) {
+                Ok((Reply::Ok { .. }, _)) => run.hosts.push(h.clone()),
+                Ok((Reply::Refused(why), _)) => {
+                    return Err(format!("host {h} refused the run: {why}"))
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(run)
+    }
+}
+
+/// A run spread over hosts: ends the run on every host when dropped.
+pub struct RemoteRun {
+    cluster: Arc<Cluster>,
+    run_id: String,
+    placement: Placement,
+    /// Hosts where the run is prepared.
+    hosts: Vec<String>,
+    bridge: RefCell<Option<Bridge>>,
+}
+
+impl Drop for RemoteRun {
+    fn drop(&mut self) {
+        for h in &self.hosts {
+            let _ = self.cluster.request(
+                h,
+                &Request::End {
+                    run_id: self.run_id.clone(),
+                },
+                &[],
+                session::REPLY_TIMEOUT,
+            );
+        }
+        if let Some(b) = self.bridge.borrow_mut().take() {
+            let s = &b.stats;
+            use std::sync::atomic::Ordering::Relaxed;
+            tracing::info!(
+                frames_out = s.frames_out.load(Relaxed),
+                samples_out = s.samples_out.load(Relaxed),
+                events_out = s.events_out.load(Relaxed),
+                frames_in = s.frames_in.load(Relaxed),
+                refused = s.refused.load(Relaxed),
+                "bridge stopped"
+            );
+        }
+    }
+}
+
+impl RemoteRun {
+    /// Starts this machine's bridge (after the orchestrator created the services).
+    pub fn start_bridge(&self, prefix: &str, sizing: Sizing) -> Result<(), String> {
+        let b = Bridge::start(
+            self.cluster.session(),
+            BridgeConfig {
+                run_id: self.run_id.clone(),
+                prefix: prefix.to_string(),
+                me: LAUNCHER.to_string(),
+                placement: self.placement.clone(),
+                sizing,
+                create: false,
+            },
+        )?;
+        tracing::info!(
+            out = b.forwarded.0,
+            inbound = b.forwarded.1,
+            "bridge started"
+        );
+        *self.bridge.borrow_mut() = Some(b);
+        Ok(())
+    }
+
+    /// Whether agent i (0-based) runs on another host.
+    pub fn is_remote(&self, i: usize) -> bool {
+        self.placement
+            .agent_hosts
+            .get(i)
+            .is_some_and(|h| h != LAUNCHER)
+    }
+
+    /// `agents 1,2,3 here, 4,5 on b`.
+    pub fn describe(&self) -> String {
+        let mut parts = Vec::new();
+        for h in self.placement.hosts() {
+            let ids: Vec<String> = self
+                .placement
+                .agents_on(&h)
+                .iter()
+                .map(|i| (i + 1).to_string())
+                .collect();
+            if !ids.is_empty() {
+                parts.push(format!("{} on {h}", ids.join(",")));
+            }
+        }
+        format!("agents {}", parts.join("; "))
+    }
+
+    /// Starts agent `agent` on its host (with its rejoin file, for a process taking over).
+    pub fn spawn(
+        &self,
+        agent: usize,
+        label: String,
+        args: &ChildArgs,
+    ) -> Result<RoleProcess, String> {
+        let host = self.placement.agent_hosts[agent].clone();
+        let rejoin = match args.rejoin_at {
+            Some(_) => {
+                let p = restart::rejoin_path(&args.run_dir, agent);
+                std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?
+            }
+            None => Vec::new(),
+        };
+        let req = Request::Spawn {
+            run_id: self.run_id.clone(),
+            agent,
+            rejoin_at: args.rejoin_at,
+        };
+        match self
+            .cluster
+            .request(&host, &req, &rejoin, session::REPLY_TIMEOUT)?
+        {
+            (Reply::Ok { pid: Some(pid) }, _) => Ok(RoleProcess::remote(
+                format!("{label} on {host}"),
+                Box::new(RemoteAgent {
+                    cluster: self.cluster.clone(),
+                    host,
+                    run_id: self.run_id.clone(),
+                    agent,
+                    pid,
+                }),
+            )),
+            (Reply::Ok { pid: None }, _) => {
+                Err(format!("host {host} started {label} without a pid"))
+            }
+            (Reply::Refused(why), _) => Err(format!("host {host} cannot start {label}: {why}")),
+        }
+    }
+
+    /// Copies agent `agent`'s latest checkpoint from its host into `run_dir` (a warm takeover
+    /// reads it here).
+    pub fn fetch_checkpoint(&self, agent: usize, run_dir: &Path) -> Result<(), String> {
+        let host = &self.placement.agent_hosts[agent];
+        let req = Request::Checkpoint {
+            run_id: self.run_id.clone(),
+            agent,
+        };
+        match self
+            .cluster
+            .request(host, &req, &[], session::REPLY_TIMEOUT)?
+        {
+            (Reply::Ok { .. }, bytes) => {
+                let p = restart::checkpoint_path(run_dir, agent);
+                if let Some(d) = p.parent() {
+                    std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
+                }
+                let tmp = p.with_extension("part");
+                std::fs::write(&tmp, &bytes)
+                    .and_then(|_| std::fs::rename(&tmp, &p))
+                    .map_err(|e| format!("{}: {e}", p.display()))
+            }
+            (Reply::Refused(why), _) => Err(format!("host {host}: {why}")),
+        }
+    }
+}
+
+/// An agent process on another host.
+struct RemoteAgent {
+    cluster: Arc<Cluster>,
+    host: String,
+    run_id: String,
+    agent: usize,
+    pid: u32,
+}
+
+impl RemoteProcess for RemoteAgent {
+    fn pid(&self) -> u32 {
+        self.pid
+    }
+
+    fn host(&self) -> &str {
+        &self.host
+    }
+
+    fn kill_and_reap(&mut self) {
+        let req = Request::Kill {
+            run_id: self.run_id.clone(),
+            agent: self.agent,
+        };
+        if let Err(e) = self
+            .cluster
+            .request(&self.host, &req, &[], session::REPLY_TIMEOUT)
+        {
+            tracing::warn!("cannot kill agent {} on {}: {e}", self.agent + 1, self.host);
+        }
+    }
+
+    fn signal(&self, signal: i32) {
+        let req = Request::Signal {
+            run_id: self.run_id.clone(),
+            agent: self.agent,
+            signal,
+        };
+        if let Err(e) = self
+            .cluster
+            .request(&self.host, &req, &[], session::REPLY_TIMEOUT)
+        {
+            tracing::warn!(
+                "cannot signal agent {} on {}: {e}",
+                self.agent + 1,
+                self.host
+            );
+        }
+    }
+
+    fn try_wait(&mut self) -> Option<String> {
+        if let Some(how) = self.cluster.exit_of(&self.host, self.agent, self.pid) {
+            return Some(how);
+        }
+        self.cluster.lost(&self.host).map(|_| {
+            format!(
+                "was lost with host {} (its daemon's liveliness token vanished)",
+                self.host
+            )
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn agents_go_round_robin_over_this_machine_and_the_hosts_unless_placed() {
+        let h = vec!["b".to_string()];
+        assert_eq!(
+            placement(5, &h, &[]).unwrap(),
+            ["local", "b", "local", "b", "local"]
+        );
+        assert_eq!(
+            placement(5, &h, &["4,5@b".into()]).unwrap(),
+            ["local", "local", "local", "b", "b"]
+        );
+        let hc = vec!["b".to_string(), "c".to_string()];
+        assert_eq!(
+            placement(4, &hc, &["1@c".into(), "2@b".into()]).unwrap(),
+            ["c", "b", "local", "local"]
+        );
+    }
+
+    #[test]
+    fn a_bad_placement_is_named() {
+        let h = vec!["b".to_string()];
+        assert!(placement(5, &h, &["6@b".into()])
+            .unwrap_err()
+            .contains("agent 6 does not exist"));
+        assert!(placement(5, &h, &["4@c".into()])
+            .unwrap_err()
+            .contains("not in --hosts"));
+        assert!(placement(5, &h, &["4@b".into(), "4@b".into()])
+            .unwrap_err()
+            .contains("placed twice"));
+        assert!(placement(5, &h, &["x@b".into()])
+            .unwrap_err()
+            .contains("not an agent id"));
+        assert!(placement(5, &h, &["4b".into()])
+            .unwrap_err()
+            .contains("IDS@HOST"));
+        assert!(placement(5, &["local".into()], &[]).is_err());
+        assert!(placement(5, &["a/b".into()], &[]).is_err());
+    }
+}

@@ -1,0 +1,61 @@
+//! `formation run` built without the `multihost` feature: no placement options, every process on
+//! this machine.
+
+use super::spawn::RoleProcess;
+use formation_config::node::args::ChildArgs;
+use formation_config::protocol::services::Sizing;
+use formation_config::Scenario;
+use std::path::Path;
+
+/// No placement options without the `multihost` feature.
+#[derive(clap::Args, Debug, Clone)]
+pub struct PlaceArgs {}
+
+/// Never built.
+pub enum Remote {}
+
+/// Never built.
+pub enum RemoteRun {}
+
+/// Every run is local.
+pub fn connect(_: &PlaceArgs, _: &Scenario) -> Result<Option<Remote>, String> {
+    Ok(None)
+}
+
+impl Remote {
+    /// Unreachable.
+    pub fn prepare(
+        self,
+        _: &str,
+        _: &str,
+        _: &Scenario,
+        _: &str,
+        _: bool,
+        _: usize,
+    ) -> Result<RemoteRun, String> {
+        match self {}
+    }
+}
+
+impl RemoteRun {
+    /// Unreachable.
+    pub fn start_bridge(&self, _: &str, _: Sizing) -> Result<(), String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn is_remote(&self, _: usize) -> bool {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn describe(&self) -> String {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn spawn(&self, _: usize, _: String, _: &ChildArgs) -> Result<RoleProcess, String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn fetch_checkpoint(&self, _: usize, _: &Path) -> Result<(), String> {
+        match *self {}
+    }
+}

@@ -1,0 +1,512 @@
+//! One formation across several "hosts" (docs/multi-host.md): Linux network namespaces, each with
+//! its own /dev/shm and /tmp (a mount namespace with fresh tmpfs), joined by a veth pair, so no
+//! shared memory can cross; a `formation host` daemon in the second namespace, the orchestrator
+//! (plant, leader, the launcher's agents) in the first. The proof is the lockstep contract:
+//! `trajectory.csv` byte-identical to `formation sim` for the split placement, with and without a
+//! crash event, and nothing left in any namespace's /dev/shm.
+//!
+//! Needs root (namespaces, veth): skipped with a message otherwise, and required (a failure)
+//! when `FORMATION_REQUIRE_NETNS=1` (set by `.ci/run`, which runs as root).
+
+use formation_tests::bin;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+static NEXT: AtomicUsize = AtomicUsize::new(0);
+
+/// Why these tests cannot run here, if they cannot.
+fn unavailable() -> Option<String> {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return Some(
+            "not root (network namespaces and veth pairs need CAP_NET_ADMIN and CAP_SYS_ADMIN)"
+                .into(),
+        );
+    }
+    let ok = |c: &str, a: &[&str]| {
+        Command::new(c)
+            .args(a)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status()
+            .is_ok_and(|s| s.success())
+    };
+    if !ok("ip", &["-V"]) {
+        return Some("the `ip` command (iproute2) is missing".into());
+    }
+    if !ok("unshare", &["--version"]) {
+        return Some("the `unshare` command (util-linux) is missing".into());
+    }
+    None
+}
+
+/// `true`: run the test; `false`: skipped (panics instead when FORMATION_REQUIRE_NETNS=1).
+fn available(test: &str) -> bool {
+    match unavailable() {
+        None => true,
+        Some(why) if std::env::var("FORMATION_REQUIRE_NETNS").as_deref() == Ok("1") => {
+            panic!("{test}: FORMATION_REQUIRE_NETNS=1 but {why}")
+        }
+        Some(why) => {
+            eprintln!("skipping {test}: {why}");
+            false
+        }
+    }
+}
+
+fn ip(args: &[&str]) {
+    let o = Command::new("ip").args(args).output().expect("ip runs");
+    assert!(
+        o.status.success(),
+        "ip {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// A folder for the test's files outside /tmp (each namespace has its own /tmp).
+fn work_dir(tag: &str) -> PathBuf {
+    let d = bin("formation")
+        .parent()
+        .unwrap()
+        .join("multihost-tests")
+        .join(format!("{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Two or more namespaces "hosts", star-linked to the first; removed (with their daemons) on drop,
+/// whatever happened.
+struct Hosts {
+    names: Vec<String>,
+    addrs: Vec<String>,
+    daemons: Vec<Child>,
+    auth: PathBuf,
+}
+
+impl Hosts {
+    fn new(count: usize, dir: &Path) -> Hosts {
+        let k = (std::process::id() as usize * 7 + NEXT.fetch_add(1, Ordering::SeqCst)) % 200 + 20;
+        let names: Vec<String> = (0..count).map(|h| format!("fm{k}h{h}")).collect();
+        let mut hosts = Hosts {
+            names: names.clone(),
+            addrs: Vec::new(),
+            daemons: Vec::new(),
+            auth: dir.join("auth"),
+        };
+        for n in &names {
+            let _ = Command::new("ip")
+                .args(["netns", "del", n])
+                .stderr(Stdio::null())
+                .status();
+            ip(&["netns", "add", n]);
+            ip(&["-n", n, "link", "set", "lo", "up"]);
+        }
+        hosts.addrs.push(String::new());
+        for h in 1..count {
+            // One /24 per test and link: 10.<k>.<h>.0/24, launcher .1, host .2.
+            let (a, b) = (format!("fm{k}a{h}"), format!("fm{k}b{h}"));
+            ip(&["link", "add", &a, "type", "veth", "peer", "name", &b]);
+            ip(&["link", "set", &a, "netns", &names[0]]);
+            ip(&["link", "set", &b, "netns", &names[h]]);
+            ip(&[
+                "-n",
+                &names[0],
+                "addr",
+                "add",
+                &format!("10.{k}.{h}.1/24"),
+                "dev",
+                &a,
+            ]);
+            ip(&[
+                "-n",
+                &names[h],
+                "addr",
+                "add",
+                &format!("10.{k}.{h}.2/24"),
+                "dev",
+                &b,
+            ]);
+            ip(&["-n", &names[0], "link", "set", &a, "up"]);
+            ip(&["-n", &names[h], "link", "set", &b, "up"]);
+            hosts.addrs.push(format!("10.{k}.{h}.2"));
+        }
+        std::fs::write(&hosts.auth, "formation:tests-only-secret\n").unwrap();
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&hosts.auth, std::fs::Permissions::from_mode(0o600)).unwrap();
+        hosts
+    }
+
+    /// A command running in namespace `h` with a private /dev/shm and /tmp; `residue` receives
+    /// what is left in that /dev/shm and /tmp/iceoryx2 when the command ends (`None`: the
+    /// command replaces the shell, so its pid is the child's; see [`residue_of`]).
+    fn command(&self, h: usize, residue: Option<&Path>, args: &[&str]) -> Command {
+        let script = match residue {
+            Some(_) => {
+                r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
+res="$1"; shift
+"$@"; rc=$?
+find /dev/shm -mindepth 1 > "$res"; find /tmp/iceoryx2 -type f >> "$res" 2>/dev/null
+exit $rc"#
+            }
+            None => {
+                r#"mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97
+shift
+exec "$@""#
+            }
+        };
+        let residue = residue.map_or_else(|| "-".into(), |p| p.display().to_string());
+        let mut c = Command::new("ip");
+        c.args([
+            "netns",
+            "exec",
+            &self.names[h],
+            "unshare",
+            "--mount",
+            "--propagation",
+            "private",
+            "sh",
+            "-c",
+            script,
+            "sh",
+        ])
+        .arg(&residue)
+        .arg(bin("formation"))
+        .args(args)
+        .env_remove("CARGO")
+        .env("RUST_LOG", "warn");
+        c
+    }
+
+    /// Starts `formation host --name h<h>` in namespace h, listening on its link address.
+    fn start_daemon(&mut self, h: usize, dir: &Path, extra_env: &[(&str, &str)]) {
+        let log = dir.join(format!("daemon-{h}.log"));
+        let ep = format!("tcp/{}:7447", self.addrs[h]);
+        let auth = self.auth.display().to_string();
+        let name = format!("h{h}");
+        let mut c = self.command(
+            h,
+            None,
+            &["host", "--name", &name, "--listen", &ep, "--auth", &auth],
+        );
+        for (k, v) in extra_env {
+            c.env(k, v);
+        }
+        let child = c
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .expect("formation host starts");
+        let t0 = Instant::now();
+        while !std::fs::read_to_string(&log)
+            .unwrap_or_default()
+            .contains("listening on")
+        {
+            assert!(
+                t0.elapsed() < Duration::from_secs(20),
+                "daemon {h} did not start: {}",
+                std::fs::read_to_string(&log).unwrap_or_default()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        self.daemons.push(child);
+    }
+
+    /// What each daemon's namespace holds in /dev/shm and /tmp/iceoryx2 now (read through
+    /// /proc/<pid>/root, its view of its own mounts), then stops the daemons (SIGTERM).
+    fn stop_daemons(&mut self) -> Vec<String> {
+        let mut out = Vec::new();
+        for c in self.daemons.iter_mut() {
+            out.push(residue_of(c.id()));
+            // SAFETY: kill(2) on our own child.
+            unsafe { libc::kill(c.id() as libc::pid_t, libc::SIGTERM) };
+            let t0 = Instant::now();
+            while t0.elapsed() < Duration::from_secs(10) {
+                if let Ok(Some(_)) = c.try_wait() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+        self.daemons.clear();
+        out
+    }
+
+    fn connect_args(&self) -> Vec<String> {
+        let mut v = Vec::new();
+        for a in self.addrs.iter().skip(1) {
+            v.push("--connect".to_string());
+            v.push(format!("tcp/{a}:7447"));
+        }
+        v
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        for c in self.daemons.iter_mut() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+        for n in &self.names {
+            // Deleting a namespace deletes the veth ends inside it.
+            let _ = Command::new("ip").args(["netns", "del", n]).status();
+        }
+    }
+}
+
+/// Runs `formation run ARGS --out OUT` in the launcher namespace; (exit code, stderr, residue).
+fn run_in(
+    hosts: &Hosts,
+    dir: &Path,
+    args: &[&str],
+    out: &Path,
+    with_auth: bool,
+) -> (i32, String, String) {
+    let residue = dir.join("residue-launcher.txt");
+    let mut v: Vec<String> = vec!["run".into()];
+    v.extend(args.iter().map(|s| s.to_string()));
+    v.extend(hosts.connect_args());
+    if with_auth {
+        v.push("--auth".into());
+        v.push(hosts.auth.display().to_string());
+    }
+    v.push("--out".into());
+    v.push(out.display().to_string());
+    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+    let mut child = hosts
+        .command(0, Some(&residue), &refs)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("formation run starts");
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    let st = child.wait().unwrap();
+    (
+        st.code().unwrap_or(-1),
+        err,
+        std::fs::read_to_string(&residue).unwrap_or_default(),
+    )
+}
+
+/// Files in /dev/shm and /tmp/iceoryx2 as process `pid` sees them (its mount namespace).
+fn residue_of(pid: u32) -> String {
+    fn walk(d: &Path, out: &mut Vec<String>) {
+        if let Ok(rd) = std::fs::read_dir(d) {
+            for e in rd.flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    walk(&p, out);
+                } else {
+                    out.push(p.display().to_string());
+                }
+            }
+        }
+    }
+    let root = PathBuf::from(format!("/proc/{pid}/root"));
+    assert!(root.join("dev/shm").is_dir(), "process {pid} is gone");
+    let mut v = Vec::new();
+    walk(&root.join("dev/shm"), &mut v);
+    walk(&root.join("tmp/iceoryx2"), &mut v);
+    v.join("\n")
+}
+
+fn assert_no_residue(what: &str, residue: &str) {
+    assert!(
+        residue.trim().is_empty(),
+        "{what} left files in /dev/shm or /tmp/iceoryx2: {residue}"
+    );
+}
+
+fn split_run_matches_sim(tag: &str, scenario: &str, duration: &str, place: &str) {
+    let dir = work_dir(tag);
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let set = format!("simulation.duration_s={duration}");
+    let out = dir.join("run");
+    let (code, err, residue) = run_in(
+        &hosts,
+        &dir,
+        &[scenario, "--set", &set, "--hosts", "h1", "--place", place],
+        &out,
+        true,
+    );
+    assert_eq!(code, 0, "formation run over two hosts failed:\n{err}");
+    assert!(
+        err.contains("on h1"),
+        "the run names the remote host: {err}"
+    );
+    assert_no_residue("the launcher", &residue);
+    let left = hosts.stop_daemons();
+    assert_no_residue("host h1", &left[0]);
+    formation_tests::assert_trajectory_is_sims(&out, &[scenario, "--set", &set], &dir.join("sim"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn paper_split_three_two_over_two_hosts_is_byte_identical_to_sim_and_leaves_nothing() {
+    if !available(
+        "paper_split_three_two_over_two_hosts_is_byte_identical_to_sim_and_leaves_nothing",
+    ) {
+        return;
+    }
+    split_run_matches_sim("split", "paper", "5", "4,5@h1");
+}
+
+#[test]
+fn a_crash_of_a_remote_agent_is_taken_over_warm_on_its_host_byte_identical_to_sim() {
+    if !available("a_crash_of_a_remote_agent_is_taken_over_warm_on_its_host_byte_identical_to_sim")
+    {
+        return;
+    }
+    // crash-warm.toml crashes agent 3 at t = 20 s for 0.5 s; agent 3 is on the second host.
+    let scenario = formation_tests::workspace_root().join("config/scenarios/crash-warm.toml");
+    split_run_matches_sim("crash", scenario.to_str().unwrap(), "21", "3,4@h1");
+}
+
+#[test]
+fn a_mismatched_build_is_refused_before_anything_starts_naming_both_hosts() {
+    if !available("a_mismatched_build_is_refused_before_anything_starts_naming_both_hosts") {
+        return;
+    }
+    let dir = work_dir("mismatch");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[("FORMATION_BUILD_ID", "0.0.0+other-build")]);
+    let out = dir.join("run");
+    let (code, err, residue) = run_in(&hosts, &dir, &["paper", "--hosts", "h1"], &out, true);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("h1") && err.contains("local"),
+        "both hosts named: {err}"
+    );
+    assert!(
+        err.contains("0.0.0+other-build"),
+        "what differs is named: {err}"
+    );
+    assert!(!out.join("trajectory.csv").exists(), "nothing started");
+    assert_no_residue("the launcher", &residue);
+    let left = hosts.stop_daemons();
+    assert_no_residue("host h1", &left[0]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback() {
+    if !available(
+        "an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback",
+    ) {
+        return;
+    }
+    let dir = work_dir("noauth");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let out = dir.join("run");
+    let (code, err, residue) = run_in(&hosts, &dir, &["paper", "--hosts", "h1"], &out, false);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("h1"), "the host is named: {err}");
+    assert!(!out.join("trajectory.csv").exists(), "nothing started");
+    assert_no_residue("the launcher", &residue);
+    let left = hosts.stop_daemons();
+    assert_no_residue("host h1", &left[0]);
+    // A daemon refuses to listen beyond loopback without credentials at all.
+    let o = Command::new(bin("formation"))
+        .args(["host", "--name", "x", "--listen", "tcp/0.0.0.0:7447"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("requires authentication"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly() {
+    if !available("a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly") {
+        return;
+    }
+    let dir = work_dir("lost");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let mut v: Vec<String> = ["run", "paper", "--hosts", "h1", "--place", "4,5@h1"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    v.extend(hosts.connect_args());
+    v.extend(["--auth".to_string(), hosts.auth.display().to_string()]);
+    v.extend(["--out".to_string(), out.display().to_string()]);
+    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+    let err_path = dir.join("run.err");
+    let mut run = hosts
+        .command(0, Some(&residue), &refs)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .expect("formation run starts");
+    // Let it fly a little, then SIGKILL the daemon (and with it its agents).
+    let t0 = Instant::now();
+    while !std::fs::read_to_string(&err_path)
+        .unwrap_or_default()
+        .contains("steps/s")
+    {
+        assert!(
+            t0.elapsed() < Duration::from_secs(30),
+            "the run did not start"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let daemon = hosts.daemons.remove(0);
+    let mut daemon = daemon;
+    let killed = Instant::now();
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGKILL) };
+    let _ = daemon.wait();
+    let st = loop {
+        if let Some(st) = run.try_wait().unwrap() {
+            break st;
+        }
+        assert!(
+            killed.elapsed() < Duration::from_secs(15),
+            "the run did not stop after its host was lost"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let stopped_after = killed.elapsed();
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    assert_eq!(st.code(), Some(1), "{err}");
+    assert!(
+        err.contains("lost with host h1"),
+        "the lost host is named: {err}"
+    );
+    // Named and stopped well within the lease (a killed daemon's TCP link closes at once).
+    assert!(
+        stopped_after < Duration::from_secs(5),
+        "stopped {stopped_after:?} after the kill"
+    );
+    eprintln!(
+        "run stopped {:.0} ms after the daemon's SIGKILL",
+        stopped_after.as_secs_f64() * 1e3
+    );
+    assert_no_residue(
+        "the launcher",
+        &std::fs::read_to_string(&residue).unwrap_or_default(),
+    );
+    assert!(
+        out.join("trajectory.csv").exists(),
+        "the recorded prefix is kept"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
