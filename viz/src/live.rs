@@ -153,6 +153,7 @@ impl LiveView {
             .spawn(move || {
                 lower_priority();
                 let published = Viewer {
+                    _context: ctx,
                     builder,
                     channels: raw,
                     server,
@@ -230,6 +231,9 @@ impl Drop for LiveView {
 
 /// The viewer thread's state.
 struct Viewer {
+    /// The channels' context: channels and server sinks hold it weakly, it lives as long as the
+    /// viewer.
+    _context: Arc<Context>,
     builder: SceneBuilder,
     channels: Vec<Arc<RawChannel>>,
     server: WebSocketServerHandle,

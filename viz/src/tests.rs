@@ -218,3 +218,39 @@ fn encoded_messages_decode_to_the_scene_on_their_channels() {
     want.sort();
     assert_eq!(keys, want);
 }
+
+#[test]
+fn the_shipped_layout_uses_only_topics_and_fields_the_view_publishes() {
+    let layout: serde_json::Value =
+        serde_json::from_str(include_str!("../../docs/foxglove/formation.json")).unwrap();
+    let specs = channels(5);
+    let topics: Vec<&str> = specs.iter().map(|c| c.topic.as_str()).collect();
+    let schema = plot_schema();
+    let fields = schema["properties"].as_object().unwrap();
+    let mut plotted = 0;
+    for (id, panel) in layout["configById"].as_object().unwrap() {
+        if id.starts_with("3D!") {
+            for topic in panel["topics"].as_object().unwrap().keys() {
+                assert!(topics.contains(&topic.as_str()), "3D panel topic {topic}");
+            }
+            assert_eq!(panel["followTf"], WORLD_FRAME);
+        }
+        for p in panel["paths"].as_array().into_iter().flatten() {
+            let path = p["value"].as_str().unwrap();
+            let (topic, field) = path.split_once(".").unwrap();
+            assert!(topics.contains(&topic), "plot topic {topic}");
+            let field = field.split('[').next().unwrap();
+            assert!(fields.contains_key(field), "plot field {field}");
+            plotted += 1;
+        }
+        if id.starts_with("Log!") {
+            assert_eq!(panel["topicToRender"], "/log");
+        }
+    }
+    assert!(plotted >= 20, "{plotted} plotted series");
+    // Every panel of the configuration is placed in the layout tree.
+    let tree = layout["layout"].to_string();
+    for id in layout["configById"].as_object().unwrap().keys() {
+        assert!(tree.contains(&format!("\"{id}\"")), "{id} is not in the layout");
+    }
+}
