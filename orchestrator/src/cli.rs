@@ -321,6 +321,10 @@ pub struct RunnerArgs {
     /// the events, on Foxglove's WebSocket protocol (docs/foxglove.md). Put it after SCENARIO.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765", value_parser = foxglove_addr)]
     pub foxglove: Option<std::net::SocketAddr>,
+    /// With --foxglove: wait up to S seconds for a viewer to connect before the run starts (a
+    /// lockstep run of the paper scenario lasts a few seconds of wall time).
+    #[arg(long, value_name = "S", requires = "foxglove", default_value_t = 0.0)]
+    pub foxglove_wait: f64,
     /// Print the summary as JSON on standard output (the content of DIR/summary.json) instead of
     /// the table; everything else goes to standard error.
     #[arg(long)]
@@ -346,6 +350,14 @@ pub enum RestartStateArg {
 }
 
 impl RunnerArgs {
+    /// The live view's options of `--foxglove` and `--foxglove-wait`.
+    pub fn live_options(&self) -> Option<crate::record::LiveOptions> {
+        self.foxglove.map(|addr| crate::record::LiveOptions {
+            addr,
+            wait_s: self.foxglove_wait.max(0.0),
+        })
+    }
+
     /// The validated scenario (after the overrides, the runtime flags and the events file) and the
     /// variant; exit code 2 with clear errors.
     pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {

@@ -120,8 +120,8 @@ let done = false;
 function finish() {
   if (done) return;
   done = true;
-  process.stdout.write(JSON.stringify(report) + "\n");
-  process.exit(0);
+  // Exit once the whole report is written (a pipe takes it in pieces).
+  process.stdout.write(JSON.stringify(report) + "\n", () => process.exit(0));
 }
 client.on("close", finish);
 setTimeout(() => {

@@ -97,7 +97,8 @@ fn trajectory(dir: &Path) -> HashMap<(u64, u64), HashMap<String, f64>> {
 fn live_run_seen_by_node(test: &str, args: &[&str], dir: &Path) -> Option<(Value, PathBuf)> {
     let (node, js) = node(test)?;
     let out = dir.join("run");
-    let mut all = vec!["--foxglove", "127.0.0.1:0"];
+    // The run waits for the client before it starts (a lockstep run lasts a few seconds).
+    let mut all = vec!["--foxglove", "127.0.0.1:0", "--foxglove-wait", "60"];
     all.extend_from_slice(args);
     let mut run = RunningRun::start(&all, &out);
     let line = run
@@ -213,8 +214,8 @@ fn check_live_report(report: &Value, out: &Path) {
 fn a_foxglove_ws_protocol_client_joins_a_lockstep_run_and_its_poses_are_trajectory_csv() {
     let test = "a_foxglove_ws_protocol_client_joins_a_lockstep_run";
     let dir = temp_dir("foxglove-lockstep");
-    // The paper run (60 s): several seconds of wall time for the client to join.
-    let Some((report, out)) = live_run_seen_by_node(test, &[], &dir) else {
+    let args = ["--set", "simulation.duration_s=10"];
+    let Some((report, out)) = live_run_seen_by_node(test, &args, &dir) else {
         return;
     };
     check_live_report(&report, &out);

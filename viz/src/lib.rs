@@ -16,7 +16,9 @@ pub mod channels;
 pub mod frame;
 pub mod live;
 pub mod scene;
+pub mod topview;
 
+pub use foxglove;
 pub use frame::{AgentSample, Frame, Limits};
 pub use live::{LiveError, LiveStats, LiveView};
 pub use scene::{Scene, SceneBuilder, SceneConfig};

@@ -19,7 +19,7 @@ use formation_config::scenario::events::Event;
 use foxglove::websocket::Capability;
 use foxglove::{Context, PartialMetadata, RawChannel, WebSocketServer, WebSocketServerHandle};
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -86,6 +86,21 @@ pub struct LiveView {
     decimation: u64,
     offered: u64,
     dropped: Arc<AtomicU64>,
+    viewers: Arc<Viewers>,
+}
+
+/// Counts the connected viewers (the server's listener).
+#[derive(Default)]
+struct Viewers(AtomicUsize);
+
+impl foxglove::websocket::ServerListener for Viewers {
+    fn on_client_connect(&self) {
+        self.0.fetch_add(1, Ordering::SeqCst);
+    }
+
+    fn on_client_disconnect(&self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 /// Splits `HOST:PORT` (an IPv6 host in brackets).
@@ -120,7 +135,9 @@ impl LiveView {
             .build()
             .map_err(LiveError::Runtime)?;
         let ctx = Context::new();
+        let viewers = Arc::new(Viewers::default());
         let server = WebSocketServer::new()
+            .listener(viewers.clone())
             .name(name)
             .bind(host.clone(), port)
             .context(&ctx)
@@ -172,7 +189,26 @@ impl LiveView {
             decimation,
             offered: 0,
             dropped: Arc::new(AtomicU64::new(0)),
+            viewers,
         })
+    }
+
+    /// Number of viewers connected now.
+    pub fn viewers(&self) -> usize {
+        self.viewers.0.load(Ordering::SeqCst)
+    }
+
+    /// Waits until a viewer is connected or `timeout` passes (before a run starts: a lockstep
+    /// run of a few seconds would end before anyone could join); whether one is connected.
+    pub fn wait_for_viewer(&self, timeout: Duration) -> bool {
+        let start = Instant::now();
+        while self.viewers() == 0 {
+            if start.elapsed() >= timeout {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        true
     }
 
     /// The address the server listens on (the bound port when 0 was asked for).

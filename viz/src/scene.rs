@@ -534,8 +534,9 @@ fn body(id: usize, color: Color, ts: Timestamp) -> SceneEntity {
         head_diameter: 0.06,
         color: Some(color),
     });
+    // Beside the body (seen from above it would sit on the arms).
     e.texts
-        .push(text([0.0, 0.0, 0.3], id.to_string(), 0.25, color));
+        .push(text([-0.3, -0.3, 0.3], id.to_string(), 0.3, color));
     e
 }
 
@@ -711,13 +712,13 @@ impl SceneBuilder {
             .push(sphere([t[0], t[1], 0.15], 0.3, rgba(180, 20, 20, 1.0)));
         target
             .texts
-            .push(text([t[0], t[1], 0.5], "target".into(), 0.25, rgba(180, 20, 20, 1.0)));
+            .push(text([t[0] + 0.3, t[1] - 0.6, 0.5], "target".into(), 0.25, rgba(180, 20, 20, 1.0)));
         let mut leader = entity("leader".into(), WORLD_FRAME.into(), ts);
         leader
             .spheres
             .push(sphere(f.p_d, 0.18, rgba(20, 20, 20, 1.0)));
         leader.texts.push(text(
-            [f.p_d[0], f.p_d[1], f.p_d[2] + 0.3],
+            [f.p_d[0] + 0.3, f.p_d[1] + 0.3, f.p_d[2] + 0.3],
             "P_d".into(),
             0.22,
             rgba(20, 20, 20, 1.0),

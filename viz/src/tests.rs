@@ -254,3 +254,52 @@ fn the_shipped_layout_uses_only_topics_and_fields_the_view_publishes() {
         assert!(tree.contains(&format!("\"{id}\"")), "{id} is not in the layout");
     }
 }
+
+#[test]
+fn seen_from_above_the_body_follows_its_pose_and_the_footprint_lies_under_it() {
+    use crate::topview::{shapes, Shape};
+    let s = Scenario::paper();
+    let mut b = SceneBuilder::for_scenario(&s);
+    let mut f = frame(&s, 0, 0.0);
+    let psi = 0.7;
+    f.agents[0].attitude = [0.0, 0.0, psi];
+    let scene = b.build(&f);
+    let all = shapes(&scene);
+    let p = f.agents[0].position;
+    let color = agent_color(1, 1.0);
+    // The heading arrow of agent 1 starts at P_1 and points along psi.
+    let arrow = all
+        .iter()
+        .find_map(|s| match s {
+            Shape::Polyline { points, color: c, .. } if *c == color && points.len() == 2 => {
+                Some(points.clone())
+            }
+            _ => None,
+        })
+        .expect("the arrow of agent 1");
+    assert!((arrow[0][0] - p[0]).abs() < 1e-12 && (arrow[0][1] - p[1]).abs() < 1e-12);
+    let (dx, dy) = (arrow[1][0] - arrow[0][0], arrow[1][1] - arrow[0][1]);
+    assert!((dy.atan2(dx) - psi).abs() < 1e-9, "{dx} {dy}");
+    // Its four rotors sit ARM_M from P_1.
+    let rotors: Vec<[f64; 2]> = all
+        .iter()
+        .filter_map(|s| match s {
+            Shape::Polygon { points, color: c, .. } if c.a == 0.8 && c.r == color.r && c.g == color.g => {
+                let n = points.len() as f64;
+                Some([
+                    points.iter().map(|q| q[0]).sum::<f64>() / n,
+                    points.iter().map(|q| q[1]).sum::<f64>() / n,
+                ])
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(rotors.len(), 4);
+    for r in rotors {
+        let d = (r[0] - p[0]).hypot(r[1] - p[1]);
+        assert!((d - ARM_M).abs() < 1e-9, "{d}");
+    }
+    // Labels come last, ground disks first.
+    assert!(matches!(all.last(), Some(Shape::Text { .. })));
+    assert!(matches!(all.first(), Some(Shape::Polygon { .. })));
+}

@@ -9,7 +9,6 @@ use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFram
 use formation_config::scenario::events::Event;
 use formation_config::Scenario;
 use formation_viz::{Frame, Limits, LiveView, SceneConfig};
-use std::net::SocketAddr;
 
 /// The live view of one run and what the recorder needs to feed it.
 pub struct LiveFeed {
@@ -19,9 +18,10 @@ pub struct LiveFeed {
 
 impl LiveFeed {
     /// Starts the server on `addr` and says where on standard error.
-    pub fn start(addr: SocketAddr, s: &Scenario) -> std::io::Result<LiveFeed> {
+    /// With `wait_s` > 0, waits until a viewer connects (or that long) before returning.
+    pub fn start(o: super::LiveOptions, s: &Scenario) -> std::io::Result<LiveFeed> {
         let view = LiveView::start(
-            &addr.to_string(),
+            &o.addr.to_string(),
             &format!("formation {}", s.name),
             SceneConfig::from_scenario(s),
             &s.events,
@@ -31,6 +31,14 @@ impl LiveFeed {
             "foxglove: live view on ws://{} (Foxglove: Open connection, Foxglove WebSocket; layout docs/foxglove/formation.json)",
             view.addr()
         );
+        if o.wait_s > 0.0 {
+            eprintln!("foxglove: waiting up to {} s for a viewer (--foxglove-wait)", o.wait_s);
+            let joined = view.wait_for_viewer(std::time::Duration::from_secs_f64(o.wait_s));
+            eprintln!(
+                "foxglove: {}; the run starts",
+                if joined { "a viewer joined" } else { "no viewer joined" }
+            );
+        }
         Ok(LiveFeed {
             view,
             limits: Limits::of(s),

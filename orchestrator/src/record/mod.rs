@@ -34,14 +34,23 @@ pub enum Format {
 }
 
 /// Which files a [`Recorder`] writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Outputs {
     /// `trajectory.csv` (sweeps need only `summary.json`).
     pub trajectory: bool,
     /// `run.mcap`.
     pub mcap: bool,
     /// `--foxglove ADDR`: serve the live view there (feature `foxglove`).
-    pub foxglove: Option<std::net::SocketAddr>,
+    pub foxglove: Option<LiveOptions>,
+}
+
+/// Where the live Foxglove view is served and how long the run waits for a first viewer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiveOptions {
+    /// `--foxglove ADDR`.
+    pub addr: std::net::SocketAddr,
+    /// `--foxglove-wait S`: seconds to wait for a viewer before the run starts (0: none).
+    pub wait_s: f64,
 }
 
 impl Outputs {
@@ -113,7 +122,7 @@ impl Recorder {
         #[cfg(feature = "foxglove")]
         let live = outputs
             .foxglove
-            .map(|addr| live::LiveFeed::start(addr, s))
+            .map(|o| live::LiveFeed::start(o, s))
             .transpose()?;
         #[cfg(not(feature = "foxglove"))]
         if outputs.foxglove.is_some() {

@@ -216,7 +216,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         variant,
         mode,
         crate::record::Outputs {
-            foxglove: args.common.foxglove,
+            foxglove: args.common.live_options(),
             ..crate::record::Outputs::with(&args.common.record)
         },
         placement.as_ref(),
