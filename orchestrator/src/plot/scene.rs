@@ -68,6 +68,7 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
         w.1 = w.1.min(last_step - last_step % builder.config().decimation);
     }
     let mut out: Vec<(f64, Scene)> = Vec::new();
+    let mut last: Option<Scene> = None;
     let mut rows: Vec<Vec<f64>> = Vec::with_capacity(n);
     let mut reference = ReferenceFrame::default();
     for line in lines {
@@ -119,9 +120,19 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
         if out.len() == wanted.len() {
             break;
         }
+        last = Some(scene);
+    }
+    // A run that ended early (diverged, interrupted): its last scene frame stands for the times
+    // it did not reach.
+    for &(t_asked, _) in &wanted {
+        if !out.iter().any(|(ta, _)| *ta == t_asked) {
+            if let Some(scene) = &last {
+                out.push((t_asked, scene.clone()));
+            }
+        }
     }
     if out.is_empty() {
-        return Err(input("trajectory.csv", &"no scene frame at the chosen times"));
+        return Err(input("trajectory.csv", &"no scene frame in the file"));
     }
     Ok(Scenes { at: out })
 }
