@@ -50,7 +50,11 @@ pub fn foxglove_addr(text: &str) -> Result<std::net::SocketAddr, String> {
         return Err(NO_FOXGLOVE.into());
     }
     use std::net::ToSocketAddrs;
-    let bad = |why: String| format!("'{text}': {why}; expected HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one)");
+    let bad = |why: String| {
+        format!(
+            "'{text}': {why}; expected HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one)"
+        )
+    };
     text.to_socket_addrs()
         .map_err(|e| bad(e.to_string()))?
         .next()

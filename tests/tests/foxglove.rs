@@ -135,9 +135,16 @@ fn live_run_seen_by_node(test: &str, args: &[&str], dir: &Path) -> Option<(Value
 /// The assertions both live tests share: channels, their schemas, entities, and every pose and
 /// plot equal to `trajectory.csv` at the same step.
 fn check_live_report(report: &Value, out: &Path) {
-    assert_eq!(report["errors"], serde_json::json!([]), "{}", report["errors"]);
+    assert_eq!(
+        report["errors"],
+        serde_json::json!([]),
+        "{}",
+        report["errors"]
+    );
     assert!(
-        report["subprotocol"].as_str().is_some_and(|p| p.starts_with("foxglove.")),
+        report["subprotocol"]
+            .as_str()
+            .is_some_and(|p| p.starts_with("foxglove.")),
         "{}",
         report["subprotocol"]
     );
@@ -148,20 +155,37 @@ fn check_live_report(report: &Value, out: &Path) {
         .map(|c| {
             (
                 c["topic"].as_str().unwrap(),
-                (c["schemaName"].as_str().unwrap(), c["encoding"].as_str().unwrap()),
+                (
+                    c["schemaName"].as_str().unwrap(),
+                    c["encoding"].as_str().unwrap(),
+                ),
             )
         })
         .collect();
     assert_eq!(channels["/tf"], ("foxglove.FrameTransforms", "protobuf"));
-    for t in ["/scene/agents", "/scene/mission", "/scene/links", "/scene/events"] {
+    for t in [
+        "/scene/agents",
+        "/scene/mission",
+        "/scene/links",
+        "/scene/events",
+    ] {
         assert_eq!(channels[t], ("foxglove.SceneUpdate", "protobuf"), "{t}");
     }
     assert_eq!(channels["/log"], ("foxglove.Log", "protobuf"));
     for i in 1..=5 {
-        assert_eq!(channels[format!("/agent/{i}/plot").as_str()], ("formation.AgentPlot", "json"));
+        assert_eq!(
+            channels[format!("/agent/{i}/plot").as_str()],
+            ("formation.AgentPlot", "json")
+        );
     }
     let counts = &report["counts"];
-    for t in ["/tf", "/scene/agents", "/scene/mission", "/scene/links", "/agent/3/plot"] {
+    for t in [
+        "/tf",
+        "/scene/agents",
+        "/scene/mission",
+        "/scene/links",
+        "/agent/3/plot",
+    ] {
         assert!(counts[t].as_u64().unwrap_or(0) >= 5, "{t}: {counts}");
     }
     let ids = |t: &str| -> Vec<String> {
@@ -192,10 +216,16 @@ fn check_live_report(report: &Value, out: &Path) {
         let step = stamp / dt_ns;
         assert_eq!(step % 40, 0, "scene frames every 40 steps");
         assert_eq!(tf["parent"], "world");
-        let agent: u64 = tf["child"].as_str().unwrap()["agent/".len()..].parse().unwrap();
+        let agent: u64 = tf["child"].as_str().unwrap()["agent/".len()..]
+            .parse()
+            .unwrap();
         let row = &rows[&(step, agent)];
         let got: Vec<f64> = serde_json::from_value(tf["translation"].clone()).unwrap();
-        assert_eq!(got, vec![row["px"], row["py"], row["pz"]], "step {step} agent {agent}");
+        assert_eq!(
+            got,
+            vec![row["px"], row["py"], row["pz"]],
+            "step {step} agent {agent}"
+        );
         compared += 1;
     }
     assert!(compared >= 25, "{compared} poses compared");
@@ -305,7 +335,13 @@ fn run_mcap_scene_channels_decode_with_foxglove_schemas_and_mark_events_at_their
     let frames = 63;
     assert_eq!(r["tf_compared"], 5 * frames, "{r}");
     assert_eq!(r["plots_compared"], 5 * frames, "{r}");
-    for t in ["/tf", "/scene/agents", "/scene/mission", "/scene/links", "/scene/events"] {
+    for t in [
+        "/tf",
+        "/scene/agents",
+        "/scene/mission",
+        "/scene/links",
+        "/scene/events",
+    ] {
         assert_eq!(r["counts"][t], frames, "{t}: {}", r["counts"]);
     }
     assert_eq!(r["channels"]["/scene/agents"][0], "foxglove.SceneUpdate");
@@ -362,7 +398,10 @@ fn run_mcap_scene_channels_decode_with_foxglove_schemas_and_mark_events_at_their
     assert!(red(&cut[0]) && green(&cut[2]), "{cut:?}");
     let crashed = colors_at(1120);
     assert!(red(&crashed[0]), "{crashed:?}");
-    assert!(amber(&crashed[2]) && amber(&crashed[4]), "edges 2-3, 3-4: {crashed:?}");
+    assert!(
+        amber(&crashed[2]) && amber(&crashed[4]),
+        "edges 2-3, 3-4: {crashed:?}"
+    );
     assert!(green(&crashed[6]), "edge 4-5: {crashed:?}");
     let after = colors_at(1400);
     assert!(after.iter().all(|c| green(c)), "{after:?}");

@@ -116,7 +116,16 @@ fn the_installed_sdk_lists_its_commands_and_speaks_the_runs_request_kinds() {
     );
     // A bad agent is refused before anything is sent (exit 2), without a run.
     let o = sdk(&py, &tmp.join("formation-no-runs-here"))
-        .args(["-m", "formation_client", "inject", "crash", "--agent", "1", "--down", "1"])
+        .args([
+            "-m",
+            "formation_client",
+            "inject",
+            "crash",
+            "--agent",
+            "1",
+            "--down",
+            "1",
+        ])
         .output()
         .expect("python starts");
     assert_eq!(o.status.code(), Some(2), "no run: exit 2");
@@ -188,8 +197,16 @@ fn the_installed_sdk_injects_into_a_live_run_as_formation_inject_does() {
     let link = &lines[2]["link"];
     assert_eq!(link["event"], "link_down");
     assert_eq!(link["scenario_event"]["agents"], serde_json::json!([1, 2]));
-    assert_eq!(lines[3]["rejected"], true, "Gamma = 1.5 is refused: {}", lines[3]);
-    assert!(lines[3]["why"].as_str().unwrap().contains("gamma"), "{}", lines[3]);
+    assert_eq!(
+        lines[3]["rejected"], true,
+        "Gamma = 1.5 is refused: {}",
+        lines[3]
+    );
+    assert!(
+        lines[3]["why"].as_str().unwrap().contains("gamma"),
+        "{}",
+        lines[3]
+    );
 
     // The run's log: the same lines it wrote for the SDK's requests.
     let events: Vec<Value> = std::fs::read_to_string(out.join("events.jsonl"))
@@ -202,7 +219,10 @@ fn the_installed_sdk_injects_into_a_live_run_as_formation_inject_does() {
     assert_eq!(events[3]["event"], "rejected");
 
     // They act at their steps: Gamma of agent 2 (the plant's truth), tau of agent 3.
-    let (fault_step, delay_step) = (fault["step"].as_u64().unwrap(), delay["step"].as_u64().unwrap());
+    let (fault_step, delay_step) = (
+        fault["step"].as_u64().unwrap(),
+        delay["step"].as_u64().unwrap(),
+    );
     let loaded = sdk(&py, &runs)
         .args([
             "-c",
@@ -221,7 +241,12 @@ fn the_installed_sdk_injects_into_a_live_run_as_formation_inject_does() {
     assert_eq!(t["agents"], serde_json::json!([1, 2, 3, 4, 5]));
     assert_eq!(t["scenario"], "paper");
     let (mut after_fault, mut after_delay) = (0, 0);
-    for (step, g) in t["step2"].as_array().unwrap().iter().zip(t["gamma_x2"].as_array().unwrap()) {
+    for (step, g) in t["step2"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(t["gamma_x2"].as_array().unwrap())
+    {
         let (step, g) = (step.as_u64().unwrap(), g.as_f64().unwrap());
         if step >= fault_step {
             assert_eq!(g, 0.5, "gamma_x of agent 2 at step {step}");
@@ -230,7 +255,12 @@ fn the_installed_sdk_injects_into_a_live_run_as_formation_inject_does() {
             assert!(g > 0.5, "gamma_x of agent 2 before the fault, step {step}");
         }
     }
-    for (step, tau) in t["step3"].as_array().unwrap().iter().zip(t["tau3"].as_array().unwrap()) {
+    for (step, tau) in t["step3"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(t["tau3"].as_array().unwrap())
+    {
         if step.as_u64().unwrap() >= delay_step {
             assert!((tau.as_f64().unwrap() - 0.03).abs() < 1e-12);
             after_delay += 1;

@@ -50,7 +50,11 @@ pub fn channels(n: usize) -> Vec<ChannelSpec> {
         well_known::<SceneUpdate>("/scene/events"),
         well_known::<Log>("/log"),
     ];
-    let plot = Schema::new(PLOT_SCHEMA_NAME, "jsonschema", plot_schema().to_string().into_bytes());
+    let plot = Schema::new(
+        PLOT_SCHEMA_NAME,
+        "jsonschema",
+        plot_schema().to_string().into_bytes(),
+    );
     for id in 1..=n {
         out.push(ChannelSpec {
             topic: format!("/agent/{id}/plot"),

@@ -51,7 +51,10 @@ pub enum LiveError {
 impl std::fmt::Display for LiveError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            LiveError::Address(a) => write!(f, "--foxglove {a}: expected HOST:PORT (e.g. {DEFAULT_ADDR}; port 0 picks a free one)"),
+            LiveError::Address(a) => write!(
+                f,
+                "--foxglove {a}: expected HOST:PORT (e.g. {DEFAULT_ADDR}; port 0 picks a free one)"
+            ),
             LiveError::Runtime(e) => write!(f, "Foxglove server: cannot start its runtime: {e}"),
             LiveError::Server(e) => write!(f, "Foxglove server: {e}"),
         }
@@ -125,7 +128,12 @@ fn lower_priority() {
 impl LiveView {
     /// Starts the server on `addr` (`HOST:PORT`; port 0 picks a free one) for a run of `cfg`
     /// with the scenario's `events`, named `name` in the viewer.
-    pub fn start(addr: &str, name: &str, cfg: SceneConfig, events: &[Event]) -> Result<LiveView, LiveError> {
+    pub fn start(
+        addr: &str,
+        name: &str,
+        cfg: SceneConfig,
+        events: &[Event],
+    ) -> Result<LiveView, LiveError> {
         let (host, port) = parse_addr(addr)?;
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
@@ -246,11 +254,7 @@ impl LiveView {
     fn stop(&mut self) -> LiveStats {
         self.tx.take();
         self.events.take();
-        let published = self
-            .thread
-            .take()
-            .and_then(|t| t.join().ok())
-            .unwrap_or(0);
+        let published = self.thread.take().and_then(|t| t.join().ok()).unwrap_or(0);
         LiveStats {
             offered: self.offered,
             dropped: self.dropped.load(Ordering::Relaxed),
@@ -337,10 +341,16 @@ mod tests {
 
     #[test]
     fn an_address_is_host_and_port_and_a_bad_one_is_named() {
-        assert_eq!(parse_addr("127.0.0.1:8765").unwrap(), ("127.0.0.1".into(), 8765));
+        assert_eq!(
+            parse_addr("127.0.0.1:8765").unwrap(),
+            ("127.0.0.1".into(), 8765)
+        );
         assert_eq!(parse_addr("[::1]:0").unwrap(), ("::1".into(), 0));
         let e = parse_addr("localhost").unwrap_err().to_string();
-        assert!(e.contains("--foxglove localhost") && e.contains("HOST:PORT"), "{e}");
+        assert!(
+            e.contains("--foxglove localhost") && e.contains("HOST:PORT"),
+            "{e}"
+        );
         assert!(parse_addr(":80").is_err());
         assert!(parse_addr("host:99999").is_err());
     }

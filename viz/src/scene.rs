@@ -23,9 +23,9 @@ use formation_config::scenario::events::{Event, EventKind, Timeline};
 use formation_config::Scenario;
 use foxglove::messages::{
     line_primitive, log, scene_entity_deletion, ArrowPrimitive, Color, CubePrimitive,
-    CylinderPrimitive, Duration, FrameTransform, FrameTransforms, LinePrimitive, Log, Point3,
-    Pose, Quaternion, SceneEntity, SceneEntityDeletion, SceneUpdate, SpherePrimitive,
-    TextPrimitive, Timestamp, Vector3,
+    CylinderPrimitive, Duration, FrameTransform, FrameTransforms, LinePrimitive, Log, Point3, Pose,
+    Quaternion, SceneEntity, SceneEntityDeletion, SceneUpdate, SpherePrimitive, TextPrimitive,
+    Timestamp, Vector3,
 };
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -329,9 +329,7 @@ pub struct AgentPlot {
 
 /// JSON Schema of [`AgentPlot`].
 pub fn plot_schema() -> serde_json::Value {
-    let vec3 = |d: &str| {
-        serde_json::json!({"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3, "description": d})
-    };
+    let vec3 = |d: &str| serde_json::json!({"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3, "description": d});
     let num = |d: &str| serde_json::json!({"type": "number", "description": d});
     serde_json::json!({
         "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -491,7 +489,12 @@ fn text(p: [f64; 3], s: String, size: f64, color: Color) -> TextPrimitive {
     }
 }
 
-fn line(kind: line_primitive::Type, points: Vec<Point3>, thickness: f64, color: Color) -> LinePrimitive {
+fn line(
+    kind: line_primitive::Type,
+    points: Vec<Point3>,
+    thickness: f64,
+    color: Color,
+) -> LinePrimitive {
     LinePrimitive {
         r#type: kind as i32,
         pose: at([0.0; 3]),
@@ -710,9 +713,12 @@ impl SceneBuilder {
         target
             .spheres
             .push(sphere([t[0], t[1], 0.15], 0.3, rgba(180, 20, 20, 1.0)));
-        target
-            .texts
-            .push(text([t[0] + 0.3, t[1] - 0.6, 0.5], "target".into(), 0.25, rgba(180, 20, 20, 1.0)));
+        target.texts.push(text(
+            [t[0] + 0.3, t[1] - 0.6, 0.5],
+            "target".into(),
+            0.25,
+            rgba(180, 20, 20, 1.0),
+        ));
         let mut leader = entity("leader".into(), WORLD_FRAME.into(), ts);
         leader
             .spheres
@@ -734,7 +740,12 @@ impl SceneBuilder {
 
     fn links(&self, f: &Frame, ts: Timestamp) -> SceneUpdate {
         let mut graph = entity("graph".into(), WORLD_FRAME.into(), ts);
-        let mut edges = line(line_primitive::Type::LineList, Vec::new(), 0.035, link_color(LinkState::Up));
+        let mut edges = line(
+            line_primitive::Type::LineList,
+            Vec::new(),
+            0.035,
+            link_color(LinkState::Up),
+        );
         for &(a, b) in &self.cfg.edges {
             let (Some(pa), Some(pb)) = (f.agents.get(a), f.agents.get(b)) else {
                 continue;
@@ -745,7 +756,12 @@ impl SceneBuilder {
         }
         graph.lines.push(edges);
         let mut leader = entity("leader-links".into(), WORLD_FRAME.into(), ts);
-        let mut links = line(line_primitive::Type::LineList, Vec::new(), 0.015, rgba(110, 110, 110, 0.6));
+        let mut links = line(
+            line_primitive::Type::LineList,
+            Vec::new(),
+            0.015,
+            rgba(110, 110, 110, 0.6),
+        );
         for &i in &self.cfg.leader_links {
             if let Some(a) = f.agents.get(i) {
                 links.points.extend([p3(f.p_d), p3(a.position)]);

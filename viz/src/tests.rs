@@ -29,7 +29,12 @@ fn frame(s: &Scenario, step: u64, shift: f64) -> Frame {
 
 #[test]
 fn the_quaternion_rotates_like_the_plants_rotation_matrix() {
-    for a in [[0.0, 0.0, 0.0], [0.3, -0.2, 1.1], [-1.2, 0.7, -2.9], [0.05, 1.3, 3.0]] {
+    for a in [
+        [0.0, 0.0, 0.0],
+        [0.3, -0.2, 1.1],
+        [-1.2, 0.7, -2.9],
+        [0.05, 1.3, 3.0],
+    ] {
         let r = formation_plant::kinematics::rotation(&nalgebra::Vector3::from(a));
         let q = quaternion(a);
         let norm = (q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z).sqrt();
@@ -38,7 +43,10 @@ fn the_quaternion_rotates_like_the_plants_rotation_matrix() {
             let want = r * nalgebra::Vector3::from(v);
             let got = rotate(&q, v);
             for k in 0..3 {
-                assert!((got[k] - want[k]).abs() < 1e-12, "{a:?} {v:?}: {got:?} vs {want:?}");
+                assert!(
+                    (got[k] - want[k]).abs() < 1e-12,
+                    "{a:?} {v:?}: {got:?} vs {want:?}"
+                );
             }
         }
     }
@@ -72,7 +80,9 @@ fn each_quadrotor_is_posed_by_tf_and_drawn_in_its_own_frame() {
         .filter(|e| e.id.starts_with("quad/"))
         .collect();
     assert_eq!(bodies.len(), 5);
-    assert!(bodies.iter().all(|e| e.frame_locked && e.frame_id.starts_with("agent/")));
+    assert!(bodies
+        .iter()
+        .all(|e| e.frame_locked && e.frame_id.starts_with("agent/")));
     assert_eq!(bodies[0].cylinders.len(), 4, "four rotors");
     // Every update replaces its topic's entities.
     for u in [&scene.agents, &scene.mission, &scene.links, &scene.events] {
@@ -86,13 +96,31 @@ fn the_footprint_is_the_sensor_cone_on_the_ground_and_the_disk_the_metric_radius
     let s = Scenario::paper();
     let mut b = SceneBuilder::for_scenario(&s);
     let scene = b.build(&frame(&s, 0, 0.0));
-    let foot = scene.agents.entities.iter().find(|e| e.id == "footprint/1").unwrap();
+    let foot = scene
+        .agents
+        .entities
+        .iter()
+        .find(|e| e.id == "footprint/1")
+        .unwrap();
     let size = foot.cylinders[0].size.unwrap();
     let want = 2.0 * 4.0 * (s.metrics.sensor_fov_deg.to_radians() / 2.0).tan();
     assert!((size.x - want).abs() < 1e-12, "{} vs {want}", size.x);
-    let target = scene.mission.entities.iter().find(|e| e.id == "target").unwrap();
-    assert_eq!(target.cylinders[0].size.unwrap().x, 2.0 * s.metrics.target_radius_m);
-    let slots = scene.mission.entities.iter().find(|e| e.id == "slots").unwrap();
+    let target = scene
+        .mission
+        .entities
+        .iter()
+        .find(|e| e.id == "target")
+        .unwrap();
+    assert_eq!(
+        target.cylinders[0].size.unwrap().x,
+        2.0 * s.metrics.target_radius_m
+    );
+    let slots = scene
+        .mission
+        .entities
+        .iter()
+        .find(|e| e.id == "slots")
+        .unwrap();
     assert_eq!(slots.spheres.len(), 5);
     assert_eq!(slots.spheres[2].pose.unwrap().position.unwrap().x, 2.0);
 }
@@ -107,7 +135,12 @@ fn the_trail_keeps_the_last_three_seconds() {
         last = Some(b.build(&frame(&s, k * dec, k as f64 * 0.01)));
     }
     let scene = last.unwrap();
-    let trail = scene.agents.entities.iter().find(|e| e.id == "trail/2").unwrap();
+    let trail = scene
+        .agents
+        .entities
+        .iter()
+        .find(|e| e.id == "trail/2")
+        .unwrap();
     let pts = &trail.lines[0].points;
     assert_eq!(pts.len(), (TRAIL_S * SCENE_RATE_HZ) as usize);
     // The newest point is the current position.
@@ -126,7 +159,12 @@ fn links_are_up_stale_while_an_end_is_down_and_down_after_link_down() {
     let b = SceneBuilder::for_scenario(&s);
     let color_of = |k: u64, a: usize, b_: usize| {
         let scene = b.scene(&frame(&s, k, 0.0));
-        let g = scene.links.entities.iter().find(|e| e.id == "graph").unwrap();
+        let g = scene
+            .links
+            .entities
+            .iter()
+            .find(|e| e.id == "graph")
+            .unwrap();
         let l = &g.lines[0];
         let i = b
             .config()
@@ -137,10 +175,24 @@ fn links_are_up_stale_while_an_end_is_down_and_down_after_link_down() {
         assert_eq!(l.points.len(), 2 * b.config().edges.len());
         l.colors[2 * i]
     };
-    let edge_with_3 = *b.config().edges.iter().find(|e| e.0 == 2 || e.1 == 2).unwrap();
-    assert_eq!(color_of(500, edge_with_3.0, edge_with_3.1), link_color(LinkState::Up));
-    assert_eq!(color_of(1200, edge_with_3.0, edge_with_3.1), link_color(LinkState::Stale));
-    assert_eq!(color_of(1500, edge_with_3.0, edge_with_3.1), link_color(LinkState::Up));
+    let edge_with_3 = *b
+        .config()
+        .edges
+        .iter()
+        .find(|e| e.0 == 2 || e.1 == 2)
+        .unwrap();
+    assert_eq!(
+        color_of(500, edge_with_3.0, edge_with_3.1),
+        link_color(LinkState::Up)
+    );
+    assert_eq!(
+        color_of(1200, edge_with_3.0, edge_with_3.1),
+        link_color(LinkState::Stale)
+    );
+    assert_eq!(
+        color_of(1500, edge_with_3.0, edge_with_3.1),
+        link_color(LinkState::Up)
+    );
     if b.config().edges.contains(&(0, 1)) {
         assert_eq!(color_of(1999, 0, 1), link_color(LinkState::Up));
         assert_eq!(color_of(2000, 0, 1), link_color(LinkState::Down));
@@ -148,7 +200,12 @@ fn links_are_up_stale_while_an_end_is_down_and_down_after_link_down() {
     // The crashed quadrotor is grey while down, coloured again after.
     let rotor = |k: u64| {
         let scene = b.scene(&frame(&s, k, 0.0));
-        let q = scene.agents.entities.iter().find(|e| e.id == "quad/3").unwrap();
+        let q = scene
+            .agents
+            .entities
+            .iter()
+            .find(|e| e.id == "quad/3")
+            .unwrap();
         q.cylinders[0].color.unwrap()
     };
     assert_ne!(rotor(1200), rotor(500));
@@ -171,7 +228,12 @@ fn an_event_is_logged_once_at_its_step_and_marked_for_four_seconds() {
         let k = j * dec;
         let scene = b.build(&frame(&s, k, 0.0));
         logs.extend(scene.logs.iter().map(|(step, l)| (k, *step, l.clone())));
-        if scene.events.entities.iter().any(|e| e.texts.iter().any(|t| t.text == "fault 2")) {
+        if scene
+            .events
+            .entities
+            .iter()
+            .any(|e| e.texts.iter().any(|t| t.text == "fault 2"))
+        {
             marked.push(k);
         }
     }
@@ -180,9 +242,17 @@ fn an_event_is_logged_once_at_its_step_and_marked_for_four_seconds() {
     assert_eq!(*step, 1010);
     assert_eq!(*frame_step, 1040, "the first frame at or after the event");
     assert_eq!(log.timestamp.unwrap(), timestamp(1010, 0.001));
-    assert!(log.message.contains("actuator fault of agent 2"), "{}", log.message);
+    assert!(
+        log.message.contains("actuator fault of agent 2"),
+        "{}",
+        log.message
+    );
     assert_eq!(marked.first(), Some(&1040));
-    assert_eq!(marked.last(), Some(&5000), "the last frame before 1010 + 4000");
+    assert_eq!(
+        marked.last(),
+        Some(&5000),
+        "the last frame before 1010 + 4000"
+    );
 }
 
 #[test]
@@ -208,12 +278,20 @@ fn encoded_messages_decode_to_the_scene_on_their_channels() {
     let agents = SceneUpdate::decode(&out[1].data[..]).unwrap();
     assert_eq!(agents, scene.agents);
     let log = out.iter().find(|m| m.channel == LOG).unwrap();
-    assert!(Log::decode(&log.data[..]).unwrap().message.contains("crash of agent 1"));
+    assert!(Log::decode(&log.data[..])
+        .unwrap()
+        .message
+        .contains("crash of agent 1"));
     let plot = out.iter().find(|m| m.channel == PLOT + 2).unwrap();
     let v: serde_json::Value = serde_json::from_slice(&plot.data).unwrap();
     assert_eq!(v["agent"], 3);
     let mut keys: Vec<_> = v.as_object().unwrap().keys().cloned().collect();
-    let mut want: Vec<_> = plot_schema()["properties"].as_object().unwrap().keys().cloned().collect();
+    let mut want: Vec<_> = plot_schema()["properties"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .cloned()
+        .collect();
     keys.sort();
     want.sort();
     assert_eq!(keys, want);
@@ -251,7 +329,10 @@ fn the_shipped_layout_uses_only_topics_and_fields_the_view_publishes() {
     // Every panel of the configuration is placed in the layout tree.
     let tree = layout["layout"].to_string();
     for id in layout["configById"].as_object().unwrap().keys() {
-        assert!(tree.contains(&format!("\"{id}\"")), "{id} is not in the layout");
+        assert!(
+            tree.contains(&format!("\"{id}\"")),
+            "{id} is not in the layout"
+        );
     }
 }
 
@@ -271,9 +352,9 @@ fn seen_from_above_the_body_follows_its_pose_and_the_footprint_lies_under_it() {
     let arrow = all
         .iter()
         .find_map(|s| match s {
-            Shape::Polyline { points, color: c, .. } if *c == color && points.len() == 2 => {
-                Some(points.clone())
-            }
+            Shape::Polyline {
+                points, color: c, ..
+            } if *c == color && points.len() == 2 => Some(points.clone()),
             _ => None,
         })
         .expect("the arrow of agent 1");
@@ -284,7 +365,9 @@ fn seen_from_above_the_body_follows_its_pose_and_the_footprint_lies_under_it() {
     let rotors: Vec<[f64; 2]> = all
         .iter()
         .filter_map(|s| match s {
-            Shape::Polygon { points, color: c, .. } if c.a == 0.8 && c.r == color.r && c.g == color.g => {
+            Shape::Polygon {
+                points, color: c, ..
+            } if c.a == 0.8 && c.r == color.r && c.g == color.g => {
                 let n = points.len() as f64;
                 Some([
                     points.iter().map(|q| q[0]).sum::<f64>() / n,

@@ -119,13 +119,27 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
         let d = c.size.map_or(0.0, |s| s.x.max(s.y));
         let layer = if body { 3 } else { 0 };
         let color = c.color.unwrap_or_default();
-        layered(layer, Shape::Polygon { points: circle(t.p, d / 2.0), color }, out);
+        layered(
+            layer,
+            Shape::Polygon {
+                points: circle(t.p, d / 2.0),
+                color,
+            },
+            out,
+        );
     }
     for s in &e.spheres {
         let t = frame.then(&Rigid::of(&s.pose));
         let d = s.size.map_or(0.0, |s| s.x.max(s.y));
         let color = s.color.unwrap_or_default();
-        layered(2, Shape::Polygon { points: circle(t.p, d / 2.0), color }, out);
+        layered(
+            2,
+            Shape::Polygon {
+                points: circle(t.p, d / 2.0),
+                color,
+            },
+            out,
+        );
     }
     for c in &e.cubes {
         let t = frame.then(&Rigid::of(&c.pose));
@@ -134,23 +148,46 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             .iter()
             .map(|[a, b]| xy(t.apply([a * s[0], b * s[1], 0.0])))
             .collect();
-        layered(3, Shape::Polygon { points, color: c.color.unwrap_or_default() }, out);
+        layered(
+            3,
+            Shape::Polygon {
+                points,
+                color: c.color.unwrap_or_default(),
+            },
+            out,
+        );
     }
     for l in &e.lines {
         let t = frame.then(&Rigid::of(&l.pose));
-        let pts: Vec<[f64; 2]> = l.points.iter().map(|p| xy(t.apply([p.x, p.y, p.z]))).collect();
+        let pts: Vec<[f64; 2]> = l
+            .points
+            .iter()
+            .map(|p| xy(t.apply([p.x, p.y, p.z])))
+            .collect();
         let color = l.color.unwrap_or_default();
         if l.r#type == line_primitive::Type::LineList as i32 {
             for (k, pair) in pts.chunks_exact(2).enumerate() {
                 let color = l.colors.get(2 * k).copied().unwrap_or(color);
                 layered(
                     1,
-                    Shape::Polyline { points: pair.to_vec(), color, width_m: l.thickness },
+                    Shape::Polyline {
+                        points: pair.to_vec(),
+                        color,
+                        width_m: l.thickness,
+                    },
                     out,
                 );
             }
         } else if pts.len() >= 2 {
-            layered(1, Shape::Polyline { points: pts, color, width_m: l.thickness }, out);
+            layered(
+                1,
+                Shape::Polyline {
+                    points: pts,
+                    color,
+                    width_m: l.thickness,
+                },
+                out,
+            );
         }
     }
     for a in &e.arrows {

@@ -39,10 +39,38 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
     let mut lines = text.lines();
     let col = columns(lines.next().unwrap_or_default());
     let need = [
-        "step", "t", "agent", "px", "py", "pz", "phi", "theta", "psi", "pdx", "pdy", "pdz",
-        "e_norm", "tx", "ty", "att_norm", "c1_bar", "rate_norm", "c2_bar", "gamma_x", "gamma_y",
-        "gamma_z", "gamma_hat_x", "gamma_hat_y", "gamma_hat_z", "delta_x", "delta_y", "delta_z",
-        "delta_hat_x", "delta_hat_y", "delta_hat_z", "tau",
+        "step",
+        "t",
+        "agent",
+        "px",
+        "py",
+        "pz",
+        "phi",
+        "theta",
+        "psi",
+        "pdx",
+        "pdy",
+        "pdz",
+        "e_norm",
+        "tx",
+        "ty",
+        "att_norm",
+        "c1_bar",
+        "rate_norm",
+        "c2_bar",
+        "gamma_x",
+        "gamma_y",
+        "gamma_z",
+        "gamma_hat_x",
+        "gamma_hat_y",
+        "gamma_hat_z",
+        "delta_x",
+        "delta_y",
+        "delta_z",
+        "delta_hat_x",
+        "delta_hat_y",
+        "delta_hat_z",
+        "tau",
     ];
     if let Some(missing) = need.iter().find(|c| !col.contains_key(*c)) {
         return Err(input("trajectory.csv", &format!("no column '{missing}'")));
@@ -198,7 +226,11 @@ pub fn draw<DB: Backend>(scenes: &Scenes, title: &str, root: &Area<DB>) -> DrawR
                     let pts: Vec<(f64, f64)> = points.iter().map(|p| (p[0], p[1])).collect();
                     chart.draw_series(std::iter::once(Polygon::new(pts, rgba(color).filled())))?;
                 }
-                Shape::Polyline { points, color, width_m } => {
+                Shape::Polyline {
+                    points,
+                    color,
+                    width_m,
+                } => {
                     let pts: Vec<(f64, f64)> = points.iter().map(|p| (p[0], p[1])).collect();
                     let width = (width_m * px_per_m).round().clamp(1.0, 6.0) as u32;
                     chart.draw_series(std::iter::once(PathElement::new(
@@ -206,7 +238,12 @@ pub fn draw<DB: Backend>(scenes: &Scenes, title: &str, root: &Area<DB>) -> DrawR
                         rgba(color).stroke_width(width),
                     )))?;
                 }
-                Shape::Text { at, text, color, size_m } => {
+                Shape::Text {
+                    at,
+                    text,
+                    color,
+                    size_m,
+                } => {
                     let size = (size_m * px_per_m).clamp(12.0, 22.0);
                     let style = (FONT, size).into_font().color(&rgba(color));
                     chart.draw_series(std::iter::once(Text::new(

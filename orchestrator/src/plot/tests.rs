@@ -426,7 +426,10 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
     let scene = files.last().expect("figures");
     assert_eq!(scene.path.file_name().unwrap(), "scene.png");
     assert_eq!(scene.width, 900 * 3 + 100);
-    assert!(std::fs::metadata(&scene.path).unwrap().len() > 50_000, "looks blank");
+    assert!(
+        std::fs::metadata(&scene.path).unwrap().len() > 50_000,
+        "looks blank"
+    );
     // The first scene frame (every 40 steps) at or after each time; a time after the end is the
     // last frame of the run.
     let scenes = super::scene::load(&dir, &times).expect("scenes");
@@ -441,6 +444,13 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
         .find(|r| tr.value(r, "step") as u64 == 1520 && tr.value(r, "agent") as u64 == 3)
         .expect("row of step 1520, agent 3");
     let p = tf.translation.unwrap();
-    assert_eq!([p.x, p.y, p.z], [tr.value(row, "px"), tr.value(row, "py"), tr.value(row, "pz")]);
+    assert_eq!(
+        [p.x, p.y, p.z],
+        [
+            tr.value(row, "px"),
+            tr.value(row, "py"),
+            tr.value(row, "pz")
+        ]
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

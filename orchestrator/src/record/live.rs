@@ -32,11 +32,18 @@ impl LiveFeed {
             view.addr()
         );
         if o.wait_s > 0.0 {
-            eprintln!("foxglove: waiting up to {} s for a viewer (--foxglove-wait)", o.wait_s);
+            eprintln!(
+                "foxglove: waiting up to {} s for a viewer (--foxglove-wait)",
+                o.wait_s
+            );
             let joined = view.wait_for_viewer(std::time::Duration::from_secs_f64(o.wait_s));
             eprintln!(
                 "foxglove: {}; the run starts",
-                if joined { "a viewer joined" } else { "no viewer joined" }
+                if joined {
+                    "a viewer joined"
+                } else {
+                    "no viewer joined"
+                }
             );
         }
         Ok(LiveFeed {

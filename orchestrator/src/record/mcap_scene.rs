@@ -31,7 +31,8 @@ impl McapScene {
             let schema = match schemas.get(&c.schema.name) {
                 Some(id) => *id,
                 None => {
-                    let id = writer.add_schema(&c.schema.name, &c.schema.encoding, &c.schema.data)?;
+                    let id =
+                        writer.add_schema(&c.schema.name, &c.schema.encoding, &c.schema.data)?;
                     schemas.insert(c.schema.name.clone(), id);
                     id
                 }
