@@ -40,6 +40,27 @@ pub fn whole_number<T: TryFrom<u64>>(text: &str) -> Result<T, String> {
     }
 }
 
+/// What `--foxglove` says in a build without the cargo feature `foxglove`.
+pub const NO_FOXGLOVE: &str =
+    "--foxglove: this build has no Foxglove view (build the orchestrator with its default feature `foxglove`)";
+
+/// Value parser of `--foxglove ADDR`: `HOST:PORT` (a name is resolved; port 0 picks a free one).
+pub fn foxglove_addr(text: &str) -> Result<std::net::SocketAddr, String> {
+    if !cfg!(feature = "foxglove") {
+        return Err(NO_FOXGLOVE.into());
+    }
+    use std::net::ToSocketAddrs;
+    let bad = |why: String| {
+        format!(
+            "'{text}': {why}; expected HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one)"
+        )
+    };
+    text.to_socket_addrs()
+        .map_err(|e| bad(e.to_string()))?
+        .next()
+        .ok_or_else(|| bad("resolves to no address".into()))
+}
+
 /// Which elements of an array a `--set` path segment selects.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Index {
@@ -299,6 +320,15 @@ pub struct RunnerArgs {
     /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md).
     #[arg(long, value_enum, value_name = "FORMAT", value_delimiter = ',')]
     pub record: Vec<crate::record::Format>,
+    /// Serve the run live to Foxglove on ADDR (default 127.0.0.1:8765; port 0 picks a free port;
+    /// the address is printed on stderr): the 3D scene of the swarm, per-agent plot channels and
+    /// the events, on Foxglove's WebSocket protocol (docs/foxglove.md). Put it after SCENARIO.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765", value_parser = foxglove_addr)]
+    pub foxglove: Option<std::net::SocketAddr>,
+    /// With --foxglove: wait up to S seconds for a viewer to connect before the run starts (a
+    /// lockstep run of the paper scenario lasts a few seconds of wall time).
+    #[arg(long, value_name = "S", requires = "foxglove", default_value_t = 0.0)]
+    pub foxglove_wait: f64,
     /// Print the summary as JSON on standard output (the content of DIR/summary.json) instead of
     /// the table; everything else goes to standard error.
     #[arg(long)]
@@ -324,6 +354,14 @@ pub enum RestartStateArg {
 }
 
 impl RunnerArgs {
+    /// The live view's options of `--foxglove` and `--foxglove-wait`.
+    pub fn live_options(&self) -> Option<crate::record::LiveOptions> {
+        self.foxglove.map(|addr| crate::record::LiveOptions {
+            addr,
+            wait_s: self.foxglove_wait.max(0.0),
+        })
+    }
+
     /// The validated scenario (after the overrides, the runtime flags and the events file) and the
     /// variant; exit code 2 with clear errors.
     pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {

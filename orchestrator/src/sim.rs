@@ -29,6 +29,7 @@ pub fn main(args: SimArgs) -> ExitCode {
         Ok(v) => v,
         Err(code) => return code,
     };
+    let live = args.common.live_options();
     let out = args
         .common
         .out
@@ -45,7 +46,8 @@ pub fn main(args: SimArgs) -> ExitCode {
         eprintln!("error: cannot write {}/scenario.toml: {e}", out.display());
         return ExitCode::from(1);
     }
-    let outputs = Outputs::with(&args.common.record);
+    let mut outputs = Outputs::with(&args.common.record);
+    outputs.foxglove = live;
     let mut factors = Vec::new();
     for _ in 1..args.repeat.max(1) {
         match run_in_process_with(&scenario, variant, &out, outputs) {

@@ -5,7 +5,8 @@ Usage: python mcap_check.py DIR
 Every `/agent/{id}/state` message must equal the row of its step and agent in trajectory.csv
 (step, t, position, velocity, attitude, body rate: the same floats, compared exactly), every row
 must have its message, every channel must be JSON with a JSON Schema whose required fields each
-message holds, and log times must be t_k in nanoseconds. Prints one JSON line with the counts;
+message holds (except the 3D scene's, on Foxglove's protobuf schemas, which mcap_scene_check.py
+decodes), and log times must be t_k in nanoseconds. Prints one JSON line with the counts;
 exits 1 on any mismatch (listing the first ones on stderr), 2 on bad usage.
 """
 
@@ -40,13 +41,21 @@ def main(argv):
         reader = make_reader(f)
         summary = reader.get_summary()
         schemas = {}
+        scene = set()
         for channel in summary.channels.values():
             schema = summary.schemas[channel.schema_id]
+            if (channel.message_encoding, schema.encoding) == ("protobuf", "protobuf") and \
+                    schema.name.startswith("foxglove."):
+                # The 3D scene's channels (Foxglove's schemas): mcap_scene_check.py decodes them.
+                scene.add(channel.id)
+                continue
             if channel.message_encoding != "json" or schema.encoding != "jsonschema":
                 problems.append(f"{channel.topic}: {channel.message_encoding}/{schema.encoding}")
             schemas[channel.id] = json.loads(schema.data)
         for _schema, channel, message in reader.iter_messages():
             per_topic[channel.topic] = per_topic.get(channel.topic, 0) + 1
+            if channel.id in scene:
+                continue
             data = json.loads(message.data)
             required = schemas[channel.id].get("required", [])
             missing = [k for k in required if k not in data]
@@ -77,7 +86,8 @@ def main(argv):
     print(json.dumps({
         "rows": len(rows),
         "states_compared": len(seen),
-        "channels": len(schemas),
+        "channels": len(schemas) + len(scene),
+        "scene_channels": len(scene),
         "messages": per_topic,
         "problems": len(problems),
     }))

@@ -609,6 +609,9 @@ fn an_injection_into_a_recording_run_is_an_event_of_run_mcap_and_inject_json_pri
     let (mut after, mut before) = (None::<(u64, Value)>, None::<(u64, Value)>);
     for m in mcap::MessageStream::new(&bytes).expect("run.mcap parses") {
         let m = m.expect("every message parses");
+        if m.channel.message_encoding != "json" {
+            continue; // the 3D scene's channels (Foxglove's protobuf schemas, docs/foxglove.md)
+        }
         let v: Value = serde_json::from_slice(&m.data).expect("JSON messages");
         match m.channel.topic.as_str() {
             "/events" => events.push((m.log_time, v)),

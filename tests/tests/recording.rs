@@ -97,8 +97,11 @@ fn lockstep_run_mcap_equals_sim_mcap_byte_for_byte_and_its_states_equal_trajecto
     assert_eq!(report["rows"], 5 * 200, "{report}");
     assert_eq!(report["states_compared"], 5 * 200, "{report}");
     assert_eq!(report["problems"], 0, "{report}");
-    // 5 agents x (state, command, telemetry, truth) + reference + events.
-    assert_eq!(report["channels"], 22, "{report}");
+    // 5 agents x (state, command, telemetry, truth) + reference + events, and the 3D scene (the
+    // orchestrator's default feature `foxglove`): /tf, /scene/{agents,mission,links,events}, /log
+    // on Foxglove's protobuf schemas and 5 x /agent/{i}/plot (JSON).
+    assert_eq!(report["scene_channels"], 6, "{report}");
+    assert_eq!(report["channels"], 22 + 6 + 5, "{report}");
     assert_eq!(report["messages"]["/agent/3/telemetry"], 200, "{report}");
     assert_eq!(report["messages"]["/reference"], 200, "{report}");
     let _ = std::fs::remove_dir_all(&dir);

@@ -1,8 +1,13 @@
-"""`python -m formation_client inspect --agent I [--run ID|DIR] [--json] [--follow] [--count K]`:
-agent I's live telemetry (1-based id), read with the iceoryx2 Python binding. `--json` prints one
-object per sample with the keys of `formation inspect --json` (controller fields at the top
-level, agent 1-based); without it, a short readable line. Exits 2 on bad input or when no run is
-found, 1 when no sample arrives in time.
+"""`python -m formation_client COMMAND ...` (installed: `formation-client COMMAND ...`): the client
+SDK's command line. Commands:
+
+  ps        the live runs (id, directory, agents, orchestrator pid)
+  inspect   agent I's live telemetry, as `formation inspect` (read with the iceoryx2 binding)
+  inject    fault | delay | crash | hang | link: the same request as `formation inject`
+  summary   a finished run's summary.json and trajectory.csv, in brief
+
+Agent ids are 1-based. Exit codes: 0 success, 1 failure (no sample in time, injection rejected),
+2 bad input or no run found.
 """
 
 import argparse
@@ -11,7 +16,9 @@ import math
 import sys
 import time
 
-from . import RunNotFound, connect, to_dict
+from . import RunNotFound, connect, live_runs, runs_dir, to_dict
+from .inject import InjectRejected
+from .results import load_summary, load_trajectory
 
 #: How long to wait for the first sample, s (the service keeps the latest one, so a live run
 #: answers at once).
@@ -37,15 +44,16 @@ def telemetry_json(run_id, s):
     return d
 
 
-def inspect(argv):
-    """`inspect`: parses `argv`, prints samples; the exit code."""
-    p = argparse.ArgumentParser(prog="python -m formation_client inspect")
+def _inspect_args(p):
     p.add_argument("--agent", type=int, required=True, help="agent id, 1-based")
     p.add_argument("--run", help="run id (formation ps) or the run's output directory")
     p.add_argument("--json", action="store_true", help="one JSON object per sample")
     p.add_argument("--follow", action="store_true", help="keep printing until the run ends")
     p.add_argument("--count", type=int, default=1, help="samples to print without --follow")
-    a = p.parse_args(argv)
+
+
+def inspect(a):
+    """`inspect`: prints samples; the exit code."""
     try:
         run = connect(a.run)
     except RunNotFound as e:
@@ -56,6 +64,132 @@ def inspect(argv):
         return 2
     with run:
         return _print_samples(run, a)
+
+
+def ps(_a):
+    """`ps`: one line (or JSON object with --json) per live run."""
+    runs = live_runs()
+    if getattr(_a, "json", False):
+        print(json.dumps([{k: r.get(k) for k in ("id", "out_dir", "n_agents", "prefix")}
+                          for r in runs]))
+        return 0
+    if not runs:
+        print(f"no live run in {runs_dir()}")
+    for r in runs:
+        print(f"{r['id']}  {r.get('n_agents')} agents  pid {r['processes'][0]['pid']}  {r['out_dir']}")
+    return 0
+
+
+def _floats(text):
+    return [float(v) for v in text.split(",")]
+
+
+def _tau(text):
+    """`0.03` or `base+amp*sin(w*t)` -> (base, amplitude, rate), as `formation inject delay`."""
+    t = text.replace(" ", "")
+    if "sin(" not in t:
+        return float(t), 0.0, 0.0
+    base, _, rest = t.partition("+")
+    amp, _, rest = rest.partition("*sin(")
+    rate = rest.split("*t)")[0]
+    return float(base), float(amp), float(rate)
+
+
+def inject_cmd(a):
+    """`inject KIND`: sends the request, prints the run's confirmation line."""
+    try:
+        run = connect(a.run)
+    except RunNotFound as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    with run:
+        try:
+            if a.kind == "fault":
+                line = run.inject_fault(a.agent, _floats(a.gamma), _floats(a.delta), at=a.at)
+            elif a.kind == "delay":
+                base, amp, rate = _tau(a.tau)
+                line = run.inject_delay(a.agent, base, amp, rate, at=a.at)
+            elif a.kind in ("crash", "hang"):
+                f = run.inject_crash if a.kind == "crash" else run.inject_hang
+                line = f(a.agent, a.down, at=a.at)
+            else:
+                i, j = (int(v) for v in a.agents.split(","))
+                line = run.inject_link(i, j, up=(a.state == "up"), at=a.at)
+        except ValueError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        except InjectRejected as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 1
+    if a.json:
+        line["run"] = run.id
+        print(json.dumps(line))
+    else:
+        print(f"{line['event']} injection of run {run.id} applies at step {line['step']} "
+              f"(t = {line['t']:.3f} s)")
+    return 0
+
+
+def summary_cmd(a):
+    """`summary DIR`: the run's scenario, duration, and per agent RMS error and violations."""
+    try:
+        s = load_summary(a.dir)
+        tr = load_trajectory(a.dir)
+    except (OSError, ValueError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    if a.json:
+        print(json.dumps({"summary": s, "rows": len(tr), "columns": tr.columns}))
+        return 0
+    print(f"{a.dir}: scenario {s.get('scenario')}, variant {s.get('variant')}, "
+          f"{len(tr)} rows of {len(tr.agents())} agents")
+    for ag in s.get("agents", []):
+        rms = ag.get("rms_formation_error_m") or {}
+        print(f"  agent {ag.get('id')}: RMS formation error cover {rms.get('cover')} m, "
+              f"enclose {rms.get('enclose')} m; violations attitude "
+              f"{ag.get('attitude_constraint_violations')}, rate {ag.get('rate_constraint_violations')}")
+    return 0
+
+
+def parser():
+    """The command line."""
+    p = argparse.ArgumentParser(
+        prog="python -m formation_client",
+        description="Client SDK of formation runs: watch, inject into and load runs.",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    q = sub.add_parser("ps", help="the live runs")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=ps)
+    q = sub.add_parser("inspect", help="an agent's live telemetry (as formation inspect)")
+    _inspect_args(q)
+    q.set_defaults(func=inspect)
+    q = sub.add_parser("inject", help="inject a fault, delay, crash, hang or link change")
+    kinds = q.add_subparsers(dest="kind", metavar="KIND", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--at", type=float, help="simulation time to apply at, s")
+    common.add_argument("--run", help="run id (formation ps) or the run's output directory")
+    common.add_argument("--json", action="store_true", help="print the run's confirmation")
+    k = kinds.add_parser("fault", parents=[common], help="actuator fault Gamma, delta")
+    k.add_argument("--agent", type=int, required=True)
+    k.add_argument("--gamma", required=True, help="e.g. 0.5,0.5,0.5")
+    k.add_argument("--delta", required=True, help="N m, e.g. 0,0,0.1")
+    k = kinds.add_parser("delay", parents=[common], help="delay profile tau(t)")
+    k.add_argument("--agent", type=int, required=True)
+    k.add_argument("--tau", required=True, help="0.03 or 0.02+0.01*sin(0.5*t)")
+    for name in ("crash", "hang"):
+        k = kinds.add_parser(name, parents=[common], help=f"{name} of an agent's process")
+        k.add_argument("--agent", type=int, required=True)
+        k.add_argument("--down", type=float, required=True, help="s down")
+    k = kinds.add_parser("link", parents=[common], help="a graph edge goes down or up")
+    k.add_argument("--agents", required=True, help="the edge, e.g. 2,3")
+    k.add_argument("--state", choices=("down", "up"), required=True)
+    q.set_defaults(func=inject_cmd)
+    q = sub.add_parser("summary", help="a run directory's summary.json and trajectory.csv")
+    q.add_argument("dir")
+    q.add_argument("--json", action="store_true")
+    q.set_defaults(func=summary_cmd)
+    return p
 
 
 def _print_samples(run, a):
@@ -86,12 +220,14 @@ def _print_samples(run, a):
 
 
 def main(argv):
-    if not argv or argv[0] != "inspect":
-        print("usage: python -m formation_client inspect --agent I [--run ID|DIR] [--json]",
-              file=sys.stderr)
-        return 2
-    return inspect(argv[1:])
+    a = parser().parse_args(argv)
+    return a.func(a)
+
+
+def run_cli():
+    """Entry point of the installed `formation-client` command."""
+    sys.exit(main(sys.argv[1:]))
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    run_cli()

@@ -80,12 +80,15 @@ def _resolve(run_dir_or_id):
 
 
 class Subscription:
-    """A subscriber on one service with its message class (keeps the service open)."""
+    """A subscriber on one service with its message class (keeps the service open).
+    `receive()` returns an instance of `message` (a list of them for a slice service such as
+    `formation/plant/steps`, one per agent)."""
 
-    def __init__(self, service, subscriber, message):
+    def __init__(self, service, subscriber, message, is_slice=False):
         self.service = service
         self.subscriber = subscriber
         self.message = message
+        self.is_slice = is_slice
 
     def close(self):
         """Releases the subscriber and the service."""
@@ -97,7 +100,14 @@ class Subscription:
         if sample is None:
             return None
         size = ctypes.sizeof(self.message)
-        value = self.message.from_buffer_copy(ctypes.string_at(sample.payload_ptr, size))
+        if self.is_slice:
+            items = sample.payload()
+            value = [
+                self.message.from_buffer_copy(ctypes.string_at(sample.payload_ptr + k * size, size))
+                for k in range(items.number_of_elements)
+            ]
+        else:
+            value = self.message.from_buffer_copy(ctypes.string_at(sample.payload_ptr, size))
         sample.delete()
         return value
 
@@ -162,7 +172,7 @@ class Run:
         payload = self.iox2.Slice[t] if is_slice else t
         name = self.iox2.ServiceName.new(self.service_name(pattern, agent))
         svc = self.node.service_builder(name).publish_subscribe(payload).open()
-        port = Subscription(svc, svc.subscriber_builder().create(), t)
+        port = Subscription(svc, svc.subscriber_builder().create(), t, is_slice)
         self._ports.append(port)
         return port
 
@@ -173,6 +183,92 @@ class Run:
         port = Wakeups(self.iox2, svc, svc.listener_builder().create())
         self._ports.append(port)
         return port
+
+    # Typed subscribers, one per publish-subscribe service of the table (`formation schema`).
+
+    def reference(self):
+        """`formation/reference`: ReferenceFrame (virtual leader, target, offsets) per step."""
+        return self.subscriber("formation/reference")
+
+    def state(self, agent):
+        """`formation/agent/{i}/state`: VehicleState of quadrotor `agent` (1-based)."""
+        return self.subscriber("formation/agent/{i}/state", agent=agent)
+
+    def share(self, agent):
+        """`formation/agent/{i}/share`: NeighbourState agent `agent` shares with its neighbours."""
+        return self.subscriber("formation/agent/{i}/share", agent=agent)
+
+    def command(self, agent):
+        """`formation/agent/{i}/command`: ControlCommand of agent `agent`."""
+        return self.subscriber("formation/agent/{i}/command", agent=agent)
+
+    def telemetry(self, agent):
+        """`formation/agent/{i}/telemetry`: AgentTelemetry of agent `agent`."""
+        return self.subscriber("formation/agent/{i}/telemetry", agent=agent)
+
+    def steps(self):
+        """`formation/plant/steps`: the step records, a list of N StepEntry per step."""
+        return self.subscriber("formation/plant/steps")
+
+    def control(self):
+        """`formation/run/control`: RunControl (kind 1: the run stops)."""
+        return self.subscriber("formation/run/control")
+
+    def progress(self):
+        """`formation/run/progress`: RunProgress (steps recorded)."""
+        return self.subscriber("formation/run/progress")
+
+    def hello(self):
+        """`formation/run/hello`: Hello of each role process that starts."""
+        return self.subscriber("formation/run/hello")
+
+    def runtime_events(self):
+        """`formation/run/events`: RuntimeEvent (crashes, hangs, links, losses, restarts)."""
+        return self.subscriber("formation/run/events")
+
+    def fault_injections(self):
+        """`formation/inject/fault`: FaultInjection forwarded to the plant."""
+        return self.subscriber("formation/inject/fault")
+
+    def delay_injections(self):
+        """`formation/inject/delay`: DelayInjection forwarded to the agents."""
+        return self.subscriber("formation/inject/delay")
+
+    def inject_requests(self):
+        """`formation/inject/request`: InjectRequest of every client (as `formation inject`)."""
+        return self.subscriber("formation/inject/request")
+
+    # Injections (`formation_client.inject`): each returns the run's events.jsonl line.
+
+    def inject_fault(self, agent, gamma, delta, at=None):
+        """Actuator fault of `agent` (1-based): Gamma, delta (N m); `at` in s or None."""
+        from . import inject
+
+        return inject.fault(self, agent, gamma, delta, at)
+
+    def inject_delay(self, agent, base_s, amplitude_s=0.0, angular_rate_rad_s=0.0, at=None):
+        """Delay tau(t) = base + amplitude sin(rate t) of `agent`, s."""
+        from . import inject
+
+        return inject.delay(self, agent, base_s, amplitude_s, angular_rate_rad_s, at)
+
+    def inject_crash(self, agent, down_s, at=None):
+        """Crash of `agent`'s process, replaced `down_s` s later."""
+        from . import inject
+
+        return inject.crash(self, agent, down_s, at)
+
+    def inject_hang(self, agent, down_s, at=None):
+        """Hang of `agent`'s process, replaced `down_s` s later."""
+        from . import inject
+
+        return inject.hang(self, agent, down_s, at)
+
+    def inject_link(self, a, b, up, at=None):
+        """The edge {a, b} goes down (up=False) or comes back (up=True)."""
+        from . import inject
+
+        return inject.link(self, a, b, up, at)
 
     @staticmethod
     def receive(sub):

@@ -15,6 +15,8 @@ mod errors;
 mod estimates;
 mod geometry;
 mod inputs;
+#[cfg(feature = "foxglove")]
+pub mod scene;
 mod separation;
 mod style;
 #[cfg(test)]
@@ -39,6 +41,10 @@ pub struct PlotArgs {
     /// File format of the figures: `png` (bitmap) or `svg` (vector, text as text).
     #[arg(long, value_enum, default_value_t = Format::Png)]
     pub format: Format,
+    /// Times of the `scene` figure, s (default 30,55: covering and enclosing of the paper run;
+    /// moved inside the run). The figure needs DIR/scenario.toml (written by sim and run).
+    #[arg(long, value_name = "T1,T2", value_delimiter = ',')]
+    pub scene_at: Vec<f64>,
 }
 
 /// File format of the figures.
@@ -124,7 +130,50 @@ pub fn run(args: &PlotArgs) -> Result<Vec<Rendered>, PlotError> {
         ))
     })?;
     let geometry = Geometry::for_run(&main_run);
-    render_all(&main_run, compare.as_ref(), &geometry, &out, args.format)
+    #[allow(unused_mut)] // appended to with the `foxglove` feature
+    let mut files = render_all(&main_run, compare.as_ref(), &geometry, &out, args.format)?;
+    #[cfg(feature = "foxglove")]
+    if scene::available(&args.dir) {
+        files.push(render_scene(args, &main_run, &out)?);
+    }
+    Ok(files)
+}
+
+/// The `scene` figure: the live view's scene at the `--scene-at` times, from above.
+#[cfg(feature = "foxglove")]
+fn render_scene(args: &PlotArgs, run: &Run, out: &Path) -> Result<Rendered, PlotError> {
+    let times = if args.scene_at.is_empty() {
+        scene::DEFAULT_TIMES_S.to_vec()
+    } else {
+        args.scene_at.clone()
+    };
+    let scenes = scene::load(&args.dir, &times)?;
+    let size = (900 * scenes.at.len() as u32 + 100, 1010);
+    let path = out.join(format!("scene.{}", args.format.extension()));
+    let title = run.title();
+    let drawn: style::DrawResult = (|| {
+        match args.format {
+            Format::Png => {
+                let backend = plotters::backend::BitMapBackend::new(&path, size);
+                let root = text::GlyphText::new(backend).into_drawing_area();
+                scene::draw(&scenes, &title, &root)?;
+                root.present()?;
+            }
+            Format::Svg => {
+                let backend = plotters::backend::SVGBackend::new(&path, size);
+                let root = text::GlyphText::vector(backend).into_drawing_area();
+                scene::draw(&scenes, &title, &root)?;
+                root.present()?;
+            }
+        }
+        Ok(())
+    })();
+    drawn.map_err(|e| PlotError::Render(format!("{}: {e}", path.display())))?;
+    Ok(Rendered {
+        path,
+        width: size.0,
+        height: size.1,
+    })
 }
 
 /// The figures.

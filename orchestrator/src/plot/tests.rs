@@ -407,3 +407,50 @@ fn a_legend_inside_the_data_goes_to_the_corner_with_the_fewest_points() {
         SeriesLabelPosition::LowerLeft
     ));
 }
+
+#[cfg(feature = "foxglove")]
+#[test]
+fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
+    let dir = temp_dir("scene");
+    let mut s = formation_config::Scenario::paper();
+    s.simulation.duration_s = 2.0;
+    crate::sim::write_resolved_scenario(&s, &dir).expect("scenario.toml");
+    crate::sim::run_in_process(&s, formation_config::Variant::Proposed, &dir).expect("sim");
+    let times = vec![0.5, 1.5, 9.0];
+    let files = run(&PlotArgs {
+        dir: dir.clone(),
+        scene_at: times.clone(),
+        ..Default::default()
+    })
+    .expect("plot succeeds");
+    let scene = files.last().expect("figures");
+    assert_eq!(scene.path.file_name().unwrap(), "scene.png");
+    assert_eq!(scene.width, 900 * 3 + 100);
+    assert!(
+        std::fs::metadata(&scene.path).unwrap().len() > 50_000,
+        "looks blank"
+    );
+    // The first scene frame (every 40 steps) at or after each time; a time after the end is the
+    // last frame of the run.
+    let scenes = super::scene::load(&dir, &times).expect("scenes");
+    let steps: Vec<u64> = scenes.at.iter().map(|(_, sc)| sc.step).collect();
+    assert_eq!(steps, vec![520, 1520, 1960]);
+    // The scene's poses are the rows of trajectory.csv.
+    let tr = crate::record::table::Trajectory::read(&dir.join("trajectory.csv")).expect("csv");
+    let tf = &scenes.at[1].1.transforms.transforms[2];
+    let row = tr
+        .rows()
+        .iter()
+        .find(|r| tr.value(r, "step") as u64 == 1520 && tr.value(r, "agent") as u64 == 3)
+        .expect("row of step 1520, agent 3");
+    let p = tf.translation.unwrap();
+    assert_eq!(
+        [p.x, p.y, p.z],
+        [
+            tr.value(row, "px"),
+            tr.value(row, "py"),
+            tr.value(row, "pz")
+        ]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -138,6 +138,9 @@ impl Sinks {
     }
 
     fn write_event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        if let Some(mcap) = &mut self.mcap {
+            mcap.injection(line);
+        }
         match (&mut self.mcap, super::mcap::event_message(line)) {
             (Some(mcap), Some((step, event))) => mcap.write_event(step, &event),
             _ => Ok(()),

@@ -235,6 +235,9 @@ pub struct McapSink {
     dt_ns: u64,
     sequence: Sequence,
     buf: Vec<u8>,
+    /// The 3D scene channels (`/tf`, `/scene/*`, `/log`, `/agent/{i}/plot`).
+    #[cfg(feature = "foxglove")]
+    scene: Option<super::mcap_scene::McapScene>,
 }
 
 fn mcap_error(e: mcap::McapError) -> std::io::Error {
@@ -287,6 +290,8 @@ impl McapSink {
                 truth: channel(truth, format!("/agent/{id}/truth"))?,
             });
         }
+        #[cfg(feature = "foxglove")]
+        let scene = Some(super::mcap_scene::McapScene::create(&mut writer, s).map_err(mcap_error)?);
         let metadata = BTreeMap::from([
             ("scenario".to_string(), s.name.clone()),
             ("variant".to_string(), variant.name().to_string()),
@@ -320,22 +325,31 @@ impl McapSink {
             dt_ns: (s.simulation.dt_s * 1e9).round() as u64,
             sequence: Sequence(BTreeMap::new()),
             buf: Vec::with_capacity(4096),
+            #[cfg(feature = "foxglove")]
+            scene,
         })
     }
 
     /// Writes `msg` to `channel` at step `step`.
     fn write<T: Serialize>(&mut self, channel: u16, step: u64, msg: &T) -> std::io::Result<()> {
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, msg)?;
-        let time = step * self.dt_ns;
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        serde_json::to_writer(&mut buf, msg)?;
+        let result = self.write_bytes(channel, step * self.dt_ns, &buf);
+        self.buf = buf;
+        result
+    }
+
+    /// Writes an encoded message to `channel` at log time `time_ns`.
+    fn write_bytes(&mut self, channel: u16, time_ns: u64, data: &[u8]) -> std::io::Result<()> {
         let header = mcap::records::MessageHeader {
             channel_id: channel,
             sequence: self.sequence.next(channel),
-            log_time: time,
-            publish_time: time,
+            log_time: time_ns,
+            publish_time: time_ns,
         };
         self.writer
-            .write_to_known_channel(&header, &self.buf)
+            .write_to_known_channel(&header, data)
             .map_err(mcap_error)
     }
 
@@ -371,7 +385,23 @@ impl McapSink {
             self.write(telemetry, step, &te)?;
             self.write(truth_ch, step, &tr)?;
         }
+        #[cfg(feature = "foxglove")]
+        if let Some(mut scene) = self.scene.take() {
+            let result = scene.step(rows, |ch, time, data| self.write_bytes(ch, time, data));
+            self.scene = Some(scene);
+            result?;
+        }
         Ok(())
+    }
+
+    /// An accepted injection (a line of `events.jsonl`): its event joins the scene's timeline
+    /// (the scene channels mark it at its step).
+    #[cfg_attr(not(feature = "foxglove"), allow(unused_variables))]
+    pub(crate) fn injection(&mut self, line: &Value) {
+        #[cfg(feature = "foxglove")]
+        if let Some(scene) = &mut self.scene {
+            scene.injection(line);
+        }
     }
 
     /// Writes one `/events` message at step `step`.

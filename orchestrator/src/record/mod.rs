@@ -7,7 +7,11 @@
 
 pub mod coverage;
 pub mod csv;
+#[cfg(feature = "foxglove")]
+pub mod live;
 pub mod mcap;
+#[cfg(feature = "foxglove")]
+mod mcap_scene;
 pub mod metrics;
 pub mod recovery;
 pub mod separation;
@@ -30,12 +34,23 @@ pub enum Format {
 }
 
 /// Which files a [`Recorder`] writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Outputs {
     /// `trajectory.csv` (sweeps need only `summary.json`).
     pub trajectory: bool,
     /// `run.mcap`.
     pub mcap: bool,
+    /// `--foxglove ADDR`: serve the live view there (feature `foxglove`).
+    pub foxglove: Option<LiveOptions>,
+}
+
+/// Where the live Foxglove view is served and how long the run waits for a first viewer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiveOptions {
+    /// `--foxglove ADDR`.
+    pub addr: std::net::SocketAddr,
+    /// `--foxglove-wait S`: seconds to wait for a viewer before the run starts (0: none).
+    pub wait_s: f64,
 }
 
 impl Outputs {
@@ -44,6 +59,7 @@ impl Outputs {
         Outputs {
             trajectory: true,
             mcap: formats.contains(&Format::Mcap),
+            foxglove: None,
         }
     }
 }
@@ -69,6 +85,9 @@ pub struct Recorder {
     runtime_events: Vec<formation_config::protocol::messages::RuntimeEvent>,
     incidents: Vec<recovery::Mark>,
     restarts: Vec<u32>,
+    /// The live Foxglove view (`--foxglove`).
+    #[cfg(feature = "foxglove")]
+    live: Option<live::LiveFeed>,
 }
 
 impl Recorder {
@@ -100,6 +119,15 @@ impl Recorder {
                 _ => {}
             }
         }
+        #[cfg(feature = "foxglove")]
+        let live = outputs
+            .foxglove
+            .map(|o| live::LiveFeed::start(o, s))
+            .transpose()?;
+        #[cfg(not(feature = "foxglove"))]
+        if outputs.foxglove.is_some() {
+            return Err(std::io::Error::other(crate::cli::NO_FOXGLOVE));
+        }
         let mcap = outputs
             .mcap
             .then(|| mcap::McapSink::create(&mcap_path, s, variant))
@@ -130,6 +158,8 @@ impl Recorder {
             runtime_events: Vec::new(),
             incidents: Vec::new(),
             restarts: vec![0; s.n_agents()],
+            #[cfg(feature = "foxglove")]
+            live,
         })
     }
 
@@ -153,6 +183,11 @@ impl Recorder {
                 )
             });
         self.series.push(worst, violations);
+        #[cfg(feature = "foxglove")]
+        if let Some(live) = &mut self.live {
+            let errors = self.metrics.agents.iter().map(|a| a.last_error);
+            live.step(step, reference, truths, commands, errors);
+        }
         if let Some(csv) = &mut self.csv {
             if step.is_multiple_of(self.decimation) || div.is_some() {
                 csv.write_step(reference, truths, commands, &self.metrics)?;
@@ -164,6 +199,10 @@ impl Recorder {
     /// Records an injection (a line of `events.jsonl`) in `run.mcap` at the step it applies;
     /// nothing without `--record mcap` or for a rejected request.
     pub fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        #[cfg(feature = "foxglove")]
+        if let Some(live) = &mut self.live {
+            live.injection(line);
+        }
         match &mut self.csv {
             Some(csv) => csv.write_event(line.clone()),
             None => Ok(()),
@@ -201,6 +240,10 @@ impl Recorder {
 
     /// Flushes the CSV and writes `summary.json`; returns the summary.
     pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
+        #[cfg(feature = "foxglove")]
+        if let Some(live) = self.live.take() {
+            live.finish();
+        }
         if let Some(csv) = self.csv.take() {
             csv.close()?;
         }

@@ -255,7 +255,10 @@ pub fn main(args: RunArgs) -> ExitCode {
         &scenario,
         variant,
         mode,
-        crate::record::Outputs::with(&args.common.record),
+        crate::record::Outputs {
+            foxglove: args.common.live_options(),
+            ..crate::record::Outputs::with(&args.common.record)
+        },
         placement.as_ref(),
         &out,
         &run_id,

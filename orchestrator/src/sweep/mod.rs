@@ -185,6 +185,7 @@ fn run_one(
             crate::record::Outputs {
                 trajectory: false,
                 mcap: false,
+                foxglove: None,
             },
         )
         .map_err(|e| format!("cannot write {}: {e}", dir.display()))
