@@ -123,7 +123,10 @@ impl Recorder {
             mode,
             dt: s.simulation.dt_s,
             timing: None,
-            series: recovery::Series::with_capacity(s.n_steps() as usize),
+            series: recovery::Series {
+                safety_m: s.metrics.safety_distance_m,
+                ..recovery::Series::with_capacity(s.n_steps() as usize)
+            },
             events: s.events.clone(),
             timeline: s.timeline(),
             topology: formation_config::scenario::graph::Topology::from_scenario(s),
@@ -153,6 +156,9 @@ impl Recorder {
                 )
             });
         self.series.push(worst, violations);
+        if let Some(d) = self.metrics.separation.last {
+            self.series.push_separation(d);
+        }
         if let Some(csv) = &mut self.csv {
             if step.is_multiple_of(self.decimation) || div.is_some() {
                 csv.write_step(reference, truths, commands, &self.metrics)?;

@@ -9,6 +9,11 @@
 //! * `peak_error_m`: the worst formation error from the event to its recovery and the `SETTLE_S`
 //!   that confirm it (or the window's end); `violations_during`: attitude and rate constraint
 //!   violations (all agents) over the same span.
+//! * for an event that takes an agent down (`crash`, `hang`): `min_separation_during_m` and
+//!   `steps_below_safety_during`, the closest approach of two quadrotors and the steps below the
+//!   safety distance from the event to the later of the span's end and the controller's return;
+//!   `violations_once_back`, the constraint violations (all agents) from the controller's return
+//!   to the later of the span's end and `SETTLE_S` after the return.
 //! * `connectivity`: whether Assumption 1 (the graph of the agents that are up, over the links
 //!   that are up, connected, and one of them pinned to the leader) held at every step.
 
@@ -53,6 +58,14 @@ pub struct EventSummary {
     pub peak_error_m: f64,
     /// Constraint violations from the event to its recovery.
     pub violations_during: u64,
+    /// Closest approach of two quadrotors from the event to the later of its span's end and the
+    /// controller's return, m (events that take an agent down).
+    pub min_separation_during_m: Option<f64>,
+    /// Steps below the safety distance over the same span.
+    pub steps_below_safety_during: Option<u64>,
+    /// Constraint violations from the controller's return to the later of the span's end and
+    /// `SETTLE_S` after the return.
+    pub violations_once_back: Option<u64>,
 }
 
 /// Whether Assumption 1 held (`summary.json` `connectivity`).
@@ -83,6 +96,8 @@ pub struct Mark {
     pub detected_after_ms: Option<f64>,
     /// Restart time, ms.
     pub restarted_after_ms: Option<f64>,
+    /// The step its controller is back (events that take an agent down for a known time).
+    pub back_step: Option<u64>,
 }
 
 impl Mark {
@@ -96,6 +111,10 @@ impl Mark {
             step: e.step(dt),
             detected_after_ms: None,
             restarted_after_ms: None,
+            back_step: e
+                .down_s
+                .filter(|_| e.kind.takes_agent_down())
+                .map(|d| e.step(dt).saturating_add((d / dt).round().max(1.0) as u64)),
         }
     }
 }
@@ -107,6 +126,10 @@ pub struct Series {
     pub error: Vec<f64>,
     /// Cumulative constraint violations (all agents) after each step.
     pub violations: Vec<u64>,
+    /// Closest distance of two quadrotors per step, m (empty: not recorded).
+    pub separation: Vec<f64>,
+    /// Safety distance, m.
+    pub safety_m: f64,
 }
 
 impl Series {
@@ -115,6 +138,8 @@ impl Series {
         Series {
             error: Vec::with_capacity(steps),
             violations: Vec::with_capacity(steps),
+            separation: Vec::with_capacity(steps),
+            safety_m: 0.0,
         }
     }
 
@@ -122,6 +147,11 @@ impl Series {
     pub fn push(&mut self, error: f64, violations: u64) {
         self.error.push(error);
         self.violations.push(violations);
+    }
+
+    /// Appends one step's closest distance of two quadrotors (after [`Series::push`]).
+    pub fn push_separation(&mut self, d: f64) {
+        self.separation.push(d);
     }
 
     /// Measures each mark (sorted by step) against the series.
@@ -166,7 +196,17 @@ impl Series {
                     .copied()
                     .unwrap_or(0)
             };
+            let back = m.back_step.map(|b| b.min(steps));
+            let sep_span = back.map(|b| s as usize..(span_end.max(b) as usize).min(self.separation.len()));
+            let sep = sep_span.map(|r| self.separation.get(r).unwrap_or(&[]));
+            let back_end = back.map(|b| span_end.max(b + settle as u64).min(steps));
             out.push(EventSummary {
+                min_separation_during_m: sep.and_then(|d| d.iter().copied().reduce(f64::min)),
+                steps_below_safety_during: sep
+                    .map(|d| d.iter().filter(|&&x| x < self.safety_m).count() as u64),
+                violations_once_back: back
+                    .zip(back_end)
+                    .map(|(b, e)| viol(e).saturating_sub(viol(b))),
                 kind: m.kind.clone(),
                 agent: m.agent.map(|a| a + 1),
                 agents: m.agents.map(|[a, b]| [a + 1, b + 1]),
@@ -280,7 +320,9 @@ mod tests {
                     0
                 },
             );
+            s.push_separation(if (1050..1060).contains(&k) { 0.4 } else { 1.0 });
         }
+        s.safety_m = 0.5;
         let m = Mark {
             kind: "crash".into(),
             agent: Some(2),
@@ -288,6 +330,7 @@ mod tests {
             step: 1000,
             detected_after_ms: None,
             restarted_after_ms: Some(80.0),
+            back_step: Some(1100),
         };
         let out = s.measure(&[m], 0.001);
         let e = &out[0];
@@ -307,6 +350,13 @@ mod tests {
             "never above its threshold, 2 x the 1.0 m of the second before"
         );
         assert_eq!(e.violations_during, 201);
+        assert_eq!(e.min_separation_during_m, Some(0.4));
+        assert_eq!(e.steps_below_safety_during, Some(10));
+        assert_eq!(
+            e.violations_once_back,
+            Some(101),
+            "from the return at step 1100: 201 - 100"
+        );
         assert!(e.peak_error_m >= 0.15);
         assert_eq!(e.agent, Some(3));
     }
@@ -333,6 +383,7 @@ mod tests {
             step: 0,
             detected_after_ms: None,
             restarted_after_ms: None,
+            back_step: None,
         }
     }
 }
