@@ -10,7 +10,8 @@
 //!
 //! `slot` and `hold` share one cascade of its own (no RBFNN, no neighbour consensus, no estimate
 //! of the faults beyond an integrator): a PD position loop with the controller's acceleration and
-//! tilt limits (D5) and a repulsion from the quadrotors nearer than [`SEPARATION_ACTIVATION`]
+//! tilt limits (D5), an integral acceleration trim that starts at the controller's last estimate
+//! F-hat of the uncertainty (61), and a repulsion from the quadrotors nearer than [`SEPARATION_ACTIVATION`]
 //! safety distances, the conversion (28) to thrust and roll/pitch at the current heading, a
 //! rate-limited attitude setpoint, a P attitude loop with setpoint-rate feedforward to a clamped
 //! body-rate setpoint, and a PI rate loop on the torque whose integrator starts at the last torque
@@ -31,6 +32,11 @@ const HOVER_COMPENSATION_TILT_RAD: f64 = 1.0;
 pub const POSITION_GAIN: f64 = 1.5;
 /// Position loop: damping k_V, 1/s (with k_P: natural frequency 1.22 rad/s, damping ratio 1.02).
 pub const VELOCITY_GAIN: f64 = 2.5;
+/// Position loop: integral gain k_I of the acceleration trim (trim' = k_I (p* - p)), 1/s³
+/// (k_I < k_P k_V keeps the loop stable; the trim absorbs the lumped uncertainty (61)).
+pub const POSITION_INTEGRAL_GAIN: f64 = 1.0;
+/// Largest acceleration trim per axis, m/s².
+pub const MAX_TRIM: f64 = 2.0;
 /// Largest horizontal acceleration asked, m/s² (the controller's D5 limit).
 pub const MAX_HORIZONTAL_ACCEL: f64 = 3.0;
 /// Largest upward and downward acceleration asked, m/s² (D5).
@@ -76,15 +82,20 @@ pub struct Failsafe {
     pub hold: Vector3<f64>,
     /// The heading it holds (its heading at the take-over), rad.
     pub heading: f64,
+    /// The position loop's acceleration trim, m/s² (starts at -F-hat, the controller's last
+    /// estimate of the uncertainty (61), carried in its command).
+    pub trim: Vector3<f64>,
 }
 
 impl Failsafe {
-    /// The failsafe taking over quadrotor `x` from the controller's last torque `torque`: the
-    /// integrator at that torque, the setpoint at the current attitude, and (for `hold`) the point
-    /// a brake at [`HOLD_BRAKE_ACCEL`] stops it at.
-    pub fn take_over(x: &RigidState, torque: Vector3<f64>) -> Failsafe {
+    /// The failsafe taking over quadrotor `x` from the controller's last command (`torque` and
+    /// its uncertainty estimate `f_hat`): the rate integrator at that torque, the acceleration trim
+    /// at -`f_hat` (clamped to [`MAX_TRIM`]), the setpoint at the current attitude, and (for `hold`)
+    /// the point a brake at [`HOLD_BRAKE_ACCEL`] stops it at.
+    pub fn take_over(x: &RigidState, torque: Vector3<f64>, f_hat: Vector3<f64>) -> Failsafe {
         let speed = x.v.norm();
         Failsafe {
+            trim: (-f_hat).map(|f| f.clamp(-MAX_TRIM, MAX_TRIM)),
             integral: torque,
             setpoint: x.a,
             hold: x.p + x.v * (speed / (2.0 * HOLD_BRAKE_ACCEL)),
@@ -110,10 +121,20 @@ pub struct Airframe {
     pub thrust_max: f64,
 }
 
-/// The acceleration the position loop asks for `target` from `x`, with the repulsion `push`
-/// added, within the acceleration and tilt limits.
-pub fn position_law(target: &Target, x: &RigidState, push: Vector3<f64>, gravity: f64) -> Vector3<f64> {
-    let mut a = target.a + (target.p - x.p) * POSITION_GAIN + (target.v - x.v) * VELOCITY_GAIN + push;
+/// The acceleration the position loop asks for `target` from `x`, with the trim and the
+/// repulsion `push` added, within the acceleration and tilt limits.
+pub fn position_law(
+    target: &Target,
+    x: &RigidState,
+    trim: Vector3<f64>,
+    push: Vector3<f64>,
+    gravity: f64,
+) -> Vector3<f64> {
+    let mut a = target.a
+        + (target.p - x.p) * POSITION_GAIN
+        + (target.v - x.v) * VELOCITY_GAIN
+        + trim
+        + push;
     a.z = a.z.clamp(-MAX_VERTICAL_ACCEL, MAX_VERTICAL_ACCEL);
     let cap = MAX_HORIZONTAL_ACCEL.min((a.z + gravity) * MAX_TILT_RAD.tan());
     let h = a.xy().norm();
@@ -201,7 +222,9 @@ pub fn fly_to(
     frame: &Airframe,
     dt: f64,
 ) -> (f64, Vector3<f64>, Vector3<f64>) {
-    let a = position_law(target, x, push, frame.gravity);
+    let a = position_law(target, x, fs.trim, push, frame.gravity);
+    fs.trim = (fs.trim + (target.p - x.p) * (POSITION_INTEGRAL_GAIN * dt))
+        .map(|f| f.clamp(-MAX_TRIM, MAX_TRIM));
     let (_, tilt) = thrust_and_tilt(&a, frame.mass, frame.gravity, x.a[2]);
     let wanted = Vector3::new(tilt[0], tilt[1], heading);
     let torque = attitude_step(fs, &wanted, x, frame, dt);
@@ -328,14 +351,14 @@ mod tests {
             v: Vector3::zeros(),
             a: Vector3::zeros(),
         };
-        let a = position_law(&t, &at([0.0, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), 9.81);
+        let a = position_law(&t, &at([0.0, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
         assert!((a.x - MAX_HORIZONTAL_ACCEL).abs() < 1e-12 && a.y == 0.0 && a.z == 0.0);
-        let near = position_law(&t, &at([9.9, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), 9.81);
+        let near = position_law(&t, &at([9.9, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
         assert!((near.x - 0.1 * POSITION_GAIN).abs() < 1e-12, "linear near it");
-        let down = position_law(&t, &at([10.0, 0.0, 50.0], [0.0; 3]), Vector3::zeros(), 9.81);
+        let down = position_law(&t, &at([10.0, 0.0, 50.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
         assert_eq!(down.z, -MAX_VERTICAL_ACCEL);
         let moving = Target { v: Vector3::new(1.0, 0.0, 0.0), ..t };
-        let a = position_law(&moving, &at([10.0, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), 9.81);
+        let a = position_law(&moving, &at([10.0, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
         assert!((a.x - VELOCITY_GAIN).abs() < 1e-12, "follows the slot's velocity");
     }
 
@@ -366,7 +389,7 @@ mod tests {
     fn the_attitude_setpoint_is_rate_limited_and_the_rates_stay_inside_the_constraint() {
         let f = frame();
         let x = at([0.0; 3], [0.0; 3]);
-        let mut fs = Failsafe::take_over(&x, Vector3::zeros());
+        let mut fs = Failsafe::take_over(&x, Vector3::zeros(), Vector3::zeros());
         let u = attitude_step(&mut fs, &Vector3::new(0.3, 0.0, 0.0), &x, &f, 0.001);
         assert!((fs.setpoint.x - SETPOINT_RATE_LIMIT * 0.001).abs() < 1e-15);
         assert!(u.x > 0.0 && u.x <= f.torque_hi.x, "rolls towards it: {u}");
@@ -377,8 +400,8 @@ mod tests {
         assert!(u.x.abs() < 0.02 + 1e-12, "already at the largest rate: {u}");
     }
 
-    /// A quadrotor flown by the cascade alone, with a constant disturbance torque and a loss of
-    /// effectiveness it does not know, ends at its target: the integrator absorbs the fault.
+    /// A quadrotor flown by the cascade alone, with a constant disturbance torque, a loss of
+    /// effectiveness and a force it does not know, ends at its target: the integrators absorb them.
     #[test]
     fn the_cascade_flies_a_faulty_quadrotor_to_its_target_and_keeps_its_rates_bounded() {
         let f = frame();
@@ -390,16 +413,18 @@ mod tests {
             a: Vector3::zeros(),
         };
         let mut x = at([0.0, 0.0, 5.0], [0.5, 0.0, 0.0]);
-        let mut fs = Failsafe::take_over(&x, Vector3::zeros());
+        let mut fs = Failsafe::take_over(&x, Vector3::zeros(), Vector3::zeros());
+        let force = Vector3::new(0.8, -0.6, 0.5);
         let dt = 0.001;
         let mut worst_rate: f64 = 0.0;
-        for _ in 0..15_000 {
+        for _ in 0..30_000 {
             let (thrust, u, _) = fly_to(&mut fs, &target, Vector3::zeros(), 0.0, &x, &f, dt);
             let applied = (u.component_mul(&gamma) + delta)
                 .zip_zip_map(&f.torque_lo, &f.torque_hi, |u, lo, hi| u.clamp(lo, hi));
             // Small-angle rigid body, enough for the test.
             let acc = crate::kinematics::thrust_axis(&x.a) * (thrust / f.mass)
-                - Vector3::new(0.0, 0.0, f.gravity);
+                - Vector3::new(0.0, 0.0, f.gravity)
+                + force;
             x.v += acc * dt;
             x.p += x.v * dt;
             x.w += applied.component_div(&f.inertia) * dt;
@@ -414,8 +439,10 @@ mod tests {
     #[test]
     fn hold_stops_where_a_brake_at_the_hold_deceleration_would() {
         let x = at([1.0, 2.0, 5.0], [3.0, 0.0, 0.0]);
-        let fs = Failsafe::take_over(&x, Vector3::new(0.1, 0.0, 0.0));
+        let fs = Failsafe::take_over(&x, Vector3::new(0.1, 0.0, 0.0), Vector3::new(0.3, 0.0, 9.0));
         assert!((fs.hold.x - (1.0 + 9.0 / (2.0 * HOLD_BRAKE_ACCEL))).abs() < 1e-12);
         assert_eq!(fs.integral.x, 0.1, "starts at the controller's torque");
+        assert_eq!(fs.trim.x, -0.3, "and at its uncertainty estimate");
+        assert_eq!(fs.trim.z, -MAX_TRIM, "clamped");
     }
 }

@@ -193,7 +193,13 @@ impl Plant {
                 }
                 Fallback::Slot | Fallback::Hold => {
                     let fs = failsafe
-                        .get_or_insert_with(|| Failsafe::take_over(&x, Vector3::from(last.torque_nm)));
+                        .get_or_insert_with(|| {
+                        Failsafe::take_over(
+                            &x,
+                            Vector3::from(last.torque_nm),
+                            Vector3::from(last.telemetry.f_hat),
+                        )
+                    });
                     let target = target.unwrap_or(Target {
                         p: fs.hold,
                         v: Vector3::zeros(),
