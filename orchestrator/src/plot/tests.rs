@@ -407,3 +407,24 @@ fn a_legend_inside_the_data_goes_to_the_corner_with_the_fewest_points() {
         SeriesLabelPosition::LowerLeft
     ));
 }
+
+#[test]
+fn events_compare_draws_one_worst_error_line_per_run_into_its_own_figure() {
+    let a = temp_dir("events-compare-a");
+    let b = temp_dir("events-compare-b");
+    write_synthetic_run(&a, 3, 301, 0.1, Some("proposed"));
+    write_synthetic_run(&b, 3, 301, 0.1, Some("proposed"));
+    let files = run(&PlotArgs {
+        dir: a.clone(),
+        events_compare: vec![b.clone()],
+        ..Default::default()
+    })
+    .expect("plot succeeds");
+    let f = files
+        .iter()
+        .find(|f| f.path.ends_with("events_compare.png"))
+        .expect("the comparison is written");
+    assert!(std::fs::metadata(&f.path).unwrap().len() > 1000);
+    let _ = std::fs::remove_dir_all(&a);
+    let _ = std::fs::remove_dir_all(&b);
+}

@@ -4,7 +4,7 @@
 //!
 //! * `recovered_after_s`: sim time from the event to the first step from which the formation
 //!   error (worst agent) stays under max(0.3 m, 2x its worst value in the second before the event)
-//!   for `SETTLE_S`, searched within the event's window (until the next event of the same agent,
+//!   for `SETTLE_S` (for a `crash` or `hang`, through `SETTLE_S` after the controller's return), searched within the event's window (until the next event of the same agent,
 //!   or 30 s); 0 if it never left; null if it does not settle within the window.
 //! * `peak_error_m`: the worst formation error from the event to its recovery and the `SETTLE_S`
 //!   that confirm it (or the window's end); `violations_during`: attitude and rate constraint
@@ -172,20 +172,28 @@ impl Series {
             let end = steps.min(s.saturating_add(window)).min(next_same);
             let settle = (SETTLE_S / dt).round() as usize;
             let span = &self.error[s as usize..end as usize];
+            // An event that takes a controller down is recovered only once the error has also
+            // stayed under through SETTLE_S after the controller's return.
+            let must_reach = m.back_step.map_or(0, |b| b.saturating_add(settle as u64)) as usize;
             // The first step from which `settle` steps (or the rest of the run) stay under.
             let mut recovered: Option<u64> = None;
             let mut run_start = 0usize;
             for (p, &e) in span.iter().enumerate() {
+                let at = s as usize + p + 1;
                 if e > threshold {
                     run_start = p + 1;
-                } else if p + 1 - run_start >= settle || (s as usize + p + 1 == steps as usize) {
+                } else if (p + 1 - run_start >= settle && at >= must_reach) || at == steps as usize {
                     recovered = Some(s + run_start as u64);
                     break;
                 }
             }
             let recovered_step = recovered.unwrap_or(end);
-            // The event's span: to its recovery and through the settling that confirmed it.
-            let span_end = (recovered_step + settle as u64).min(end).max(s);
+            // The event's span: to its recovery and through the settling that confirmed it (and
+            // through SETTLE_S after the controller's return).
+            let span_end = (recovered_step + settle as u64)
+                .max(must_reach as u64)
+                .min(end)
+                .max(s);
             let peak = self.error[s as usize..span_end as usize]
                 .iter()
                 .copied()
@@ -359,6 +367,28 @@ mod tests {
         );
         assert!(e.peak_error_m >= 0.15);
         assert_eq!(e.agent, Some(3));
+    }
+
+    #[test]
+    fn a_down_controller_is_recovered_only_once_the_error_stays_under_after_its_return() {
+        let mut s = Series::default();
+        // Under the threshold through the 2 s down window, then a bump 1 s after the return.
+        for k in 0..10_000u64 {
+            s.push(if (3000..3500).contains(&k) { 1.0 } else { 0.1 }, 0);
+            s.push_separation(1.0);
+        }
+        let m = Mark {
+            kind: "crash".into(),
+            agent: Some(0),
+            agents: None,
+            step: 0,
+            detected_after_ms: None,
+            restarted_after_ms: None,
+            back_step: Some(2000),
+        };
+        let e = &s.measure(&[m], 0.001)[0];
+        assert_eq!(e.peak_error_m, 1.0, "the bump after the return is the event's");
+        assert!((e.recovered_after_s.unwrap() - 3.5).abs() < 1e-9, "{e:?}");
     }
 
     #[test]
