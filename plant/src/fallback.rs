@@ -148,7 +148,11 @@ pub fn position_law(
 /// The repulsion of quadrotor `me` from the quadrotors at `others` nearer than
 /// [`SEPARATION_ACTIVATION`] x `safety_m`: [`SEPARATION_GAIN`] per m of intrusion, along the line
 /// between them (none from a quadrotor at the same point).
-pub fn repulsion(me: &Vector3<f64>, others: impl Iterator<Item = Vector3<f64>>, safety_m: f64) -> Vector3<f64> {
+pub fn repulsion(
+    me: &Vector3<f64>,
+    others: impl Iterator<Item = Vector3<f64>>,
+    safety_m: f64,
+) -> Vector3<f64> {
     let reach = SEPARATION_ACTIVATION * safety_m;
     let mut push = Vector3::zeros();
     for o in others {
@@ -194,17 +198,20 @@ pub fn attitude_step(
     fs.setpoint += moved;
     let euler_rate = (fs.setpoint - x.a) * ATTITUDE_GAIN + moved / dt;
     let trig = AttitudeTrig::of(&x.a);
-    let rate_sp =
-        (trig.euler_rate_matrix_inverse() * euler_rate).map(|w| w.clamp(-MAX_RATE_SETPOINT, MAX_RATE_SETPOINT));
+    let rate_sp = (trig.euler_rate_matrix_inverse() * euler_rate)
+        .map(|w| w.clamp(-MAX_RATE_SETPOINT, MAX_RATE_SETPOINT));
     let e_w = rate_sp - x.w;
     let raw = e_w.component_mul(&frame.inertia) * RATE_GAIN + fs.integral;
-    let torque = raw.zip_zip_map(&frame.torque_lo, &frame.torque_hi, |u, lo, hi| u.clamp(lo, hi));
+    let torque = raw.zip_zip_map(&frame.torque_lo, &frame.torque_hi, |u, lo, hi| {
+        u.clamp(lo, hi)
+    });
     let growth = e_w.component_mul(&frame.inertia) * (RATE_INTEGRAL_GAIN * dt);
     for k in 0..3 {
         let pushes_out = (raw[k] >= frame.torque_hi[k] && growth[k] > 0.0)
             || (raw[k] <= frame.torque_lo[k] && growth[k] < 0.0);
         if !pushes_out {
-            fs.integral[k] = (fs.integral[k] + growth[k]).clamp(frame.torque_lo[k], frame.torque_hi[k]);
+            fs.integral[k] =
+                (fs.integral[k] + growth[k]).clamp(frame.torque_lo[k], frame.torque_hi[k]);
         }
     }
     torque
@@ -335,13 +342,24 @@ mod tests {
         assert_eq!((held.thrust_n, held.torque_nm), (9.0, [0.1, 0.0, 0.0]));
         assert_eq!((held.step, held.agent), (100, 2));
         let late = command(&rt, &last, 1000, 0.001, 100, 2, hover);
-        assert_eq!(late.telemetry.attitude_cmd, [0.0, 0.0, 0.5], "its target: level");
-        assert!(late.thrust_n > 9.81, "compensates the tilt: {}", late.thrust_n);
+        assert_eq!(
+            late.telemetry.attitude_cmd,
+            [0.0, 0.0, 0.5],
+            "its target: level"
+        );
+        assert!(
+            late.thrust_n > 9.81,
+            "compensates the tilt: {}",
+            late.thrust_n
+        );
         assert!(
             late.torque_nm[0] < 0.0 && late.torque_nm[1] > 0.0,
             "levels roll and pitch"
         );
-        assert!(late.torque_nm[2] < 0.0, "damps the yaw rate, yaw itself is free");
+        assert!(
+            late.torque_nm[2] < 0.0,
+            "damps the yaw rate, yaw itself is free"
+        );
     }
 
     #[test]
@@ -351,15 +369,48 @@ mod tests {
             v: Vector3::zeros(),
             a: Vector3::zeros(),
         };
-        let a = position_law(&t, &at([0.0, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
+        let a = position_law(
+            &t,
+            &at([0.0, 0.0, 5.0], [0.0; 3]),
+            Vector3::zeros(),
+            Vector3::zeros(),
+            9.81,
+        );
         assert!((a.x - MAX_HORIZONTAL_ACCEL).abs() < 1e-12 && a.y == 0.0 && a.z == 0.0);
-        let near = position_law(&t, &at([9.9, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
-        assert!((near.x - 0.1 * POSITION_GAIN).abs() < 1e-12, "linear near it");
-        let down = position_law(&t, &at([10.0, 0.0, 50.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
+        let near = position_law(
+            &t,
+            &at([9.9, 0.0, 5.0], [0.0; 3]),
+            Vector3::zeros(),
+            Vector3::zeros(),
+            9.81,
+        );
+        assert!(
+            (near.x - 0.1 * POSITION_GAIN).abs() < 1e-12,
+            "linear near it"
+        );
+        let down = position_law(
+            &t,
+            &at([10.0, 0.0, 50.0], [0.0; 3]),
+            Vector3::zeros(),
+            Vector3::zeros(),
+            9.81,
+        );
         assert_eq!(down.z, -MAX_VERTICAL_ACCEL);
-        let moving = Target { v: Vector3::new(1.0, 0.0, 0.0), ..t };
-        let a = position_law(&moving, &at([10.0, 0.0, 5.0], [0.0; 3]), Vector3::zeros(), Vector3::zeros(), 9.81);
-        assert!((a.x - VELOCITY_GAIN).abs() < 1e-12, "follows the slot's velocity");
+        let moving = Target {
+            v: Vector3::new(1.0, 0.0, 0.0),
+            ..t
+        };
+        let a = position_law(
+            &moving,
+            &at([10.0, 0.0, 5.0], [0.0; 3]),
+            Vector3::zeros(),
+            Vector3::zeros(),
+            9.81,
+        );
+        assert!(
+            (a.x - VELOCITY_GAIN).abs() < 1e-12,
+            "follows the slot's velocity"
+        );
     }
 
     #[test]
@@ -394,8 +445,14 @@ mod tests {
         assert!((fs.setpoint.x - SETPOINT_RATE_LIMIT * 0.001).abs() < 1e-15);
         assert!(u.x > 0.0 && u.x <= f.torque_hi.x, "rolls towards it: {u}");
         // A far setpoint never asks more than MAX_RATE_SETPOINT.
-        let mut fs = Failsafe { setpoint: Vector3::new(0.35, 0.0, 0.0), ..fs };
-        let spinning = RigidState { w: Vector3::new(MAX_RATE_SETPOINT, 0.0, 0.0), ..x };
+        let mut fs = Failsafe {
+            setpoint: Vector3::new(0.35, 0.0, 0.0),
+            ..fs
+        };
+        let spinning = RigidState {
+            w: Vector3::new(MAX_RATE_SETPOINT, 0.0, 0.0),
+            ..x
+        };
         let u = attitude_step(&mut fs, &Vector3::new(0.35, 0.0, 0.0), &spinning, &f, 0.001);
         assert!(u.x.abs() < 0.02 + 1e-12, "already at the largest rate: {u}");
     }
@@ -419,8 +476,11 @@ mod tests {
         let mut worst_rate: f64 = 0.0;
         for _ in 0..30_000 {
             let (thrust, u, _) = fly_to(&mut fs, &target, Vector3::zeros(), 0.0, &x, &f, dt);
-            let applied = (u.component_mul(&gamma) + delta)
-                .zip_zip_map(&f.torque_lo, &f.torque_hi, |u, lo, hi| u.clamp(lo, hi));
+            let applied = (u.component_mul(&gamma) + delta).zip_zip_map(
+                &f.torque_lo,
+                &f.torque_hi,
+                |u, lo, hi| u.clamp(lo, hi),
+            );
             // Small-angle rigid body, enough for the test.
             let acc = crate::kinematics::thrust_axis(&x.a) * (thrust / f.mass)
                 - Vector3::new(0.0, 0.0, f.gravity)

@@ -184,16 +184,20 @@ impl Plant {
         let x = veh.state;
         let last = veh.last_command;
         let failsafe = &mut veh.failsafe;
-        let cmd = crate::fallback::command(rt, &last, since_steps, dt, step, i, || {
-            match rt.fallback {
+        let cmd =
+            crate::fallback::command(rt, &last, since_steps, dt, step, i, || match rt.fallback {
                 Fallback::Hover => {
-                    let (thrust, torque) =
-                        crate::fallback::level_hover(rt, body.mass, body.gravity, &body.inertia, &x);
+                    let (thrust, torque) = crate::fallback::level_hover(
+                        rt,
+                        body.mass,
+                        body.gravity,
+                        &body.inertia,
+                        &x,
+                    );
                     (thrust, torque, [0.0, 0.0, x.a[2]])
                 }
                 Fallback::Slot | Fallback::Hold => {
-                    let fs = failsafe
-                        .get_or_insert_with(|| {
+                    let fs = failsafe.get_or_insert_with(|| {
                         Failsafe::take_over(
                             &x,
                             Vector3::from(last.torque_nm),
@@ -210,8 +214,7 @@ impl Plant {
                         crate::fallback::fly_to(fs, &target, push, heading, &x, frame, dt);
                     (thrust, torque.into(), setpoint.into())
                 }
-            }
-        });
+            });
         self.set_input(i, &cmd);
         cmd
     }

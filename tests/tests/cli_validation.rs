@@ -118,7 +118,12 @@ fn check_of_the_embedded_paper_exact_scenario_prints_json_with_verdicts_and_exit
 fn check_exits_0_on_the_shipped_paper_design_whose_unmet_theorem1_conditions_are_information() {
     let dir = temp_dir("check-paper");
     let o = formation(&dir, &["check", "--json"]);
-    assert_eq!(o.status.code(), Some(0), "the paper design flies: {}", stderr(&o));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "the paper design flies: {}",
+        stderr(&o)
+    );
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
     let level = |name: &str| {
         v["verdicts"]
@@ -151,7 +156,15 @@ fn check_exits_3_on_a_ring_pinned_at_one_agent_that_it_predicts_not_to_fly() {
     let ring = dir.join("ring7.toml");
     let g = formation(
         &dir,
-        &["scenario", "--n", "7", "--graph", "ring", "--out", ring.to_str().unwrap()],
+        &[
+            "scenario",
+            "--n",
+            "7",
+            "--graph",
+            "ring",
+            "--out",
+            ring.to_str().unwrap(),
+        ],
     );
     assert!(g.status.success(), "{}", stderr(&g));
     let pinned = [
@@ -169,9 +182,19 @@ fn check_exits_3_on_a_ring_pinned_at_one_agent_that_it_predicts_not_to_fly() {
     // Every other agent pinned (the generator's default) flies (docs/tuning.md, section 7).
     let o = formation(
         &dir,
-        &["check", ring.to_str().unwrap(), "--set", "graph.leader_broadcast=\"pinned\""],
+        &[
+            "check",
+            ring.to_str().unwrap(),
+            "--set",
+            "graph.leader_broadcast=\"pinned\"",
+        ],
     );
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stdout));
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -179,8 +179,18 @@ fn the_failsafe_flies_the_slot_or_holds_identically_in_run_and_sim_and_beats_the
         assert!(residue_of(&r).is_empty());
     }
     assert!(peaks[0] <= 1.0, "slot: peak {} m", peaks[0]);
-    assert!(peaks[1] < peaks[2], "hold {} m vs hover {} m", peaks[1], peaks[2]);
-    assert!(peaks[2] > 2.0 * peaks[0], "hover {} m vs slot {} m", peaks[2], peaks[0]);
+    assert!(
+        peaks[1] < peaks[2],
+        "hold {} m vs hover {} m",
+        peaks[1],
+        peaks[2]
+    );
+    assert!(
+        peaks[2] > 2.0 * peaks[0],
+        "hover {} m vs slot {} m",
+        peaks[2],
+        peaks[0]
+    );
 }
 
 #[test]

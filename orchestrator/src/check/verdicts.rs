@@ -53,8 +53,9 @@ fn sufficient(holds: bool) -> Level {
 fn not_flown(mut v: Verdict, gain_set: &str) -> Verdict {
     if v.level != Level::Ok {
         v.level = Level::Info;
-        v.why
-            .push_str(&format!(" (the `{gain_set}` gain set, not flown by the checked variant)"));
+        v.why.push_str(&format!(
+            " (the `{gain_set}` gain set, not flown by the checked variant)"
+        ));
     }
     v
 }

@@ -147,7 +147,11 @@ fn worst_error(run: &Run) -> Vec<(f64, f64)> {
     let per: Vec<Vec<(f64, f64)>> = run
         .agents
         .iter()
-        .map(|a| a.derived(&["ex", "ey", "ez"], |r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()))
+        .map(|a| {
+            a.derived(&["ex", "ey", "ez"], |r| {
+                (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
+            })
+        })
         .collect();
     let rows = per.iter().map(Vec::len).min().unwrap_or(0);
     (0..rows)

@@ -182,7 +182,8 @@ impl Series {
                 let at = s as usize + p + 1;
                 if e > threshold {
                     run_start = p + 1;
-                } else if (p + 1 - run_start >= settle && at >= must_reach) || at == steps as usize {
+                } else if (p + 1 - run_start >= settle && at >= must_reach) || at == steps as usize
+                {
                     recovered = Some(s + run_start as u64);
                     break;
                 }
@@ -205,7 +206,8 @@ impl Series {
                     .unwrap_or(0)
             };
             let back = m.back_step.map(|b| b.min(steps));
-            let sep_span = back.map(|b| s as usize..(span_end.max(b) as usize).min(self.separation.len()));
+            let sep_span =
+                back.map(|b| s as usize..(span_end.max(b) as usize).min(self.separation.len()));
             let sep = sep_span.map(|r| self.separation.get(r).unwrap_or(&[]));
             let back_end = back.map(|b| span_end.max(b + settle as u64).min(steps));
             out.push(EventSummary {
@@ -387,7 +389,10 @@ mod tests {
             back_step: Some(2000),
         };
         let e = &s.measure(&[m], 0.001)[0];
-        assert_eq!(e.peak_error_m, 1.0, "the bump after the return is the event's");
+        assert_eq!(
+            e.peak_error_m, 1.0,
+            "the bump after the return is the event's"
+        );
         assert!((e.recovered_after_s.unwrap() - 3.5).abs() < 1e-9, "{e:?}");
     }
 
