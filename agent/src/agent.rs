@@ -338,6 +338,17 @@ impl Agent {
         Ok(())
     }
 
+    /// Re-synchronises the controller to the vehicle's state `own` before its first command after a
+    /// restart or a hang (`docs/failures.md`, bumpless re-entry): command filter 1 at rest at the
+    /// current attitude, the rate command filter at the current body rate, the auxiliary systems at
+    /// 0, so that z_i1 and z_i2 start at 0 instead of at the distance between the dead process's
+    /// filters and a vehicle the failsafe flew. Delay histories, RBFNN weights, adaptive estimates
+    /// and the fault identifier are kept.
+    pub fn resync(&mut self, own: &VehicleState) {
+        self.attitude_filter.reset(own.attitude);
+        self.attitude.resync(&Vector3::from(own.rate));
+    }
+
     /// Computes the command of step k from the current attitude and rate in `own` and the delayed
     /// information, then advances the controller's internal states by dt.
     pub fn step(&mut self, own: &VehicleState) -> ControlCommand {

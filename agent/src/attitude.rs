@@ -85,6 +85,16 @@ impl AttitudeLoop {
         }
     }
 
+    /// Re-synchronises the loop to a vehicle flying at body rate `w` (a controller taking over from
+    /// the failsafe): the rate command filter at rest at `w`, the auxiliary systems E_i1, E_i2 at 0
+    /// (they integrate the saturation excess of commands this controller did not fly). The
+    /// adaptive estimates and the fault identifier are kept.
+    pub fn resync(&mut self, w: &Vector3<f64>) {
+        self.rate_filter.reset((*w).into());
+        self.e1 = Vector3::zeros();
+        self.e2 = Vector3::zeros();
+    }
+
     /// Computes U_iAC of step `step` for the attitude `a`, rate `w`, filtered attitude command `a_c` and
     /// its derivative `a_c_dot`, then advances every internal state by `dt`.
     pub fn step(

@@ -38,6 +38,14 @@ impl CommandFilter {
         self.q2
     }
 
+    /// Puts the filter at rest at `value` (within the magnitude limits): q1 = value, q2 = 0.
+    pub fn reset(&mut self, value: [f64; 3]) {
+        for k in 0..3 {
+            self.q1[k] = value[k].clamp(-self.mag[k], self.mag[k]);
+            self.q2[k] = 0.0;
+        }
+    }
+
     /// Magnitude limits of the channels.
     pub fn magnitude_limit(&self) -> [f64; 3] {
         self.mag

@@ -44,6 +44,9 @@ pub struct AgentParams {
     /// A neighbour share older than the delayed step by more than this many steps is not used
     /// (`runtime.stale_after_s`).
     pub stale_steps: u64,
+    /// A new or resumed controller re-synchronises its filters to the vehicle before its first
+    /// command (`runtime.rejoin_resync`, [`crate::Agent::resync`]).
+    pub rejoin_resync: bool,
 }
 
 impl AgentParams {
@@ -68,6 +71,7 @@ impl AgentParams {
             delay: s.agents[id].delay.clone(),
             gains: s.controller.clone(),
             stale_steps: s.runtime.stale_steps(s.simulation.dt_s),
+            rejoin_resync: s.runtime.rejoin_resync,
         }
     }
 

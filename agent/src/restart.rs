@@ -40,7 +40,8 @@ pub struct Replayed {
 
 /// Rebuilds `agent` (already restored from the checkpoint of `plan.checkpoint`, or fresh) up to
 /// step `plan.rejoin_at`: replays the control of [checkpoint, down_from) and observes
-/// [max(down_from, rejoin_at - capacity), rejoin_at). `reference(k)` is the reference of step k,
+/// [max(down_from, rejoin_at - capacity), rejoin_at), then re-synchronises its filters to the
+/// vehicle's state of rejoin_at - 1 (`Agent::resync`, under `runtime.rejoin_resync`). `reference(k)` is the reference of step k,
 /// `state(k, j)` the state quadrotor j had at step k, `recorded(k)` the thrust and torque command
 /// the agent sent at step k.
 pub fn rebuild(
@@ -75,8 +76,13 @@ pub fn rebuild(
         }
     }
     let refill = plan.down_from.max(plan.rejoin_at.saturating_sub(capacity));
+    let mut last = None;
     for k in refill..plan.rejoin_at {
-        observe(agent, k);
+        last = Some(observe(agent, k));
+    }
+    // Bumpless re-entry: the filters meet the vehicle where the failsafe left it.
+    if let Some(own) = last.filter(|_| agent.params().rejoin_resync) {
+        agent.resync(&own);
     }
     out
 }

@@ -1,10 +1,15 @@
 //! N quadrotors stepped together: the plant of a run.
 
 use crate::dynamics::{rk4_with, Body, HeldInput, RigidState, TimeTerms};
+use crate::fallback::{Airframe, Failsafe, Target};
 use crate::faults::{actuate, FaultModel};
 use crate::perturbations::{disturbance, uncertainty};
-use formation_config::protocol::wire::{ControlCommand, FaultInjection, PlantTruth, VehicleState};
+use formation_config::protocol::wire::{
+    ControlCommand, FaultInjection, PlantTruth, ReferenceFrame, VehicleState,
+};
+use formation_config::scenario::events::{Fallback, Runtime};
 use formation_config::scenario::{AgentSpec, Scenario};
+use formation_leader::Mission;
 use nalgebra::Vector3;
 
 /// One quadrotor: its body, its perturbation profiles, its faults, its state and held input.
@@ -23,6 +28,11 @@ struct Vehicle {
     /// True once [`Plant::advance_vehicle`] has integrated this quadrotor over the current step:
     /// `state` and `terms_now` then already belong to step k + 1.
     advanced: bool,
+    /// Its position at the start of the current step (what the others' failsafes see of it once
+    /// it is integrated).
+    p_step: Vector3<f64>,
+    /// The onboard failsafe's state while it flies the quadrotor (None: its controller does).
+    failsafe: Option<Failsafe>,
 }
 
 /// The plant: N quadrotors, the step counter and the shared body parameters.
@@ -35,6 +45,13 @@ pub struct Plant {
     dt: f64,
     step: u64,
     vehicles: Vec<Vehicle>,
+    /// The mission, whose reference of each step the leader broadcasts to every quadrotor: what
+    /// the `slot` failsafe flies (the leader process computes the same frame from it).
+    mission: Mission,
+    /// What the failsafe flies.
+    airframe: Airframe,
+    /// The safety distance the failsafe keeps from the other quadrotors, m.
+    safety_m: f64,
 }
 
 impl Plant {
@@ -75,17 +92,29 @@ impl Plant {
                         ..ControlCommand::default()
                     },
                     advanced: false,
+                    p_step: Vector3::from(a.initial_position_m),
+                    failsafe: None,
                 }
             })
             .collect();
         Plant {
-            body,
             torque_lo: Vector3::from(v.torque_min_nm),
             torque_hi: Vector3::from(v.torque_max_nm),
             thrust_max: v.thrust_max_n,
             dt: s.simulation.dt_s,
             step: 0,
             vehicles,
+            mission: Mission::from_scenario(s),
+            airframe: Airframe {
+                mass: body.mass,
+                gravity: body.gravity,
+                inertia: body.inertia,
+                torque_lo: Vector3::from(v.torque_min_nm),
+                torque_hi: Vector3::from(v.torque_max_nm),
+                thrust_max: v.thrust_max_n,
+            },
+            safety_m: s.metrics.safety_distance_m,
+            body,
         }
     }
 
@@ -130,34 +159,92 @@ impl Plant {
     }
 
     /// Sets the inputs of quadrotor `i` for the current step from its command: the thrust is clamped
-    /// to [0, T_max], the torque goes through the faults (4) and the saturation (3).
+    /// to [0, T_max], the torque goes through the faults (4) and the saturation (3). Its controller
+    /// flies it: the failsafe, if it flew it, lets go.
     pub fn apply(&mut self, i: usize, cmd: &ControlCommand) {
         self.vehicles[i].last_command = *cmd;
+        self.vehicles[i].failsafe = None;
         self.set_input(i, cmd);
     }
 
     /// Flies quadrotor `i` on its fallback at the current step, its controller down for
-    /// `since_steps` steps (`fallback::command`): returns the command applied.
-    pub fn apply_fallback(
-        &mut self,
-        i: usize,
-        since_steps: u64,
-        rt: &formation_config::scenario::events::Runtime,
-    ) -> ControlCommand {
-        let veh = &self.vehicles[i];
+    /// `since_steps` steps (`fallback::command`, `rt.fallback`): returns the command applied.
+    pub fn apply_fallback(&mut self, i: usize, since_steps: u64, rt: &Runtime) -> ControlCommand {
+        let dt = self.dt;
+        let step = self.step;
+        let held = crate::fallback::held(rt, since_steps, dt);
+        let (target, push) = if held || rt.fallback == Fallback::Hover {
+            (None, Vector3::zeros())
+        } else {
+            (self.slot(i, rt), self.push(i))
+        };
         let body = &self.body;
-        let cmd = crate::fallback::command(
-            rt,
-            &veh.last_command,
-            since_steps,
-            self.dt,
-            self.step,
-            i,
-            veh.state.a[2],
-            || crate::fallback::level_hover(rt, body.mass, body.gravity, &body.inertia, &veh.state),
-        );
+        let frame = &self.airframe;
+        let veh = &mut self.vehicles[i];
+        let x = veh.state;
+        let last = veh.last_command;
+        let failsafe = &mut veh.failsafe;
+        let cmd =
+            crate::fallback::command(rt, &last, since_steps, dt, step, i, || match rt.fallback {
+                Fallback::Hover => {
+                    let (thrust, torque) = crate::fallback::level_hover(
+                        rt,
+                        body.mass,
+                        body.gravity,
+                        &body.inertia,
+                        &x,
+                    );
+                    (thrust, torque, [0.0, 0.0, x.a[2]])
+                }
+                Fallback::Slot | Fallback::Hold => {
+                    let fs = failsafe.get_or_insert_with(|| {
+                        Failsafe::take_over(
+                            &x,
+                            Vector3::from(last.torque_nm),
+                            Vector3::from(last.telemetry.f_hat),
+                        )
+                    });
+                    let target = target.unwrap_or(Target {
+                        p: fs.hold,
+                        v: Vector3::zeros(),
+                        a: Vector3::zeros(),
+                    });
+                    let heading = fs.heading;
+                    let (thrust, torque, setpoint) =
+                        crate::fallback::fly_to(fs, &target, push, heading, &x, frame, dt);
+                    (thrust, torque.into(), setpoint.into())
+                }
+            });
         self.set_input(i, &cmd);
         cmd
+    }
+
+    /// The slot of quadrotor `i` at the current step under `slot` (None: `hold` holds its point):
+    /// P_d + Delta_i0 of the leader's reference of the step, with derivatives.
+    fn slot(&self, i: usize, rt: &Runtime) -> Option<Target> {
+        if rt.fallback != Fallback::Slot || i >= self.mission.n_agents() {
+            return None;
+        }
+        let mut r = ReferenceFrame::default();
+        self.mission.reference(self.step, self.time(), &mut r);
+        let sum = |a: [f64; 3], b: [f64; 3]| Vector3::from(a) + Vector3::from(b);
+        Some(Target {
+            p: sum(r.p_d, r.offset[i]),
+            v: sum(r.v_d, r.offset_vel[i]),
+            a: sum(r.a_d, r.offset_acc[i]),
+        })
+    }
+
+    /// The failsafe's repulsion of quadrotor `i` from the others at their positions of the current
+    /// step (`fallback::repulsion`).
+    fn push(&self, i: usize) -> Vector3<f64> {
+        let others = self
+            .vehicles
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, v)| if v.advanced { v.p_step } else { v.state.p });
+        crate::fallback::repulsion(&self.vehicles[i].state.p, others, self.safety_m)
     }
 
     fn set_input(&mut self, i: usize, cmd: &ControlCommand) {
@@ -209,6 +296,7 @@ impl Plant {
             return;
         }
         let terms_next = TimeTerms::at(&veh.spec, t_next);
+        veh.p_step = veh.state.p;
         veh.state = rk4_with(
             &self.body,
             &veh.spec,

@@ -115,6 +115,90 @@ fn check_of_the_embedded_paper_exact_scenario_prints_json_with_verdicts_and_exit
 }
 
 #[test]
+fn check_exits_0_on_the_shipped_paper_design_whose_unmet_theorem1_conditions_are_information() {
+    let dir = temp_dir("check-paper");
+    let o = formation(&dir, &["check", "--json"]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "the paper design flies: {}",
+        stderr(&o)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON object");
+    let level = |name: &str| {
+        v["verdicts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["check"] == name)
+            .unwrap_or_else(|| panic!("{name} in the report"))["level"]
+            .clone()
+    };
+    assert_eq!(
+        level("theorem1.m_positive_definite"),
+        "INFO",
+        "a sufficient condition, not met"
+    );
+    assert_eq!(level("inner.unconstrained.cascade_margin"), "INFO");
+    assert_ne!(v["worst"], "FAIL");
+    let u = formation(&dir, &["check", "--variant", "unconstrained"]);
+    assert_eq!(
+        u.status.code(),
+        Some(3),
+        "the unconstrained variant's own cascade margin is negative"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn check_exits_3_on_a_ring_pinned_at_one_agent_that_it_predicts_not_to_fly() {
+    let dir = temp_dir("check-ring");
+    let ring = dir.join("ring7.toml");
+    let g = formation(
+        &dir,
+        &[
+            "scenario",
+            "--n",
+            "7",
+            "--graph",
+            "ring",
+            "--out",
+            ring.to_str().unwrap(),
+        ],
+    );
+    assert!(g.status.success(), "{}", stderr(&g));
+    let pinned = [
+        "--set",
+        "graph.leader_broadcast=\"pinned\"",
+        "--set",
+        "graph.leader_weights=[1.0,0.0,0.0,0.0,0.0,0.0,0.0]",
+    ];
+    let mut args = vec!["check", ring.to_str().unwrap()];
+    args.extend(pinned);
+    let o = formation(&dir, &args);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(3), "{text}");
+    assert!(text.contains("FAIL outer.leader_information"), "{text}");
+    // Every other agent pinned (the generator's default) flies (docs/tuning.md, section 7).
+    let o = formation(
+        &dir,
+        &[
+            "check",
+            ring.to_str().unwrap(),
+            "--set",
+            "graph.leader_broadcast=\"pinned\"",
+        ],
+    );
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bare_formation_starts_the_default_lockstep_run_exactly_like_formation_run() {
     let dir = temp_dir("bare");
     let mut child = Command::new(bin("formation"))

@@ -135,6 +135,64 @@ fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_beats_a
     assert!(residue_of(&run).is_empty());
 }
 
+/// Agent 3 crashes for 2 s and agent 1 hangs for 1 s: the failsafe flies their slots (`slot`,
+/// the default) or holds their points (`hold`), with no step below the safety distance and no
+/// violation once the controllers are back; the lockstep run writes sim's trajectory byte for byte
+/// in both modes; `slot` stays within 1 m and the level hover of the same timeline is far worse.
+#[test]
+fn the_failsafe_flies_the_slot_or_holds_identically_in_run_and_sim_and_beats_the_level_hover() {
+    let dir = temp_dir("failsafe");
+    let s = scenario_with(
+        &dir,
+        "failsafe",
+        9.0,
+        "[[events]]\nat_s = 4.0\nkind = \"crash\"\nagent = 3\ndown_s = 2.0\n\n[[events]]\nat_s = 6.5\nkind = \"hang\"\nagent = 1\ndown_s = 1.0\n",
+    );
+    let s = s.to_str().unwrap();
+    let mut peaks = Vec::new();
+    for mode in ["slot", "hold", "hover"] {
+        let set = format!("runtime.fallback=\"{mode}\"");
+        let sim = dir.join(format!("sim-{mode}"));
+        let o = formation(&["sim", s, "--set", &set, "--out", sim.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let events = summary(&sim)["events"].as_array().unwrap().clone();
+        let peak = events
+            .iter()
+            .map(|e| e["peak_error_m"].as_f64().unwrap())
+            .fold(0.0, f64::max);
+        eprintln!("fallback {mode}: {events:?}");
+        peaks.push(peak);
+        if mode == "hover" {
+            continue;
+        }
+        for e in &events {
+            assert_eq!(e["violations_once_back"], 0, "{mode}: {e}");
+            assert_eq!(e["steps_below_safety_during"], 0, "{mode}: {e}");
+        }
+        let run = dir.join(format!("run-{mode}"));
+        let (code, stderr, r) = run_to_end(&[s, "--set", &set], &run);
+        assert_eq!(code, 0, "{stderr}");
+        assert!(
+            same_file(&sim.join("trajectory.csv"), &run.join("trajectory.csv")),
+            "{mode}: the lockstep run differs from sim"
+        );
+        assert!(residue_of(&r).is_empty());
+    }
+    assert!(peaks[0] <= 1.0, "slot: peak {} m", peaks[0]);
+    assert!(
+        peaks[1] < peaks[2],
+        "hold {} m vs hover {} m",
+        peaks[1],
+        peaks[2]
+    );
+    assert!(
+        peaks[2] > 2.0 * peaks[0],
+        "hover {} m vs slot {} m",
+        peaks[2],
+        peaks[0]
+    );
+}
+
 #[test]
 fn a_killed_agent_is_replaced_under_on_failure_counted_measured_and_the_run_ends_with_exit_0() {
     let _one = one_at_a_time();
@@ -387,6 +445,16 @@ fn a_stopped_agent_of_a_realtime_run_is_named_by_its_silence_replaced_and_the_ru
         .find(|e| e["kind"] == "hung")
         .expect("the hang is an event");
     eprintln!("realtime SIGSTOP of agent 3: {hung}");
+    // The failsafe flies agent 3's slot while it is silent (docs/failures.md).
+    let peak = hung["peak_error_m"].as_f64().expect("measured");
+    assert!(peak <= 1.5, "peak formation error {peak} m: {hung}");
+    let worst = s["agents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["max_formation_error_m"]["whole"].as_f64().unwrap_or(0.0))
+        .fold(0.0, f64::max);
+    eprintln!("realtime SIGSTOP of agent 3: worst formation error over the run {worst} m");
     assert_eq!(s["diverged"], false);
     assert!(residue_of(&run).is_empty());
 }

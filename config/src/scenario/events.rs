@@ -167,6 +167,22 @@ pub enum RestartState {
     Cold,
 }
 
+/// What the plant's onboard failsafe flies a quadrotor on once its controller has been down for
+/// `hold_s` (`plant/src/fallback.rs`, docs/failures.md "While an agent is down").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Fallback {
+    /// Fly its formation slot: the leader's reference of the step (broadcast to every quadrotor)
+    /// plus its formation offset, with the failsafe's own position and attitude loops.
+    #[default]
+    Slot,
+    /// Brake and hold the point where it stops, altitude included.
+    Hold,
+    /// Level hover: roll and pitch to zero, yaw rate damped, thrust against gravity (drifts with
+    /// the velocity it had).
+    Hover,
+}
+
 /// `[runtime]`: supervision, checkpoints and the fallbacks of a run. Every field has a default, so
 /// scenarios without the section behave as before (no restarts).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -186,6 +202,12 @@ pub struct Runtime {
     /// While an agent is down, the plant holds its last command for this long, then flies the
     /// level-hover fallback, s. Default 0.2.
     pub hold_s: f64,
+    /// What the failsafe flies after `hold_s`: `slot`, `hold` or `hover`. Default `slot`.
+    pub fallback: Fallback,
+    /// A new or resumed controller re-synchronises its command filters and auxiliary systems to
+    /// the vehicle's current attitude and rate before its first command (adaptive estimates and
+    /// RBFNN weights are kept). Default true.
+    pub rejoin_resync: bool,
     /// Level-hover fallback: attitude gain (torque = -J (k_att A + k_rate omega)), 1/s². Default 16.
     pub fallback_attitude_gain: f64,
     /// Level-hover fallback: rate gain, 1/s. Default 8.
@@ -204,6 +226,8 @@ impl Default for Runtime {
             checkpoint_every_s: 1.0,
             restart_state: RestartState::Warm,
             hold_s: 0.2,
+            fallback: Fallback::Slot,
+            rejoin_resync: true,
             fallback_attitude_gain: 16.0,
             fallback_rate_gain: 8.0,
             stale_after_s: 0.1,

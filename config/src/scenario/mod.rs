@@ -174,14 +174,14 @@ pub struct FormationSpec {
     /// take the agents in order (the first ring agents 1..=n_1, the next the following n_2, ...), every
     /// ring's radius A_j(t) moves from its own R_c,j to its own R_e,j with the shared transition of
     /// A_t, every slot spins with the shared w_t, and the three ring-wide values above are not used.
-    /// Not in the paper (N = 5 is one ring); see docs/deviations.md (D21).
+    /// Not in the paper (N = 5 is one ring); see docs/deviations.md (D22).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub rings: Vec<FormationRing>,
 }
 
 /// One ring of a concentric formation: Lambda_i = A_j(t) [cos(w_t (t - T2) + phi_i), sin(...), 0]
 /// for the k-th agent (k = 0..n_j - 1) of ring j, with A_j(t) = R_e,j + (R_c,j - R_e,j)
-/// (atan(k_r (T1 - t)) / pi + 1/2) and phi_i = phi_j + 2 pi k / n_j. Not in the paper (D21).
+/// (atan(k_r (T1 - t)) / pi + 1/2) and phi_i = phi_j + 2 pi k / n_j. Not in the paper (D22).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FormationRing {

@@ -11,8 +11,14 @@
 //!   [`freq`]: the linear-systems helpers both use.
 //! * [`barrier`]: roll/pitch authority after the worst faults vs what the attitude command demands.
 //!
-//! Exit code: 0 when the report was printed and no verdict is FAIL (WARN included), 3 when one is
-//! FAIL (the report is printed all the same), 2 on an invalid scenario (docs/cli.md).
+//! Levels: OK; INFO, a sufficient condition of the paper that is not met (Theorem 1's M > 0 and
+//! ties, which the shipped gains do not meet and yet fly), or a verdict on the gain set the checked
+//! `--variant` does not fly; WARN, a rule of thumb broken; FAIL, the analysis predicts that the
+//! design will not fly (L + B not positive definite, no leader-information window, a loop of the
+//! flown gain set with no time-scale separation or phase margin).
+//!
+//! Exit code: 0 when the report was printed and no verdict is FAIL (INFO and WARN included), 3 when
+//! one is FAIL (the report is printed all the same), 2 on an invalid scenario (docs/cli.md).
 //!
 //! # JSON fields (`--json`; stable names, units in the names or in the item docs)
 //! * `scenario`: scenario name.
@@ -38,7 +44,8 @@
 //!   `attitude_gain`, `rate_gain`, `attitude_over_fastest_outer`, `rate_over_attitude`,
 //!   `rate_filter_over_rate`, `rate_filter_over_attitude`, `attitude_loop`, `cascade`.
 //! * `barrier`: [`barrier::Barrier`].
-//! * `verdicts`: [{`check`, `level` ("OK" | "WARN" | "FAIL"), `why`}]; `worst`: the worst level.
+//! * `variant`, `gain_set`: the variant checked and the inner gain set it flies.
+//! * `verdicts`: [{`check`, `level` ("OK" | "INFO" | "WARN" | "FAIL"), `why`}]; `worst`: the worst level.
 
 pub mod barrier;
 pub mod freq;
@@ -69,6 +76,10 @@ pub struct CheckArgs {
     /// Override a scenario parameter, e.g. `--set controller.position.k_v=2` (repeatable).
     #[arg(long = "set", value_name = "PATH=VALUE")]
     pub sets: Vec<String>,
+    /// The variant whose design is judged (proposed, no-rbfnn, unconstrained): the verdicts on
+    /// the inner gain set it does not fly are information.
+    #[arg(long, default_value = "proposed")]
+    pub variant: String,
 }
 
 /// Outer-loop part of the report.
@@ -112,6 +123,10 @@ pub struct Filters {
 pub struct Report {
     /// Scenario name.
     pub scenario: String,
+    /// The variant checked.
+    pub variant: &'static str,
+    /// The inner gain set it flies (`constrained` or `unconstrained`).
+    pub gain_set: &'static str,
     /// Spectrum of L + B.
     pub graph: spectrum::Spectrum,
     /// Theorem 1 (absent when L + B is not positive definite).
@@ -134,6 +149,11 @@ pub struct Report {
 
 /// Computes the whole report of a (validated) scenario.
 pub fn report(s: &Scenario) -> Report {
+    report_for(s, formation_config::Variant::Proposed)
+}
+
+/// The report of a (validated) scenario flown by `variant`.
+pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
     let graph = spectrum::spectrum(&Topology::from_scenario(s));
     let pos = &s.controller.position;
     let tau = s.simulation.max_delay_s;
@@ -271,6 +291,12 @@ pub fn report(s: &Scenario) -> Report {
     let barrier = barrier::analyse(s);
     let mut r = Report {
         scenario: s.name.clone(),
+        variant: variant.name(),
+        gain_set: if variant == formation_config::Variant::Unconstrained {
+            "unconstrained"
+        } else {
+            "constrained"
+        },
         graph,
         theorem1,
         outer,
@@ -297,7 +323,11 @@ pub fn main(args: CheckArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    let r = report(&s);
+    let variant = match crate::cli::parse_variant(&args.variant) {
+        Ok(v) => v,
+        Err(code) => return code,
+    };
+    let r = report_for(&s, variant);
     if args.json {
         match serde_json::to_string_pretty(&r) {
             Ok(text) => println!("{text}"),
@@ -317,7 +347,7 @@ pub fn main(args: CheckArgs) -> ExitCode {
 pub fn exit_code(worst: Level) -> ExitCode {
     match worst {
         Level::Fail => ExitCode::from(crate::cli::EXIT_RESULT_FAILED),
-        Level::Ok | Level::Warn => ExitCode::SUCCESS,
+        Level::Ok | Level::Info | Level::Warn => ExitCode::SUCCESS,
     }
 }
 
@@ -330,10 +360,27 @@ mod tests {
         let r = report(&Scenario::paper_exact());
         let find = |name: &str| r.verdicts.iter().find(|v| v.check == name).unwrap().level;
         assert_eq!(find("graph.positive_definite"), Level::Ok);
-        assert_eq!(find("theorem1.m_positive_definite"), Level::Fail);
-        assert_eq!(find("theorem1.ties"), Level::Fail);
+        assert_eq!(find("theorem1.m_positive_definite"), Level::Info);
+        assert_eq!(find("theorem1.ties"), Level::Info);
         assert_eq!(find("inner.constrained.attitude_over_outer"), Level::Fail);
         assert_eq!(r.worst, Level::Fail);
+    }
+
+    #[test]
+    fn the_shipped_design_meets_no_sufficient_condition_of_theorem1_and_is_not_predicted_to_fail() {
+        let r = report(&Scenario::paper());
+        let find = |name: &str| r.verdicts.iter().find(|v| v.check == name).unwrap().level;
+        assert_eq!(find("theorem1.m_positive_definite"), Level::Info);
+        assert_eq!(find("inner.unconstrained.cascade_margin"), Level::Info);
+        assert!(r.worst != Level::Fail, "{:?}", r.verdicts);
+        let u = report_for(&Scenario::paper(), formation_config::Variant::Unconstrained);
+        let level = u
+            .verdicts
+            .iter()
+            .find(|v| v.check == "inner.unconstrained.cascade_margin")
+            .unwrap()
+            .level;
+        assert_eq!(level, Level::Fail, "the flown gain set's margin is judged");
     }
 
     #[test]

@@ -8,10 +8,16 @@ pub enum Level {
     /// The condition holds with margin.
     #[serde(rename = "OK")]
     Ok,
+    /// A sufficient condition of the paper's proof is not met: information, not a prediction
+    /// that the design will not fly (sufficient conditions are conservative).
+    #[serde(rename = "INFO")]
+    Info,
     /// A rule of thumb is broken: the gains may still work, but expect trouble.
     #[serde(rename = "WARN")]
     Warn,
-    /// A condition the paper's proof or basic loop analysis needs does not hold.
+    /// The analysis predicts that the design will not fly: no stabilising feedback on the graph
+    /// (Lemma 1), no leader-information window, or a loop of the flown gain set with no time-scale
+    /// separation or phase margin.
     #[serde(rename = "FAIL")]
     Fail,
 }
@@ -21,6 +27,7 @@ impl Level {
     pub fn label(self) -> &'static str {
         match self {
             Level::Ok => "OK",
+            Level::Info => "INFO",
             Level::Warn => "WARN",
             Level::Fail => "FAIL",
         }
@@ -71,6 +78,14 @@ mod tests {
         assert_eq!(separation_level(2.0, 3.0), Level::Warn);
         assert_eq!(separation_level(0.5, 3.0), Level::Fail);
         assert_eq!(separation_level(f64::NAN, 3.0), Level::Fail);
+    }
+
+    #[test]
+    fn information_ranks_above_ok_and_below_a_warning() {
+        let worst = |l: &[Level]| l.iter().copied().max_by_key(|l| *l as u8).unwrap();
+        assert_eq!(worst(&[Level::Ok, Level::Info]), Level::Info);
+        assert_eq!(worst(&[Level::Info, Level::Warn]), Level::Warn);
+        assert_eq!(serde_json::to_string(&Level::Info).unwrap(), "\"INFO\"");
     }
 
     #[test]

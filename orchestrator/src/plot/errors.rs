@@ -136,3 +136,76 @@ pub fn events<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         },
     )
 }
+
+/// Seconds shown before the first event in `events_compare`.
+const COMPARE_BEFORE_S: f64 = 2.0;
+/// Seconds shown after it.
+const COMPARE_AFTER_S: f64 = 12.0;
+
+/// The worst agent's formation error at each time row of `run`.
+fn worst_error(run: &Run) -> Vec<(f64, f64)> {
+    let per: Vec<Vec<(f64, f64)>> = run
+        .agents
+        .iter()
+        .map(|a| {
+            a.derived(&["ex", "ey", "ez"], |r| {
+                (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
+            })
+        })
+        .collect();
+    let rows = per.iter().map(Vec::len).min().unwrap_or(0);
+    (0..rows)
+        .map(|k| (per[0][k].0, per.iter().map(|p| p[k].1).fold(0.0, f64::max)))
+        .collect()
+}
+
+/// The worst agent's formation error of the run and of each `--events-compare` run, from 2 s
+/// before the run's first event to 12 s after it; each line is named by its run's directory.
+pub fn events_compare<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
+    let t0 = fig.run.events.first().map_or(0.0, |e| e.0);
+    let window = (t0 - COMPARE_BEFORE_S, t0 + COMPARE_AFTER_S);
+    let name = |r: &Run| {
+        r.dir
+            .file_name()
+            .map_or_else(|| r.label(), |n| n.to_string_lossy().into_owned())
+    };
+    let lines = std::iter::once(fig.run)
+        .chain(fig.others.iter())
+        .enumerate()
+        .map(|(k, r)| {
+            let points = worst_error(r)
+                .into_iter()
+                .filter(|(t, _)| *t >= window.0 && *t <= window.1)
+                .collect();
+            Line::new(name(r), agent_color(k as u32 + 1), points)
+        })
+        .collect();
+    let area = titled(
+        root,
+        &format!(
+            "Worst formation error max_i ||P_i − P_d − Δ_i0|| around the first event ({})",
+            fig.run.title()
+        ),
+    )?;
+    draw_panel(
+        &area,
+        Panel {
+            title: format!(
+                "dashed: {}",
+                fig.run
+                    .events
+                    .iter()
+                    .map(|(t, what)| format!("{what} at {t:.2} s"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            x_desc: "t (s)",
+            y_desc: "max_i ||e_i|| (m)".to_string(),
+            lines,
+            markers: &fig.run.events,
+            legend: Legend::Side,
+            y_range: None,
+            x_range: Some(window),
+        },
+    )
+}

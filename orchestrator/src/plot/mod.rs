@@ -35,6 +35,11 @@ pub struct PlotArgs {
     /// Second run directory (e.g. a `no-rbfnn` or `unconstrained` run) compared in Figs. 6 and 9.
     #[arg(long, value_name = "DIR2")]
     pub compare: Option<PathBuf>,
+    /// Runs of the same timeline flown another way (e.g. `runtime.fallback`), repeatable: adds
+    /// `events_compare`, the worst agent's formation error of DIR and of each around the first
+    /// event, each line named by its directory.
+    #[arg(long = "events-compare", value_name = "DIR")]
+    pub events_compare: Vec<PathBuf>,
     /// Directory to write the figures into (created if missing). Default: the run directory.
     #[arg(long, value_name = "OUTDIR")]
     pub out: Option<PathBuf>,
@@ -129,9 +134,30 @@ pub fn run(args: &PlotArgs) -> Result<Vec<Rendered>, PlotError> {
             out.display()
         ))
     })?;
+    let others = args
+        .events_compare
+        .iter()
+        .map(|d| Run::load(d))
+        .collect::<Result<Vec<_>, _>>()?;
     let geometry = Geometry::for_run(&main_run);
-    #[allow(unused_mut)] // appended to with the `foxglove` feature
     let mut files = render_all(&main_run, compare.as_ref(), &geometry, &out, args.format)?;
+    if !others.is_empty() {
+        let path = out.join(format!("events_compare.{}", args.format.extension()));
+        let size = (1400, 700);
+        let fig = Figure {
+            run: &main_run,
+            compare: None,
+            geometry: &geometry,
+            others: &others,
+        };
+        draw_file(Kind::EventsCompare, &fig, &path, size, args.format)
+            .map_err(|e| PlotError::Render(format!("{}: {e}", path.display())))?;
+        files.push(Rendered {
+            path,
+            width: size.0,
+            height: size.1,
+        });
+    }
     #[cfg(feature = "foxglove")]
     if scene::available(&args.dir) {
         files.push(render_scene(args, &main_run, &out)?);
@@ -192,6 +218,7 @@ enum Kind {
     Delta,
     Separation,
     Events,
+    EventsCompare,
 }
 
 /// Draws figure `kind` on `root`.
@@ -210,6 +237,7 @@ fn draw<DB: style::Backend>(kind: Kind, fig: &Figure, root: &style::Area<DB>) ->
         Kind::Delta => estimates::delta(fig, root),
         Kind::Separation => separation::separation(fig, root),
         Kind::Events => errors::events(fig, root),
+        Kind::EventsCompare => errors::events_compare(fig, root),
     }
 }
 
@@ -246,6 +274,8 @@ pub struct Figure<'a> {
     pub compare: Option<&'a Run>,
     /// Coverage geometry and phase times.
     pub geometry: &'a Geometry,
+    /// Runs of the same timeline flown another way (`--events-compare`).
+    pub others: &'a [Run],
 }
 
 /// Renders Figs. 5-14 of `run` and the separation figure into `out`, as `format` files.
@@ -261,6 +291,7 @@ pub fn render_all(
         run,
         compare,
         geometry,
+        others: &[],
     };
     let n = run.agents.len() as u32;
     let cols = if compare.is_some() { 2 } else { 1 };

@@ -454,3 +454,24 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn events_compare_draws_one_worst_error_line_per_run_into_its_own_figure() {
+    let a = temp_dir("events-compare-a");
+    let b = temp_dir("events-compare-b");
+    write_synthetic_run(&a, 3, 301, 0.1, Some("proposed"));
+    write_synthetic_run(&b, 3, 301, 0.1, Some("proposed"));
+    let files = run(&PlotArgs {
+        dir: a.clone(),
+        events_compare: vec![b.clone()],
+        ..Default::default()
+    })
+    .expect("plot succeeds");
+    let f = files
+        .iter()
+        .find(|f| f.path.ends_with("events_compare.png"))
+        .expect("the comparison is written");
+    assert!(std::fs::metadata(&f.path).unwrap().len() > 1000);
+    let _ = std::fs::remove_dir_all(&a);
+    let _ = std::fs::remove_dir_all(&b);
+}

@@ -151,7 +151,10 @@ impl Recorder {
             mode,
             dt: s.simulation.dt_s,
             timing: None,
-            series: recovery::Series::with_capacity(s.n_steps() as usize),
+            series: recovery::Series {
+                safety_m: s.metrics.safety_distance_m,
+                ..recovery::Series::with_capacity(s.n_steps() as usize)
+            },
             events: s.events.clone(),
             timeline: s.timeline(),
             topology: formation_config::scenario::graph::Topology::from_scenario(s),
@@ -183,6 +186,9 @@ impl Recorder {
                 )
             });
         self.series.push(worst, violations);
+        if let Some(d) = self.metrics.separation.last {
+            self.series.push_separation(d);
+        }
         #[cfg(feature = "foxglove")]
         if let Some(live) = &mut self.live {
             let errors = self.metrics.agents.iter().map(|a| a.last_error);

@@ -4,11 +4,16 @@
 //!
 //! * `recovered_after_s`: sim time from the event to the first step from which the formation
 //!   error (worst agent) stays under max(0.3 m, 2x its worst value in the second before the event)
-//!   for `SETTLE_S`, searched within the event's window (until the next event of the same agent,
+//!   for `SETTLE_S` (for a `crash` or `hang`, through `SETTLE_S` after the controller's return), searched within the event's window (until the next event of the same agent,
 //!   or 30 s); 0 if it never left; null if it does not settle within the window.
 //! * `peak_error_m`: the worst formation error from the event to its recovery and the `SETTLE_S`
 //!   that confirm it (or the window's end); `violations_during`: attitude and rate constraint
 //!   violations (all agents) over the same span.
+//! * for an event that takes an agent down (`crash`, `hang`): `min_separation_during_m` and
+//!   `steps_below_safety_during`, the closest approach of two quadrotors and the steps below the
+//!   safety distance from the event to the later of the span's end and the controller's return;
+//!   `violations_once_back`, the constraint violations (all agents) from the controller's return
+//!   to the later of the span's end and `SETTLE_S` after the return.
 //! * `connectivity`: whether Assumption 1 (the graph of the agents that are up, over the links
 //!   that are up, connected, and one of them pinned to the leader) held at every step.
 
@@ -53,6 +58,14 @@ pub struct EventSummary {
     pub peak_error_m: f64,
     /// Constraint violations from the event to its recovery.
     pub violations_during: u64,
+    /// Closest approach of two quadrotors from the event to the later of its span's end and the
+    /// controller's return, m (events that take an agent down).
+    pub min_separation_during_m: Option<f64>,
+    /// Steps below the safety distance over the same span.
+    pub steps_below_safety_during: Option<u64>,
+    /// Constraint violations from the controller's return to the later of the span's end and
+    /// `SETTLE_S` after the return.
+    pub violations_once_back: Option<u64>,
 }
 
 /// Whether Assumption 1 held (`summary.json` `connectivity`).
@@ -83,6 +96,8 @@ pub struct Mark {
     pub detected_after_ms: Option<f64>,
     /// Restart time, ms.
     pub restarted_after_ms: Option<f64>,
+    /// The step its controller is back (events that take an agent down for a known time).
+    pub back_step: Option<u64>,
 }
 
 impl Mark {
@@ -96,6 +111,10 @@ impl Mark {
             step: e.step(dt),
             detected_after_ms: None,
             restarted_after_ms: None,
+            back_step: e
+                .down_s
+                .filter(|_| e.kind.takes_agent_down())
+                .map(|d| e.step(dt).saturating_add((d / dt).round().max(1.0) as u64)),
         }
     }
 }
@@ -107,6 +126,10 @@ pub struct Series {
     pub error: Vec<f64>,
     /// Cumulative constraint violations (all agents) after each step.
     pub violations: Vec<u64>,
+    /// Closest distance of two quadrotors per step, m (empty: not recorded).
+    pub separation: Vec<f64>,
+    /// Safety distance, m.
+    pub safety_m: f64,
 }
 
 impl Series {
@@ -115,6 +138,8 @@ impl Series {
         Series {
             error: Vec::with_capacity(steps),
             violations: Vec::with_capacity(steps),
+            separation: Vec::with_capacity(steps),
+            safety_m: 0.0,
         }
     }
 
@@ -122,6 +147,11 @@ impl Series {
     pub fn push(&mut self, error: f64, violations: u64) {
         self.error.push(error);
         self.violations.push(violations);
+    }
+
+    /// Appends one step's closest distance of two quadrotors (after [`Series::push`]).
+    pub fn push_separation(&mut self, d: f64) {
+        self.separation.push(d);
     }
 
     /// Measures each mark (sorted by step) against the series.
@@ -142,20 +172,29 @@ impl Series {
             let end = steps.min(s.saturating_add(window)).min(next_same);
             let settle = (SETTLE_S / dt).round() as usize;
             let span = &self.error[s as usize..end as usize];
+            // An event that takes a controller down is recovered only once the error has also
+            // stayed under through SETTLE_S after the controller's return.
+            let must_reach = m.back_step.map_or(0, |b| b.saturating_add(settle as u64)) as usize;
             // The first step from which `settle` steps (or the rest of the run) stay under.
             let mut recovered: Option<u64> = None;
             let mut run_start = 0usize;
             for (p, &e) in span.iter().enumerate() {
+                let at = s as usize + p + 1;
                 if e > threshold {
                     run_start = p + 1;
-                } else if p + 1 - run_start >= settle || (s as usize + p + 1 == steps as usize) {
+                } else if (p + 1 - run_start >= settle && at >= must_reach) || at == steps as usize
+                {
                     recovered = Some(s + run_start as u64);
                     break;
                 }
             }
             let recovered_step = recovered.unwrap_or(end);
-            // The event's span: to its recovery and through the settling that confirmed it.
-            let span_end = (recovered_step + settle as u64).min(end).max(s);
+            // The event's span: to its recovery and through the settling that confirmed it (and
+            // through SETTLE_S after the controller's return).
+            let span_end = (recovered_step + settle as u64)
+                .max(must_reach as u64)
+                .min(end)
+                .max(s);
             let peak = self.error[s as usize..span_end as usize]
                 .iter()
                 .copied()
@@ -166,7 +205,18 @@ impl Series {
                     .copied()
                     .unwrap_or(0)
             };
+            let back = m.back_step.map(|b| b.min(steps));
+            let sep_span =
+                back.map(|b| s as usize..(span_end.max(b) as usize).min(self.separation.len()));
+            let sep = sep_span.map(|r| self.separation.get(r).unwrap_or(&[]));
+            let back_end = back.map(|b| span_end.max(b + settle as u64).min(steps));
             out.push(EventSummary {
+                min_separation_during_m: sep.and_then(|d| d.iter().copied().reduce(f64::min)),
+                steps_below_safety_during: sep
+                    .map(|d| d.iter().filter(|&&x| x < self.safety_m).count() as u64),
+                violations_once_back: back
+                    .zip(back_end)
+                    .map(|(b, e)| viol(e).saturating_sub(viol(b))),
                 kind: m.kind.clone(),
                 agent: m.agent.map(|a| a + 1),
                 agents: m.agents.map(|[a, b]| [a + 1, b + 1]),
@@ -280,7 +330,9 @@ mod tests {
                     0
                 },
             );
+            s.push_separation(if (1050..1060).contains(&k) { 0.4 } else { 1.0 });
         }
+        s.safety_m = 0.5;
         let m = Mark {
             kind: "crash".into(),
             agent: Some(2),
@@ -288,6 +340,7 @@ mod tests {
             step: 1000,
             detected_after_ms: None,
             restarted_after_ms: Some(80.0),
+            back_step: Some(1100),
         };
         let out = s.measure(&[m], 0.001);
         let e = &out[0];
@@ -307,8 +360,40 @@ mod tests {
             "never above its threshold, 2 x the 1.0 m of the second before"
         );
         assert_eq!(e.violations_during, 201);
+        assert_eq!(e.min_separation_during_m, Some(0.4));
+        assert_eq!(e.steps_below_safety_during, Some(10));
+        assert_eq!(
+            e.violations_once_back,
+            Some(101),
+            "from the return at step 1100: 201 - 100"
+        );
         assert!(e.peak_error_m >= 0.15);
         assert_eq!(e.agent, Some(3));
+    }
+
+    #[test]
+    fn a_down_controller_is_recovered_only_once_the_error_stays_under_after_its_return() {
+        let mut s = Series::default();
+        // Under the threshold through the 2 s down window, then a bump 1 s after the return.
+        for k in 0..10_000u64 {
+            s.push(if (3000..3500).contains(&k) { 1.0 } else { 0.1 }, 0);
+            s.push_separation(1.0);
+        }
+        let m = Mark {
+            kind: "crash".into(),
+            agent: Some(0),
+            agents: None,
+            step: 0,
+            detected_after_ms: None,
+            restarted_after_ms: None,
+            back_step: Some(2000),
+        };
+        let e = &s.measure(&[m], 0.001)[0];
+        assert_eq!(
+            e.peak_error_m, 1.0,
+            "the bump after the return is the event's"
+        );
+        assert!((e.recovered_after_s.unwrap() - 3.5).abs() < 1e-9, "{e:?}");
     }
 
     #[test]
@@ -333,6 +418,7 @@ mod tests {
             step: 0,
             detected_after_ms: None,
             restarted_after_ms: None,
+            back_step: None,
         }
     }
 }

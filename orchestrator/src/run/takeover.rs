@@ -142,6 +142,7 @@ impl Takeover {
                     step: x.down_from?,
                     detected_after_ms: x.detected_after_ms,
                     restarted_after_ms: x.restarted_after_ms,
+                    back_step: None,
                 })
             })
             .collect()

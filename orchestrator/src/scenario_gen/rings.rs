@@ -3,7 +3,7 @@
 //! One ring of N slots needs the radius R_s(N) = s_min / (2 sin(pi/N)) to keep neighbours s_min
 //! apart, and N footprints of radius r_f cover the target's centre only for R <= r_f; beyond
 //! N = 12 (paper geometry: s_min = 1.176 m, r_f = 2.33 m) both cannot hold. The generator then flies
-//! concentric rings (`[[mission.formation.rings]]`, D21):
+//! concentric rings (`[[mission.formation.rings]]`, D22):
 //!
 //! * ring 0 is the template's ring: its N_0 (5) agents at the template's radii R_c,0 and R_e,0 (2.0 m
 //!   and 1.0 m), which cover the target disk as in the paper;

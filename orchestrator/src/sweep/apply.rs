@@ -20,9 +20,9 @@ use super::spec::Value;
 use crate::scenario_gen::{self, graphs::GraphKind, GenOptions};
 use formation_config::Scenario;
 
-/// Parameters that take whole numbers.
+/// Parameters that take whole numbers (an event's agent, `events[0].agent`, included).
 pub fn is_integer(name: &str) -> bool {
-    matches!(name, "n" | "k" | "seed")
+    matches!(name, "n" | "k" | "seed") || (name.starts_with("events[") && name.ends_with("].agent"))
 }
 
 fn count(name: &str, v: &Value, lo: f64) -> Result<usize, String> {

@@ -25,6 +25,52 @@ pub struct Metrics {
     pub coverage: Option<f64>,
     /// The run diverged.
     pub diverged: bool,
+    /// The measured events of the run (`summary.json` `events`), summed up.
+    pub events: EventMetrics,
+}
+
+/// The event figures of one sample (`summary.json` `events[]`, docs/failures.md): worst peak,
+/// slowest recovery, summed violations, closest approach. All `None` for a run without events.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EventMetrics {
+    /// Worst `peak_error_m` of the events, m.
+    pub peak_error_m: Option<f64>,
+    /// Slowest `recovered_after_s`, s (infinite: an event did not recover in its window).
+    pub recovered_after_s: Option<f64>,
+    /// Sum of `violations_during`.
+    pub violations_during: Option<u64>,
+    /// Smallest `min_separation_during_m`, m.
+    pub min_separation_during_m: Option<f64>,
+    /// Sum of `steps_below_safety_during`.
+    pub steps_below_safety_during: Option<u64>,
+    /// Sum of `violations_once_back`.
+    pub violations_once_back: Option<u64>,
+}
+
+impl EventMetrics {
+    /// The figures of a run's measured events.
+    pub fn of(events: &[crate::record::recovery::EventSummary]) -> EventMetrics {
+        if events.is_empty() {
+            return EventMetrics::default();
+        }
+        let sum = |f: &dyn Fn(&crate::record::recovery::EventSummary) -> Option<u64>| {
+            events.iter().filter_map(f).reduce(|a, b| a + b)
+        };
+        EventMetrics {
+            peak_error_m: events.iter().map(|e| e.peak_error_m).reduce(f64::max),
+            recovered_after_s: events
+                .iter()
+                .map(|e| e.recovered_after_s.unwrap_or(f64::INFINITY))
+                .reduce(f64::max),
+            violations_during: sum(&|e| Some(e.violations_during)),
+            min_separation_during_m: events
+                .iter()
+                .filter_map(|e| e.min_separation_during_m)
+                .reduce(f64::min),
+            steps_below_safety_during: sum(&|e| e.steps_below_safety_during),
+            violations_once_back: sum(&|e| e.violations_once_back),
+        }
+    }
 }
 
 impl Metrics {
@@ -45,6 +91,7 @@ impl Metrics {
             steps_below_safety: s.separation.steps_below_safety,
             coverage: s.coverage_fraction,
             diverged: s.diverged,
+            events: EventMetrics::of(&s.events),
         }
     }
 }
@@ -90,7 +137,7 @@ pub fn write_csv(path: &Path, names: &[String], outcomes: &[Outcome]) -> std::io
         text.push(',');
         text.push_str(&csv_field(n));
     }
-    text.push_str(",rms_cover_worst_m,rms_enclose_worst_m,violations,min_separation_m,steps_below_safety,coverage_fraction,diverged,wall_s,error\n");
+    text.push_str(",rms_cover_worst_m,rms_enclose_worst_m,violations,min_separation_m,steps_below_safety,coverage_fraction,diverged,peak_error_m,recovered_after_s,violations_during,min_separation_during_m,steps_below_safety_during,violations_once_back,wall_s,error\n");
     for o in outcomes {
         text.push_str(&o.sample.index.to_string());
         for (_, v) in &o.sample.values {
@@ -98,18 +145,28 @@ pub fn write_csv(path: &Path, names: &[String], outcomes: &[Outcome]) -> std::io
             text.push_str(&csv_field(&v.to_string()));
         }
         match &o.result {
-            Ok(m) => text.push_str(&format!(
-                ",{},{},{},{},{},{},{},{:.3},\n",
-                opt(m.rms_cover_m),
-                opt(m.rms_enclose_m),
-                m.violations,
-                opt(m.min_separation_m),
-                m.steps_below_safety,
-                opt(m.coverage),
-                m.diverged,
-                o.wall_s
-            )),
-            Err(e) => text.push_str(&format!(",,,,,,,,{:.3},{}\n", o.wall_s, csv_field(e))),
+            Ok(m) => {
+                let e = &m.events;
+                let count = |v: Option<u64>| v.map_or(String::new(), |x| x.to_string());
+                text.push_str(&format!(
+                    ",{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3},\n",
+                    opt(m.rms_cover_m),
+                    opt(m.rms_enclose_m),
+                    m.violations,
+                    opt(m.min_separation_m),
+                    m.steps_below_safety,
+                    opt(m.coverage),
+                    m.diverged,
+                    opt(e.peak_error_m),
+                    opt(e.recovered_after_s),
+                    count(e.violations_during),
+                    opt(e.min_separation_during_m),
+                    count(e.steps_below_safety_during),
+                    count(e.violations_once_back),
+                    o.wall_s
+                ))
+            }
+            Err(e) => text.push_str(&format!(",,,,,,,,,,,,,,{:.3},{}\n", o.wall_s, csv_field(e))),
         }
     }
     std::fs::write(path, text)
@@ -402,6 +459,7 @@ mod tests {
                 steps_below_safety: 0,
                 coverage: Some(1.0),
                 diverged,
+                events: EventMetrics::default(),
             }),
             wall_s: 1.0,
         }

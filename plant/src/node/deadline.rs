@@ -1,6 +1,6 @@
 //! The realtime plant's deadline policy (`docs/realtime.md`, `docs/failures.md`): an agent whose
 //! command of step k is not in by the deadline is flown on its fallback (`crate::fallback`): its
-//! last command held for `runtime.hold_s`, then the level hover. The count restarts as soon as a
+//! last command held for `runtime.hold_s`, then the failsafe of `runtime.fallback`. The count restarts as soon as a
 //! command of the agent is in again, whose command is then used. Pure: no iceoryx2, no clock.
 
 /// What the plant applies to quadrotor i at a step.
@@ -10,7 +10,7 @@ pub enum Decision {
     Command,
     /// None came in time; its last command came `since_steps` steps before this one (0: it is the
     /// first step missed): fly the fallback (`Plant::apply_fallback`), which holds that command
-    /// within `hold_s`, then hovers level.
+    /// within `hold_s`, then flies the failsafe of `runtime.fallback`.
     Fallback { since_steps: u64 },
 }
 
@@ -76,7 +76,8 @@ mod tests {
     #[test]
     fn the_plant_holds_the_last_command_for_hold_s_then_hovers_level() {
         let sc = Scenario::paper();
-        let rt = sc.runtime.clone();
+        let mut rt = sc.runtime.clone();
+        rt.fallback = formation_config::scenario::events::Fallback::Hover;
         let dt = sc.simulation.dt_s;
         let mut plant = Plant::from_scenario(&sc);
         let last = ControlCommand {

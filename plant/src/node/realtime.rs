@@ -8,7 +8,7 @@
 //! 2. collect the commands of step k until all N are in or the deadline S_{k+1} passes;
 //! 3. apply them, integrate [t_k, t_{k+1}] and publish the step record. An agent whose command did
 //!    not arrive in time is flown on its fallback (`super::deadline`): its last command held for
-//!    `runtime.hold_s` (zero-order hold), then the level hover of `crate::fallback`, until its
+//!    `runtime.hold_s` (zero-order hold), then the failsafe of `crate::fallback`, until its
 //!    commands come in again; such a step counts as one deadline miss. Commands for a step already
 //!    integrated are dropped and counted as late.
 //!
