@@ -472,7 +472,8 @@ mod tests {
         // a replayed events.jsonl and `inject --json` must give back those exact bits.
         let path =
             std::env::temp_dir().join(format!("formation-roundtrip-{}.jsonl", std::process::id()));
-        let times: Vec<f64> = (1..5000u32).map(|k| f64::from(k) * 0.001).collect();
+        // 1000 steps (the most one file holds) across 5 s, 1646 among them.
+        let times: Vec<f64> = (0..1000u32).map(|j| f64::from(1 + 5 * j) * 0.001).collect();
         let lines: String = times
             .iter()
             .map(|t| {

@@ -127,6 +127,17 @@ impl Collector {
 /// Validates a scenario; returns every error found (not just the first).
 pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     let mut c = Collector(Vec::new());
+    if s.events.len() > MAX_EVENTS {
+        c.push(
+            "events",
+            TIMELINE,
+            format!(
+                "{} events; a timeline holds at most {MAX_EVENTS} (every process asks it about every step)",
+                s.events.len()
+            ),
+        );
+        return Err(ValidationErrors(c.0));
+    }
     check_finite(s, &mut c);
     if !c.0.is_empty() {
         return Err(ValidationErrors(c.0));
@@ -144,19 +155,8 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         check_agent(s, i, a, &mut c);
     }
     check_runtime(s, &mut c);
-    if s.events.len() > MAX_EVENTS {
-        c.push(
-            "events",
-            TIMELINE,
-            format!(
-                "{} events; a timeline holds at most {MAX_EVENTS} (every process asks it about every step)",
-                s.events.len()
-            ),
-        );
-    } else {
-        for (k, e) in s.events.iter().enumerate() {
-            check_event(s, &format!("events[{k}]"), e, &mut c);
-        }
+    for (k, e) in s.events.iter().enumerate() {
+        check_event(s, &format!("events[{k}]"), e, &mut c);
     }
     if c.0.is_empty() {
         Ok(())
