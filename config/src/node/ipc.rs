@@ -344,24 +344,32 @@ fn collect_matching(
     Ok(())
 }
 
-/// Removes the records and files of the dead nodes of `prefix` (iceoryx2's dead-node cleanup);
-/// true when no node of the prefix is alive any more (none listed, or only dead ones).
+/// When no node of `prefix` is alive (none listed, or only dead ones), removes the records and
+/// files of its dead nodes (iceoryx2's dead-node cleanup) and returns true; a prefix with a node
+/// that is alive (or cannot be judged) is left untouched and gives false.
 pub fn cleanup_dead_nodes(prefix: &str) -> Result<bool, IpcError> {
     let cfg = config_for_prefix(prefix)?;
+    let list_err =
+        |e| IpcError::BadName(format!("cannot list the nodes of {prefix}: {e:?}"));
     let mut alive = false;
-    let listed = Node::<ipc::Service>::list(&cfg, |state| {
-        match state {
-            NodeState::Alive(_) | NodeState::Inaccessible(_) | NodeState::Undefined(_) => {
-                alive = true
-            }
-            NodeState::Dead(view) => {
-                let _ = view.try_remove_stale_resources();
-            }
+    Node::<ipc::Service>::list(&cfg, |state| {
+        if !matches!(state, NodeState::Dead(_)) {
+            alive = true;
         }
         CallbackProgression::Continue
-    });
-    listed.map_err(|e| IpcError::BadName(format!("cannot list the nodes of {prefix}: {e:?}")))?;
-    Ok(!alive)
+    })
+    .map_err(list_err)?;
+    if alive {
+        return Ok(false);
+    }
+    Node::<ipc::Service>::list(&cfg, |state| {
+        if let NodeState::Dead(view) = state {
+            let _ = view.try_remove_stale_resources();
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(list_err)?;
+    Ok(true)
 }
 
 /// A prefix's files are reaped only once its newest file is this old: a run that is starting has
