@@ -2,7 +2,7 @@
 //! the error names the offending field and the right assumption.
 
 use formation_config::scenario::validate::{
-    validate, ValidationError, A1, A2, A4, A5, CTRL, D11, EQ15, EQ35_50, EQ46_49, FINITE, INDEX,
+    validate, validate_event, ValidationError, A1, A2, A4, A5, CTRL, D11, EQ15, EQ35_50, EQ46_49, FINITE, INDEX,
     MISSION, PHYS, SAT, SIM,
 };
 use formation_config::scenario::{Edge, PAPER_TOML};
@@ -1065,4 +1065,87 @@ fn zero_rbfnn_gains_switch_the_update_off_and_are_accepted() {
     s.controller.position.nn_k_p = 0.0;
     s.controller.position.nn_k_v = 0.0;
     assert_eq!(validate(&s), Ok(()));
+}
+
+/// An event of `kind` for agent 1 at 1 s.
+fn event(kind: formation_config::scenario::events::EventKind) -> formation_config::scenario::events::Event {
+    let mut e = formation_config::scenario::events::Event::new(1.0, kind);
+    e.agent = Some(1);
+    e
+}
+
+#[test]
+fn down_times_that_are_infinite_nan_negative_or_beyond_the_runs_end_are_refused() {
+    use formation_config::scenario::events::EventKind;
+    let s = Scenario::paper();
+    let remaining = s.simulation.duration_s - 1.0;
+    for kind in [EventKind::Crash, EventKind::Hang] {
+        for bad in [f64::INFINITY, f64::NAN, -1.0, 0.0, 1e9, 1e15, remaining + 0.5] {
+            let mut with = s.clone();
+            let mut e = event(kind);
+            e.down_s = Some(bad);
+            with.events.push(e.clone());
+            let assumption = if bad.is_finite() { "timeline" } else { "finite" };
+            assert_rejected(&with, "events[0].down_s", assumption);
+            // What `formation inject` and the orchestrator check for a live event.
+            let live = validate_event(&s, "inject", &e).unwrap_err();
+            assert!(live.0.iter().any(|x| x.field == "inject.down_s"), "{bad}: {live:?}");
+        }
+        let mut ok = s.clone();
+        let mut e = event(kind);
+        e.down_s = Some(remaining);
+        ok.events.push(e);
+        assert!(errors(&ok).is_empty(), "{:?}", errors(&ok));
+    }
+}
+
+#[test]
+fn a_timeline_fault_has_the_live_injections_limits_and_times_must_be_finite() {
+    use formation_config::scenario::events::EventKind;
+    use formation_config::scenario::validate::max_fault_delta_nm;
+    let s = Scenario::paper();
+    let mut f = s.clone();
+    let mut e = event(EventKind::Fault);
+    e.gamma = Some([1.0; 3]);
+    e.delta = Some([1e308, 0.0, 0.0]);
+    f.events.push(e.clone());
+    assert_rejected(&f, "events[0].delta[0]", "eq. (3)");
+    e.delta = Some([max_fault_delta_nm(&s, 0), 0.0, f64::NAN]);
+    f.events[0] = e.clone();
+    assert_rejected(&f, "events[0].delta[2]", "finite");
+    let live = validate_event(&s, "inject", &e).unwrap_err();
+    assert!(live.0.iter().any(|x| x.field == "inject.delta[2]"), "{live:?}");
+    e.delta = Some([max_fault_delta_nm(&s, 0), 0.0, 0.0]);
+    f.events[0] = e;
+    assert!(errors(&f).is_empty(), "{:?}", errors(&f));
+    let mut d = s.clone();
+    let mut e = event(EventKind::Delay);
+    e.base_s = Some(0.0);
+    e.angular_rate_rad_s = Some(f64::INFINITY);
+    d.events.push(e.clone());
+    assert_rejected(&d, "events[0].angular_rate_rad_s", "finite");
+    let live = validate_event(&s, "inject", &e).unwrap_err();
+    assert!(live.0.iter().any(|x| x.field == "inject.angular_rate_rad_s"), "{live:?}");
+    let mut t = s.clone();
+    let mut e = event(EventKind::LinkDown);
+    e.agent = None;
+    e.agents = Some([1, 2]);
+    e.at_s = f64::INFINITY;
+    t.events.push(e.clone());
+    assert_rejected(&t, "events[0].at_s", "finite");
+    let live = validate_event(&s, "inject", &e).unwrap_err();
+    assert!(live.0.iter().any(|x| x.field == "inject.at_s"), "{live:?}");
+}
+
+#[test]
+fn a_timeline_longer_than_the_cap_is_one_error_not_one_per_event() {
+    use formation_config::scenario::events::EventKind;
+    use formation_config::scenario::validate::MAX_EVENTS;
+    let mut s = Scenario::paper();
+    let mut e = event(EventKind::Crash);
+    e.down_s = Some(f64::INFINITY);
+    s.events = vec![e; MAX_EVENTS + 1];
+    let errs = errors(&s);
+    assert_eq!(errs.len(), 1, "{errs:?}");
+    assert_eq!(errs[0].field, "events");
 }

@@ -266,12 +266,37 @@ pub fn load_with_overrides(name: Option<&str>, sets: &[String]) -> Result<Scenar
     };
     if let Err(errs) = validate(&s) {
         eprintln!("error: scenario '{name}' is invalid:");
-        for e in &errs.0 {
-            eprintln!("  {e}");
-        }
+        print_errors(&errs.0);
         return Err(ExitCode::from(EXIT_INVALID));
     }
     Ok(s)
+}
+
+/// Most errors printed for one input; the rest are counted.
+pub const MAX_PRINTED_ERRORS: usize = 20;
+
+/// The lines [`print_errors`] prints: the first [`MAX_PRINTED_ERRORS`], then how many more.
+pub fn error_lines<T: std::fmt::Display>(errors: &[T]) -> Vec<String> {
+    let mut out: Vec<String> = errors
+        .iter()
+        .take(MAX_PRINTED_ERRORS)
+        .map(|e| format!("  {e}"))
+        .collect();
+    if errors.len() > MAX_PRINTED_ERRORS {
+        out.push(format!(
+            "  ... and {} more errors ({} in all)",
+            errors.len() - MAX_PRINTED_ERRORS,
+            errors.len()
+        ));
+    }
+    out
+}
+
+/// Prints validation errors on stderr, indented: at most [`MAX_PRINTED_ERRORS`] and a count.
+pub fn print_errors<T: std::fmt::Display>(errors: &[T]) {
+    for l in error_lines(errors) {
+        eprintln!("{l}");
+    }
 }
 
 /// Parses a variant name, exit code 2 on an unknown one.
@@ -397,32 +422,56 @@ impl RunnerArgs {
         }
         if let Err(errs) = validate(&scenario) {
             eprintln!("error: the scenario with its runtime settings and events is invalid:");
-            for e in &errs.0 {
-                eprintln!("  {e}");
-            }
+            print_errors(&errs.0);
             return Err(ExitCode::from(EXIT_INVALID));
         }
         Ok((scenario, parse_variant(&self.variant)?))
     }
 }
 
+/// Most events one `--events` file may hold ([`formation_config::scenario::validate::MAX_EVENTS`],
+/// the limit of a whole timeline).
+pub const MAX_EVENTS_PER_FILE: usize = formation_config::scenario::validate::MAX_EVENTS;
+
+/// Largest `--events` file read, bytes (a line of `events.jsonl` is ~400 bytes).
+const MAX_EVENTS_FILE_BYTES: u64 = 4 << 20;
+
 /// The events of a file: TOML with `[[events]]`, or JSON lines (a live run's `events.jsonl`, whose
-/// accepted injections carry their event as `"scenario_event"`; other lines are skipped), or JSON
-/// lines of bare events.
+/// accepted injections carry their event as `"scenario_event"` and whose refused requests,
+/// `"event": "rejected"`, are skipped), or JSON lines of bare events. A line that is neither (an
+/// event without `at_s`) is an error naming the line; so is a file of more than
+/// [`MAX_EVENTS_PER_FILE`] events.
 pub fn read_events(
     path: &std::path::Path,
 ) -> Result<Vec<formation_config::scenario::events::Event>, String> {
     use formation_config::scenario::events::Event;
-    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_EVENTS_FILE_BYTES + 1).read_to_string(&mut text))
+        .map_err(|e| e.to_string())?;
+    if text.len() as u64 > MAX_EVENTS_FILE_BYTES {
+        return Err(format!(
+            "larger than {} MiB; a file holds at most {MAX_EVENTS_PER_FILE} events",
+            MAX_EVENTS_FILE_BYTES >> 20
+        ));
+    }
+    let too_many = |n: usize| {
+        format!("{n} events or more; a file holds at most {MAX_EVENTS_PER_FILE} (and a timeline as many)")
+    };
     let is_toml = path.extension().is_some_and(|x| x == "toml");
     if is_toml {
         #[derive(serde::Deserialize)]
         struct File {
             events: Vec<Event>,
         }
-        return toml::from_str::<File>(&text)
+        let events = toml::from_str::<File>(&text)
             .map(|f| f.events)
-            .map_err(|e| e.to_string());
+            .map_err(|e| e.to_string())?;
+        if events.len() > MAX_EVENTS_PER_FILE {
+            return Err(too_many(events.len()));
+        }
+        return Ok(events);
     }
     let mut out = Vec::new();
     for (k, line) in text
@@ -432,9 +481,19 @@ pub fn read_events(
     {
         let v: serde_json::Value =
             serde_json::from_str(line).map_err(|e| format!("line {}: {e}", k + 1))?;
-        let ev = v.get("scenario_event").cloned().unwrap_or(v);
-        if ev.get("at_s").is_none() {
-            continue;
+        let ev = match v.get("scenario_event") {
+            Some(e) => e.clone(),
+            None if v.get("event").and_then(|e| e.as_str()) == Some("rejected") => continue,
+            None => v,
+        };
+        if ev.get("at_s").is_none_or(|t| t.is_null()) {
+            return Err(format!(
+                "line {}: an event needs `at_s` (its time, s); got {line}",
+                k + 1
+            ));
+        }
+        if out.len() == MAX_EVENTS_PER_FILE {
+            return Err(too_many(out.len() + 1));
         }
         out.push(serde_json::from_value::<Event>(ev).map_err(|e| format!("line {}: {e}", k + 1))?);
     }
@@ -451,7 +510,8 @@ mod tests {
         // a replayed events.jsonl and `inject --json` must give back those exact bits.
         let path =
             std::env::temp_dir().join(format!("formation-roundtrip-{}.jsonl", std::process::id()));
-        let times: Vec<f64> = (1..5000u32).map(|k| f64::from(k) * 0.001).collect();
+        // 1000 steps (the most one file holds) across 5 s, 1646 among them.
+        let times: Vec<f64> = (0..1000u32).map(|j| f64::from(1 + 5 * j) * 0.001).collect();
         let lines: String = times
             .iter()
             .map(|t| {
@@ -468,6 +528,36 @@ mod tests {
         for (e, t) in events.iter().zip(&times) {
             assert_eq!(e.at_s.to_bits(), t.to_bits(), "{t} read back as {}", e.at_s);
         }
+    }
+
+    fn events_file(tag: &str, text: &str) -> Result<Vec<formation_config::scenario::events::Event>, String> {
+        let path = std::env::temp_dir().join(format!("formation-ev-{tag}-{}.jsonl", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        let r = read_events(&path);
+        let _ = std::fs::remove_file(&path);
+        r
+    }
+
+    #[test]
+    fn an_event_line_without_at_s_is_an_error_naming_the_line_and_refused_requests_are_skipped() {
+        let ok = r#"{"at_s": 0.5, "kind": "crash", "agent": 1, "down_s": 0.5}"#;
+        let rejected = r#"{"event": "rejected", "nonce": 1, "error": "x"}"#;
+        let missing = r#"{"kind": "crash", "agent": 1, "down_s": 0.5}"#;
+        assert_eq!(events_file("ok", &format!("{ok}\n{rejected}\n")).unwrap().len(), 1);
+        let e = events_file("missing", &format!("{ok}\n\n{missing}\n")).unwrap_err();
+        assert!(e.contains("line 3") && e.contains("at_s"), "{e}");
+    }
+
+    #[test]
+    fn an_events_file_holds_at_most_the_cap_and_printed_errors_are_capped() {
+        let line = r#"{"at_s": 0.5, "kind": "link_down", "agents": [1, 2]}"#;
+        let text = format!("{line}\n").repeat(MAX_EVENTS_PER_FILE + 1);
+        let e = events_file("cap", &text).unwrap_err();
+        assert!(e.contains(&MAX_EVENTS_PER_FILE.to_string()), "{e}");
+        let errors: Vec<String> = (0..829).map(|k| format!("error {k}")).collect();
+        let lines = error_lines(&errors);
+        assert_eq!(lines.len(), MAX_PRINTED_ERRORS + 1);
+        assert!(lines.last().unwrap().contains("809 more"), "{lines:?}");
     }
 
     fn set(s: Scenario, sets: &[&str]) -> Result<Scenario, String> {

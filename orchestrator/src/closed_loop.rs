@@ -52,7 +52,7 @@ impl ClosedLoop {
         let timeline = scenario.timeline();
         let dt = scenario.simulation.dt_s;
         let capacity = agents.first().map_or(0, |a| a.history_capacity());
-        let longest = crate::history::longest_down(&timeline);
+        let longest = crate::history::longest_down(&timeline, scenario.n_steps());
         let len = if longest == 0 {
             0
         } else {

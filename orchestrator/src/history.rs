@@ -71,12 +71,14 @@ impl History {
     }
 }
 
-/// The longest down window of a timeline, steps (0: none).
-pub fn longest_down(t: &Timeline) -> u64 {
+/// The longest down window of a timeline that can be replayed, steps (0: none): only a window
+/// whose new process takes over before the run's `n_steps` end is ever rebuilt, so a longer one
+/// (validation bounds `down_s` by the run's remaining time) sizes nothing.
+pub fn longest_down(t: &Timeline, n_steps: u64) -> u64 {
     t.down_windows()
         .iter()
+        .filter(|w| w.to < n_steps)
         .map(|w| w.to.saturating_sub(w.from))
-        .filter(|&d| d != u64::MAX)
         .max()
         .unwrap_or(0)
 }
@@ -85,4 +87,26 @@ pub fn longest_down(t: &Timeline) -> u64 {
 /// delay histories of `capacity` steps, with slack.
 pub fn len(runtime: &Runtime, dt: f64, capacity: usize, longest_down: u64) -> u64 {
     runtime.checkpoint_steps(dt) + longest_down + capacity as u64 + 8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_config::scenario::events::{Event, EventKind};
+
+    #[test]
+    fn a_down_window_that_never_rejoins_inside_the_run_sizes_no_history() {
+        let dt = 0.001;
+        let crash = |at: f64, down: f64| {
+            let mut e = Event::new(at, EventKind::Crash);
+            e.agent = Some(1);
+            e.down_s = Some(down);
+            e
+        };
+        let n_steps = 10_000;
+        let t = Timeline::new(&[crash(1.0, 0.5), crash(2.0, 1e9)], dt);
+        assert_eq!(longest_down(&t, n_steps), 500);
+        let t = Timeline::new(&[crash(2.0, 8.0)], dt);
+        assert_eq!(longest_down(&t, n_steps), 0, "rejoins at the end: never replayed");
+    }
 }

@@ -3,6 +3,12 @@
 //! is refused at once (exit 2) instead of mixing its rows into the first one's CSV. The file holds
 //! who has it (pid, run id, command); it is created with mode 0600 without following a symbolic
 //! link, and removed by its holder at the end.
+//!
+//! The folder itself must be this user's alone ([`files::ensure_private_dir`]): created with mode
+//! 0700 (and each parent created on the way), or refused (exit 2, naming it) when it is a symbolic
+//! link, belongs to another user or others may write to it; so are the subfolders a run writes
+//! into ([`SUBFOLDERS`]) when they already exist. Every file in it is then created without
+//! following a symbolic link (`files::create_replacing`, `files::write_atomic`).
 
 use formation_config::node::files::{self, Lock};
 use std::fs::File;
@@ -11,6 +17,23 @@ use std::path::{Path, PathBuf};
 
 /// Name of the lock file in the output folder.
 pub const LOCK_NAME: &str = ".formation.lock";
+
+/// The subfolders `run` and `sweep` write into, checked like the folder when they exist (a planted
+/// `checkpoints -> elsewhere` would let its owner swap an agent's checkpoint).
+pub const SUBFOLDERS: [&str; 6] = ["logs", "checkpoints", "iox2", "iox2/config", "timing", "samples"];
+
+/// Creates `out` owner-only or refuses it (see the module documentation).
+pub fn check_folder(out: &Path) -> Result<(), String> {
+    files::ensure_private_dir(out).map_err(|e| format!("output folder: {e}"))?;
+    for sub in SUBFOLDERS {
+        let p = out.join(sub);
+        if std::fs::symlink_metadata(&p).is_ok() {
+            files::check_private_dir(&p)
+                .map_err(|why| format!("output folder: refusing the folder {}: {why}", p.display()))?;
+        }
+    }
+    Ok(())
+}
 
 /// A held output-folder lock; released (and its file removed) on drop.
 #[derive(Debug)]
@@ -44,8 +67,7 @@ fn describe_holder(text: &str) -> String {
 
 /// Takes the lock of `out` (creating the folder), or says which run holds it.
 pub fn acquire(out: &Path, run_id: Option<&str>, command: &str) -> Result<OutLock, String> {
-    std::fs::create_dir_all(out)
-        .map_err(|e| format!("cannot create the output folder {}: {e}", out.display()))?;
+    check_folder(out)?;
     let path = out.join(LOCK_NAME);
     // The holder removes the file at its end: a file opened just before that is no longer the one
     // at the path once locked, so open again.
@@ -107,6 +129,25 @@ mod tests {
         assert!(!d.join(LOCK_NAME).exists());
         let again = acquire(&d, None, "formation sim").unwrap();
         drop(again);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn an_output_folder_others_can_write_or_a_linked_subfolder_is_refused_naming_it() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = std::env::temp_dir().join(format!("fm-outlock-shared-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        let out = d.join("a").join("out");
+        drop(acquire(&out, None, "formation sim").unwrap());
+        std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let e = acquire(&out, None, "formation sim").unwrap_err();
+        assert!(e.contains(&out.display().to_string()) && e.contains("world-writable"), "{e}");
+        std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o700)).unwrap();
+        let elsewhere = d.join("elsewhere");
+        std::fs::create_dir(&elsewhere).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, out.join("checkpoints")).unwrap();
+        let e = acquire(&out, None, "formation run").unwrap_err();
+        assert!(e.contains("checkpoints") && e.contains("symbolic link"), "{e}");
         let _ = std::fs::remove_dir_all(&d);
     }
 

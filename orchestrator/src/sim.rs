@@ -116,8 +116,11 @@ pub fn exit_code(summary: &Summary) -> ExitCode {
 /// Writes the scenario as run (after `--set` overrides) to `out/scenario.toml`, so that a run directory
 /// is self-describing (the figures read it, and it can be run again as is).
 pub fn write_resolved_scenario(scenario: &Scenario, out: &Path) -> std::io::Result<()> {
-    std::fs::create_dir_all(out)?;
-    std::fs::write(out.join("scenario.toml"), scenario.to_toml_string())
+    formation_config::node::files::ensure_private_dir(out)?;
+    formation_config::node::files::write_atomic(
+        &out.join("scenario.toml"),
+        scenario.to_toml_string().as_bytes(),
+    )
 }
 
 /// Runs the closed loop of `scenario` with `variant` in this process, writing the outputs to `out`.

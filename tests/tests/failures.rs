@@ -525,7 +525,8 @@ fn link_faults_and_message_loss_are_flagged_survived_and_identical_in_run_and_si
 }
 
 #[test]
-fn a_live_run_with_injected_fault_and_crash_replayed_from_its_events_jsonl_is_byte_identical() {
+fn a_live_run_with_injected_fault_and_crash_replayed_from_its_events_jsonl_is_byte_identical_and_lists_the_same_events(
+) {
     let dir = temp_dir("replay");
     let out = dir.join("live");
     let mut run = RunningRun::start(&["--set", "simulation.duration_s=20"], &out);
@@ -573,6 +574,18 @@ fn a_live_run_with_injected_fault_and_crash_replayed_from_its_events_jsonl_is_by
         same_file(&out.join("trajectory.csv"), &replay.join("trajectory.csv")),
         "the replay of the live run's events differs"
     );
+    // summary.json's events[]: the live run lists its fault injection (and crash) as the replay does.
+    let listed = |d: &Path| -> Vec<(String, serde_json::Value, String)> {
+        summary(d)["events"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| (e["kind"].as_str().unwrap_or("").to_string(), e["agent"].clone(), format!("{:.3}", e["at_s"].as_f64().unwrap_or(-1.0))))
+            .collect()
+    };
+    let live = listed(&out);
+    assert!(live.iter().any(|e| e.0 == "fault"), "{live:?}");
+    assert_eq!(live, listed(&replay));
     assert!(residue_of(&run).is_empty());
 }
 

@@ -13,6 +13,7 @@ use std::path::PathBuf;
 /// Where and when this process checkpoints.
 pub struct Checkpoints {
     path: PathBuf,
+    scenario_hash: u64,
     every: u64,
     /// The next step whose checkpoint is due.
     next: u64,
@@ -24,6 +25,7 @@ impl Checkpoints {
     pub fn new(b: &Boot, i: usize, first: u64) -> Checkpoints {
         Checkpoints {
             path: restart::checkpoint_path(&b.args.run_dir, i),
+            scenario_hash: b.scenario_hash,
             every: b
                 .scenario
                 .runtime
@@ -46,7 +48,12 @@ impl Checkpoints {
             .checkpoint()
             .map_err(|e| e.to_string())
             .and_then(|state| {
-                restart::write_atomic(&self.path, &Checkpoint { step: k, state })
+                restart::write_checkpoint(
+                    &self.path,
+                    self.agent,
+                    self.scenario_hash,
+                    &Checkpoint { step: k, state },
+                )
                     .map_err(|e| e.to_string())
             });
         if let Err(e) = written {
@@ -82,8 +89,8 @@ pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), Node
     let mut checkpoint = None;
     if let Some(s) = plan.checkpoint {
         let cpath = restart::checkpoint_path(dir, i);
-        let c: Checkpoint = restart::read(&cpath)
-            .map_err(|e| NodeError::Args(format!("cannot read {}: {e}", cpath.display())))?;
+        let c: Checkpoint =
+            restart::read_checkpoint(&cpath, i, b.scenario_hash).map_err(NodeError::Args)?;
         if c.step != s {
             return Err(NodeError::Args(format!(
                 "{} holds step {}, the rejoin plan step {s}",

@@ -17,6 +17,8 @@ pub struct Boot {
     pub args: ChildArgs,
     /// The run's scenario (from `<run dir>/scenario.toml`).
     pub scenario: Scenario,
+    /// [`super::restart::scenario_hash`] of that file: what the run's checkpoints carry.
+    pub scenario_hash: u64,
     /// The controller variant.
     pub variant: Variant,
     /// Parent and signal watch.
@@ -76,6 +78,7 @@ pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
     let node = ipc::node(&args.prefix, &name)?;
     Ok(Boot {
         args,
+        scenario_hash: super::restart::scenario_hash(text.as_bytes()),
         scenario,
         variant,
         lifeline,

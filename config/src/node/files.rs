@@ -19,6 +19,172 @@ pub fn create_new(path: &Path, mode: u32) -> io::Result<File> {
         .open(path)
 }
 
+/// Creates `path` for writing (mode 0600) without following a symbolic link at its name: whatever
+/// has that name (an earlier output, a planted link) is removed first, never written through, and
+/// the file is created new (`O_CREAT | O_EXCL | O_NOFOLLOW`). For files written as they go (a CSV,
+/// a recording, a log); whole files are better written with [`write_atomic`].
+pub fn create_replacing(path: &Path) -> io::Result<File> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                format!("{} is a directory", path.display()),
+            ))
+        }
+        Ok(_) => std::fs::remove_file(path)?,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+        Err(e) => return Err(e),
+    }
+    create_new(path, 0o600)
+}
+
+/// Writes `bytes` to `path` whole: a new owner-only temporary file next to it (create-new, never
+/// through a symbolic link) renamed over `path` (a link at `path` is replaced, not followed).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    use std::io::Write;
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::other(format!("{} has no file name", path.display())))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(format!(".tmp{}", std::process::id()));
+    let tmp = path.with_file_name(tmp_name);
+    // A leftover of a killed writer of this pid, or a planted link: removed, never followed.
+    let _ = std::fs::remove_file(&tmp);
+    let mut f = create_new(&tmp, 0o600)?;
+    let written = f
+        .write_all(bytes)
+        .and_then(|_| f.flush())
+        .and_then(|_| std::fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// Opens `path` for appending (created with mode 0600 if missing) without following a symbolic
+/// link at its name; refuses anything but a regular file owned by this user.
+pub fn open_append(path: &Path) -> io::Result<File> {
+    let f = OpenOptions::new()
+        .append(true)
+        .create(true)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)?;
+    owned_regular(&f, path)?;
+    Ok(f)
+}
+
+fn owned_regular(f: &File, path: &Path) -> io::Result<()> {
+    let m = f.metadata()?;
+    if !m.file_type().is_file() {
+        return Err(io::Error::other(format!(
+            "{} is not a regular file",
+            path.display()
+        )));
+    }
+    if m.uid() != current_uid() {
+        return Err(io::Error::new(
+            io::ErrorKind::PermissionDenied,
+            format!(
+                "{} belongs to {}, not to {}",
+                path.display(),
+                user_label(m.uid()),
+                user_label(current_uid())
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Why `dir` must not hold this user's files, if it must not: it is a symbolic link, not a
+/// directory, belongs to another user, or others (group or world) may write to it.
+pub fn check_private_dir(dir: &Path) -> Result<(), String> {
+    let m = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    if m.file_type().is_symlink() {
+        return Err("it is a symbolic link".into());
+    }
+    if !m.is_dir() {
+        return Err("it is not a directory".into());
+    }
+    let me = current_uid();
+    if m.uid() != me {
+        return Err(format!(
+            "it belongs to {}, not to {}",
+            user_label(m.uid()),
+            user_label(me)
+        ));
+    }
+    let mode = m.mode() & 0o7777;
+    if mode & 0o022 != 0 {
+        return Err(format!(
+            "it is {}-writable (mode {mode:04o}): other users could plant files in it",
+            if mode & 0o002 != 0 { "world" } else { "group" }
+        ));
+    }
+    Ok(())
+}
+
+/// A folder that failed [`ensure_private_dir`]: which one and why.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnsafeDir {
+    /// The folder refused (`dir` itself or a parent created on the way).
+    pub path: std::path::PathBuf,
+    /// Why.
+    pub why: String,
+}
+
+impl std::fmt::Display for UnsafeDir {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "refusing the folder {}: {}", self.path.display(), self.why)
+    }
+}
+
+impl std::error::Error for UnsafeDir {}
+
+impl From<UnsafeDir> for io::Error {
+    fn from(e: UnsafeDir) -> io::Error {
+        io::Error::new(io::ErrorKind::PermissionDenied, e.to_string())
+    }
+}
+
+/// Makes `dir` a folder only this user can write to: every missing component is created with mode
+/// 0700 (one `mkdir` each, never through a link) and checked, and `dir` itself, new or not, must
+/// pass [`check_private_dir`]. Parents that already exist (`/tmp`, a home) are not judged.
+pub fn ensure_private_dir(dir: &Path) -> Result<(), UnsafeDir> {
+    use std::os::unix::fs::DirBuilderExt;
+    let refuse = |path: &Path, why: String| UnsafeDir {
+        path: path.to_path_buf(),
+        why,
+    };
+    // The missing components, outermost first.
+    let mut missing = Vec::new();
+    let mut p = dir;
+    loop {
+        match std::fs::symlink_metadata(p) {
+            Ok(_) => break,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                missing.push(p.to_path_buf());
+                match p.parent() {
+                    Some(q) if !q.as_os_str().is_empty() => p = q,
+                    _ => break,
+                }
+            }
+            Err(e) => return Err(refuse(p, e.to_string())),
+        }
+    }
+    for m in missing.iter().rev() {
+        match std::fs::DirBuilder::new().mode(0o700).create(m) {
+            Ok(()) => {}
+            // Created meanwhile by someone: judged below like any existing folder.
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {}
+            Err(e) => return Err(refuse(m, format!("cannot create it: {e}"))),
+        }
+        check_private_dir(m).map_err(|why| refuse(m, why))?;
+    }
+    check_private_dir(dir).map_err(|why| refuse(dir, why))
+}
+
 /// Reads `path` as text without following a symbolic link at its name (nor blocking on a FIFO).
 pub fn open_read_nofollow(path: &Path) -> io::Result<String> {
     use std::io::Read;
@@ -41,24 +207,7 @@ pub fn open_lock_file(path: &Path, create: bool) -> io::Result<File> {
         .mode(0o600)
         .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
         .open(path)?;
-    let m = f.metadata()?;
-    if !m.file_type().is_file() {
-        return Err(io::Error::other(format!(
-            "{} is not a regular file",
-            path.display()
-        )));
-    }
-    if m.uid() != current_uid() {
-        return Err(io::Error::new(
-            io::ErrorKind::PermissionDenied,
-            format!(
-                "{} belongs to {}, not to {}",
-                path.display(),
-                user_label(m.uid()),
-                user_label(current_uid())
-            ),
-        ));
-    }
+    owned_regular(&f, path)?;
     Ok(f)
 }
 
@@ -181,6 +330,53 @@ mod tests {
         assert!(create_new(&planted, 0o600).is_err());
         assert!(open_lock_file(&planted, true).is_err());
         assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn outputs_replace_a_planted_link_instead_of_writing_through_it() {
+        let d = temp("outputs");
+        let victim = d.join("victim");
+        std::fs::write(&victim, "precious").unwrap();
+        let out = d.join("out");
+        ensure_private_dir(&out).unwrap();
+        for name in ["summary.json", "trajectory.csv", "agent-1.log"] {
+            std::os::unix::fs::symlink(&victim, out.join(name)).unwrap();
+        }
+        write_atomic(&out.join("summary.json"), b"{}").unwrap();
+        use std::io::Write;
+        create_replacing(&out.join("trajectory.csv"))
+            .unwrap()
+            .write_all(b"t")
+            .unwrap();
+        assert!(open_append(&out.join("agent-1.log")).is_err());
+        assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
+        assert_eq!(std::fs::read_to_string(out.join("summary.json")).unwrap(), "{}");
+        assert!(!std::fs::symlink_metadata(out.join("trajectory.csv"))
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn private_folders_are_created_0700_and_links_or_shared_ones_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = temp("private");
+        let deep = d.join("a").join("b");
+        ensure_private_dir(&deep).unwrap();
+        for p in [d.join("a"), deep.clone()] {
+            assert_eq!(std::fs::metadata(&p).unwrap().mode() & 0o777, 0o700);
+        }
+        let link = d.join("link");
+        std::os::unix::fs::symlink(&deep, &link).unwrap();
+        let e = ensure_private_dir(&link).unwrap_err();
+        assert_eq!(e.path, link);
+        assert!(e.why.contains("symbolic link"), "{e}");
+        let shared = d.join("shared");
+        std::fs::create_dir(&shared).unwrap();
+        std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o777)).unwrap();
+        assert!(ensure_private_dir(&shared).unwrap_err().why.contains("world-writable"));
         let _ = std::fs::remove_dir_all(&d);
     }
 

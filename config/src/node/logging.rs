@@ -1,8 +1,12 @@
 //! `tracing` set-up of every formation process: `RUST_LOG` (default `info`), one log file per
 //! process under `<run dir>/logs/<role>[-<agent>].log`, and optionally a console on stderr.
+//!
+//! A log file is appended to, never truncated: a restarted agent process continues the file of
+//! the one it replaces (whose last lines name why it died) after a separator line naming its pid.
+//! It is opened without following a symbolic link at its name (`files::open_append`), in a
+//! `logs/` folder created owner-only.
 
 use super::error::NodeError;
-use std::fs::File;
 use std::io::IsTerminal;
 use std::path::Path;
 use std::sync::Mutex;
@@ -18,6 +22,11 @@ pub fn log_file_name(role: &str, agent: Option<usize>) -> String {
     }
 }
 
+/// The line between the log of a process and that of the next one appending to the same file.
+pub fn separator(pid: u32) -> String {
+    format!("---- new process: pid {pid} (the lines above are an earlier process's) ----\n")
+}
+
 /// Whether the console log may use colour: stderr is a terminal and `NO_COLOR` is unset or empty
 /// (https://no-color.org).
 fn colour_on_stderr() -> bool {
@@ -30,8 +39,16 @@ fn colour_on_stderr() -> bool {
 pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), NodeError> {
     let filter = || EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
     let dir = run_dir.join("logs");
-    let file = std::fs::create_dir_all(&dir)
-        .and_then(|_| File::create(dir.join(file_name)))
+    let file = super::files::ensure_private_dir(&dir)
+        .map_err(std::io::Error::from)
+        .and_then(|()| super::files::open_append(&dir.join(file_name)))
+        .and_then(|mut f| {
+            if f.metadata()?.len() > 0 {
+                use std::io::Write;
+                f.write_all(separator(std::process::id()).as_bytes())?;
+            }
+            Ok(f)
+        })
         .map_err(|e| NodeError::File {
             path: dir.join(file_name),
             detail: format!("cannot create: {e}"),

@@ -31,7 +31,8 @@ impl Membership {
     pub fn create(run_dir: &Path, prefix: &str) -> Result<Membership, NodeError> {
         let path = lock_path(run_dir);
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|e| file_error(dir, "cannot create", e))?;
+            files::ensure_private_dir(dir)
+                .map_err(|e| file_error(dir, "cannot create", std::io::Error::from(e)))?;
         }
         Membership::open(&path, prefix, true)
     }

@@ -103,7 +103,8 @@ impl TimingReport {
     /// Writes the report to `<run dir>/timing/<name>.json`.
     pub fn write(&self, run_dir: &Path, name: &str) -> Result<(), NodeError> {
         let d = dir(run_dir);
-        std::fs::create_dir_all(&d).map_err(|e| file_error(&d, "cannot create", e))?;
+        super::files::ensure_private_dir(&d)
+            .map_err(|e| file_error(&d, "cannot create", std::io::Error::from(e)))?;
         let hist: serde_json::Map<String, serde_json::Value> = self
             .histograms
             .iter()
@@ -111,7 +112,8 @@ impl TimingReport {
             .collect();
         let v = serde_json::json!({ "histograms": hist, "counters": self.counters });
         let path = d.join(format!("{name}.json"));
-        std::fs::write(&path, v.to_string()).map_err(|e| file_error(&path, "cannot write", e))
+        super::files::write_atomic(&path, v.to_string().as_bytes())
+            .map_err(|e| file_error(&path, "cannot write", e))
     }
 
     /// Reads a report written by [`TimingReport::write`].

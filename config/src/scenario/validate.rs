@@ -127,6 +127,17 @@ impl Collector {
 /// Validates a scenario; returns every error found (not just the first).
 pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     let mut c = Collector(Vec::new());
+    if s.events.len() > MAX_EVENTS {
+        c.push(
+            "events",
+            TIMELINE,
+            format!(
+                "{} events; a timeline holds at most {MAX_EVENTS} (every process asks it about every step)",
+                s.events.len()
+            ),
+        );
+        return Err(ValidationErrors(c.0));
+    }
     check_finite(s, &mut c);
     if !c.0.is_empty() {
         return Err(ValidationErrors(c.0));
@@ -973,6 +984,16 @@ fn check_runtime(s: &Scenario, c: &mut Collector) {
     c.non_negative("runtime.stale_after_s", r.stale_after_s, RUNTIME);
 }
 
+/// Most events of a timeline (scenario and `--events FILE` together): every process asks the
+/// timeline about every step, so its length is paid at every step.
+pub const MAX_EVENTS: usize = 1000;
+
+/// Largest |delta_ik| of an actuator fault on axis k, N m: half the torque range of eq. (3), the
+/// same limit for a timeline `fault` and a live `formation inject fault`.
+pub fn max_fault_delta_nm(s: &Scenario, axis: usize) -> f64 {
+    0.5 * (s.vehicle.torque_max_nm[axis] - s.vehicle.torque_min_nm[axis])
+}
+
 /// Validates one event against a (valid) scenario: what `formation inject` and `--events FILE`
 /// check before an event joins a run's timeline.
 pub fn validate_event(
@@ -1037,6 +1058,18 @@ fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: 
                     "a `fault` event needs `gamma`",
                 ),
             }
+            for (k, d) in e.delta.unwrap_or([0.0; 3]).iter().enumerate() {
+                let max = max_fault_delta_nm(s, k);
+                if !(d.is_finite() && d.abs() <= max) {
+                    c.push(
+                        format!("{path}.delta[{k}]"),
+                        SAT,
+                        format!(
+                            "|delta| must be at most half the torque range ({max} N m), got {d}"
+                        ),
+                    );
+                }
+            }
         }
         K::Delay => {
             agent_ok(c, "agent", e.agent, true);
@@ -1050,16 +1083,34 @@ fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: 
                     format!("base {base} + |amplitude| {amp} must be in [0, tau_M = {tau_m}] s"),
                 );
             }
+            let rate = e.angular_rate_rad_s.unwrap_or(0.0);
+            if !rate.is_finite() {
+                c.push(
+                    format!("{path}.angular_rate_rad_s"),
+                    A2,
+                    format!("must be a finite number, got {rate}"),
+                );
+            }
         }
         K::Crash | K::Hang => {
             agent_ok(c, "agent", e.agent, true);
+            // Down at most until the end of the run: a longer window changes nothing the run can
+            // show, and it sizes the replay history (docs/failures.md).
+            let remaining = s.simulation.duration_s - e.at_s.max(0.0);
             match e.down_s {
-                Some(d) if d >= s.simulation.dt_s => {}
+                Some(d) if d >= s.simulation.dt_s && d <= remaining.max(s.simulation.dt_s) => {}
+                Some(d) if d.is_finite() && d >= s.simulation.dt_s => c.push(
+                    format!("{path}.down_s"),
+                    TIMELINE,
+                    format!(
+                        "must be at most the run's remaining time after at_s ({remaining} s), got {d}"
+                    ),
+                ),
                 Some(d) => c.push(
                     format!("{path}.down_s"),
                     TIMELINE,
                     format!(
-                        "must be at least one step ({} s), got {d}",
+                        "must be a finite time of at least one step ({} s), got {d}",
                         s.simulation.dt_s
                     ),
                 ),
@@ -1112,7 +1163,13 @@ fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: 
                 ),
             }
             if let Some(d) = e.duration_s {
-                c.positive(&format!("{path}.duration_s"), d, TIMELINE);
+                if !(d.is_finite() && d > 0.0) {
+                    c.push(
+                        format!("{path}.duration_s"),
+                        TIMELINE,
+                        format!("must be a finite time > 0 s, got {d}"),
+                    );
+                }
             }
         }
     }

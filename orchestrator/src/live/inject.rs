@@ -193,6 +193,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
             } else {
                 INJECT_HANG
             };
+            validate::down(a.down)?;
             r.down_s = a.down;
         }
         InjectWhat::Link(a) => {

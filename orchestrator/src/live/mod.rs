@@ -59,6 +59,16 @@ pub fn check_access(run: &registry::RunRecord, what: &str) -> Result<(), String>
     Ok(())
 }
 
+/// The reaper of `formation ps` and `formation run`: removes this user's iceoryx2 files of run
+/// prefixes whose runs are not among `live` and whose nodes are all dead (an observer killed after
+/// its run ended), naming each on stderr ([`ipc::reap`]). Never another user's, never a live run's.
+pub fn reap_dead_prefixes(live: &[registry::RunRecord]) {
+    let live: Vec<String> = live.iter().map(|r| r.prefix.clone()).collect();
+    for (prefix, n) in ipc::reap(&live, ipc::REAP_MIN_AGE) {
+        eprintln!("reaped {n} iceoryx2 file(s) of {prefix}: its run and nodes are all dead");
+    }
+}
+
 /// A node of this client process under the run's prefix.
 pub fn client_node(run: &registry::RunRecord, role: &str) -> Result<RunNode, String> {
     ipc::node(&run.prefix, &format!("fm-{role}-{}", std::process::id())).map_err(|e| e.to_string())

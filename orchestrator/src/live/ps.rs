@@ -57,6 +57,7 @@ pub fn main(args: PsArgs) -> ExitCode {
             return ExitCode::from(crate::cli::EXIT_INVALID);
         }
     };
+    super::reap_dead_prefixes(&runs);
     let before: Vec<Vec<Option<ProcStat>>> = runs
         .iter()
         .map(|r| r.processes.iter().map(|p| procstat::read(p.pid)).collect())

@@ -129,37 +129,15 @@ pub fn runs_dir() -> PathBuf {
 /// Why `dir` must not be used as the runs folder, if it must not: it is not a directory (a
 /// symbolic link counts as not one), belongs to another user, or others may write to it.
 pub fn check_dir(dir: &Path) -> Result<(), String> {
-    let m = std::fs::symlink_metadata(dir)
+    std::fs::symlink_metadata(dir)
         .map_err(|e| format!("cannot use the runs folder {}: {e}", dir.display()))?;
-    let refuse = |why: String| {
-        Err(format!(
+    files::check_private_dir(dir).map_err(|why| {
+        format!(
             "refusing the runs folder {}: {why} (set FORMATION_RUNS_DIR to a folder of your own \
              with mode 0700)",
             dir.display()
-        ))
-    };
-    if m.file_type().is_symlink() {
-        return refuse("it is a symbolic link".into());
-    }
-    if !m.is_dir() {
-        return refuse("it is not a directory".into());
-    }
-    let me = files::current_uid();
-    if m.uid() != me {
-        return refuse(format!(
-            "it belongs to {}, not to {}",
-            files::user_label(m.uid()),
-            files::user_label(me)
-        ));
-    }
-    let mode = m.mode() & 0o7777;
-    if mode & 0o022 != 0 {
-        return refuse(format!(
-            "it is {}-writable (mode {mode:04o}): other users could plant files in it",
-            if mode & 0o002 != 0 { "world" } else { "group" }
-        ));
-    }
-    Ok(())
+        )
+    })
 }
 
 /// The runs directory, checked ([`check_dir`]); created with mode 0700 when `create` is set,

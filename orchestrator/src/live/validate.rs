@@ -35,13 +35,22 @@ pub fn fault(s: &Scenario, gamma: [f64; 3], delta: [f64; 3]) -> Result<(), Strin
         }
     }
     for (k, d) in delta.iter().enumerate() {
-        let half = 0.5 * (s.vehicle.torque_max_nm[k] - s.vehicle.torque_min_nm[k]);
+        let half = formation_config::scenario::validate::max_fault_delta_nm(s, k);
         if !(d.is_finite() && d.abs() <= half) {
             return Err(format!(
                 "--delta: component {} is {d} N m; |delta| must be at most half the torque range ({half} N m)",
                 k + 1
             ));
         }
+    }
+    Ok(())
+}
+
+/// `--down D` must be a finite time > 0 (the run bounds it further: at least one step, at most
+/// the run's remaining time).
+pub fn down(d: f64) -> Result<(), String> {
+    if !(d.is_finite() && d > 0.0) {
+        return Err(format!("--down {d}: must be a finite time > 0 s"));
     }
     Ok(())
 }
@@ -67,7 +76,7 @@ pub fn delay(s: &Scenario, d: &DelayProfile) -> Result<(), String> {
 /// `--at T` must be a time (finite, not negative), whatever the run.
 pub fn at_sign(t: f64) -> Result<(), String> {
     if !(t.is_finite() && t >= 0.0) {
-        return Err(format!("--at {t}: must be a simulation time >= 0 s"));
+        return Err(format!("--at {t}: must be a finite simulation time >= 0 s"));
     }
     Ok(())
 }
@@ -192,6 +201,9 @@ mod tests {
         assert!(fault(&s, [0.0, 1.0, 1.0], [0.0; 3])
             .unwrap_err()
             .contains("--gamma"));
+        for d in [f64::INFINITY, f64::NAN, -1.0, 0.0] {
+            assert!(down(d).unwrap_err().contains("--down"), "{d}");
+        }
         assert!(fault(&s, [1.0; 3], [1e6, 0.0, 0.0])
             .unwrap_err()
             .contains("--delta"));

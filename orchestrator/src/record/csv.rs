@@ -308,7 +308,10 @@ struct RowWriter {
 impl RowWriter {
     /// Creates the file and writes the header.
     fn create(path: &Path, s: &Scenario) -> std::io::Result<RowWriter> {
-        let mut out = BufWriter::with_capacity(1 << 20, File::create(path)?);
+        let mut out = BufWriter::with_capacity(
+            1 << 20,
+            formation_config::node::files::create_replacing(path)?,
+        );
         writeln!(out, "{}", COLUMNS.join(","))?;
         Ok(RowWriter {
             out,

@@ -251,7 +251,10 @@ impl McapSink {
     /// Creates the file, its schemas and channels, the run's metadata and the scenario as an
     /// attachment (`scenario.toml`).
     pub fn create(path: &Path, s: &Scenario, variant: Variant) -> std::io::Result<McapSink> {
-        let file = BufWriter::with_capacity(1 << 20, File::create(path)?);
+        let file = BufWriter::with_capacity(
+            1 << 20,
+            formation_config::node::files::create_replacing(path)?,
+        );
         let mut writer = mcap::WriteOptions::new()
             .compression(None)
             .profile("")

@@ -88,6 +88,7 @@ pub struct Recorder {
     /// The live Foxglove view (`--foxglove`).
     #[cfg(feature = "foxglove")]
     live: Option<live::LiveFeed>,
+    checkpoints_refused: Vec<u32>,
 }
 
 impl Recorder {
@@ -109,7 +110,7 @@ impl Recorder {
         out_dir: &Path,
         outputs: Outputs,
     ) -> std::io::Result<Recorder> {
-        std::fs::create_dir_all(out_dir)?;
+        formation_config::node::files::ensure_private_dir(out_dir)?;
         let csv_path = out_dir.join("trajectory.csv");
         let mcap_path = out_dir.join(mcap::FILE_NAME);
         if !outputs.mcap {
@@ -163,6 +164,7 @@ impl Recorder {
             restarts: vec![0; s.n_agents()],
             #[cfg(feature = "foxglove")]
             live,
+            checkpoints_refused: vec![0; s.n_agents()],
         })
     }
 
@@ -220,6 +222,16 @@ impl Recorder {
         self.timing = Some(timing);
     }
 
+    /// Checkpoints refused per agent (damaged, another agent's or run's): restarted cold.
+    pub fn set_checkpoints_refused(&mut self, refused: Vec<u32>) {
+        self.checkpoints_refused = refused;
+    }
+
+    /// Live fault and delay injections: listed in `events[]` like the same events of a replay.
+    pub fn add_events(&mut self, events: &[formation_config::scenario::events::Event]) {
+        self.events.extend_from_slice(events);
+    }
+
     /// What a live run added to its timeline: runtime events (live crashes, hangs, links, losses,
     /// agents taken down), the supervision's incidents, restarts per agent under the policy.
     pub fn set_runtime(
@@ -275,6 +287,9 @@ impl Recorder {
         }
         for (a, r) in summary.agents.iter_mut().zip(&self.restarts) {
             a.restarts = *r;
+        }
+        for (a, r) in summary.agents.iter_mut().zip(&self.checkpoints_refused) {
+            a.checkpoints_refused = *r;
         }
         summary.write(&self.out_dir.join("summary.json"))?;
         Ok(summary)

@@ -60,6 +60,9 @@ pub struct AgentSummary {
     pub torque_saturation_fraction: f64,
     /// Times its process was restarted under `runtime.restart = "on-failure"`.
     pub restarts: u32,
+    /// Checkpoints refused at a restart (damaged, another agent's or another run's), each
+    /// restarted cold at once instead.
+    pub checkpoints_refused: u32,
 }
 
 /// The whole summary.
@@ -173,6 +176,7 @@ impl Summary {
                         0.0
                     },
                     restarts: 0,
+                    checkpoints_refused: 0,
                 })
                 .collect(),
             timing: None,
@@ -183,7 +187,7 @@ impl Summary {
 
     /// Writes it as pretty JSON.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
-        std::fs::write(path, self.to_json() + "\n")
+        formation_config::node::files::write_atomic(path, (self.to_json() + "\n").as_bytes())
     }
 
     /// The pretty JSON of `summary.json` (without the final line break).

@@ -62,7 +62,11 @@ pub fn write_iox2_config(run_dir: &std::path::Path, prefix: &str) -> Result<(), 
     let text =
         toml::to_string(&cfg).map_err(|e| format!("cannot serialise the iceoryx2 config: {e}"))?;
     let dir = run_dir.join("iox2").join("config");
-    std::fs::create_dir_all(&dir)
-        .and_then(|_| std::fs::write(dir.join("iceoryx2.toml"), text))
+    formation_config::node::files::ensure_private_dir(&run_dir.join("iox2"))
+        .and_then(|()| formation_config::node::files::ensure_private_dir(&dir))
+        .map_err(std::io::Error::from)
+        .and_then(|()| {
+            formation_config::node::files::write_atomic(&dir.join("iceoryx2.toml"), text.as_bytes())
+        })
         .map_err(|e| format!("cannot write {}: {e}", dir.display()))
 }

@@ -37,6 +37,8 @@ pub struct Injections {
     events: File,
     /// The lines written to `events.jsonl` since the last [`Injections::take_logged`].
     logged: Vec<serde_json::Value>,
+    /// The fault and delay injections accepted to apply inside the run, as timeline events.
+    changes: Vec<Event>,
     scenario: Scenario,
 }
 
@@ -48,9 +50,10 @@ impl Injections {
             requests: subscriber(node, &services::INJECT_REQUEST.named())?,
             faults: publisher(node, &services::FAULT_INJECTION.named())?,
             delays: publisher(node, &services::DELAY_INJECTION.named())?,
-            events: File::create(&path)
+            events: formation_config::node::files::create_replacing(&path)
                 .map_err(|e| format!("cannot create {}: {e}", path.display()))?,
             logged: Vec::new(),
+            changes: Vec::new(),
             scenario: scenario.clone(),
         })
     }
@@ -68,23 +71,32 @@ impl Injections {
         Ok(out)
     }
 
-    fn check(&self, r: &InjectRequest) -> Result<(), String> {
+    /// The checks of a timeline event of the same kind at the step it applies (`down_s` at most
+    /// the run's remaining time from there), after the client's own.
+    fn check(&self, r: &InjectRequest, step: u64) -> Result<(), String> {
         validate::agent(r.agent as usize + 1, self.scenario.n_agents())?;
         match r.kind {
-            INJECT_FAULT => validate::fault(&self.scenario, r.gamma, r.delta),
-            INJECT_DELAY => validate::delay(&self.scenario, &profile(r)),
-            INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP => {
-                let e = event_of(r, self.scenario.simulation.dt_s, 0);
-                formation_config::scenario::validate::validate_event(&self.scenario, "inject", &e)
-                    .map_err(|e| e.to_string())
-            }
-            k => Err(format!("unknown injection kind {k}")),
+            INJECT_FAULT => validate::fault(&self.scenario, r.gamma, r.delta)?,
+            INJECT_DELAY => validate::delay(&self.scenario, &profile(r))?,
+            INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP => {}
+            k => return Err(format!("unknown injection kind {k}")),
         }
+        // An injection after the end is checked as if at the last step (it changes nothing).
+        let last = self.scenario.n_steps().saturating_sub(1);
+        let e = event_of(r, self.scenario.simulation.dt_s, step.min(last));
+        formation_config::scenario::validate::validate_event(&self.scenario, "inject", &e)
+            .map_err(|e| e.to_string())
     }
 
     fn handle(&mut self, r: &InjectRequest, recorded: u64) -> Result<Option<RuntimeEvent>, String> {
         let wall = unix_now();
-        if let Err(e) = self.check(r) {
+        let earliest = recorded + PLANT_LEAD + SLACK;
+        let step = if r.at_step != INJECT_ASAP && r.at_step >= earliest {
+            r.at_step
+        } else {
+            earliest
+        };
+        if let Err(e) = self.check(r, step) {
             tracing::warn!(nonce = r.nonce, "injection rejected: {e}");
             return self
                 .log(json!({
@@ -93,12 +105,6 @@ impl Injections {
                 }))
                 .map(|_| None);
         }
-        let earliest = recorded + PLANT_LEAD + SLACK;
-        let step = if r.at_step != INJECT_ASAP && r.at_step >= earliest {
-            r.at_step
-        } else {
-            earliest
-        };
         let dt = self.scenario.simulation.dt_s;
         let t = step as f64 * dt;
         let requested = (r.at_step != INJECT_ASAP).then_some(r.at_step);
@@ -120,6 +126,9 @@ impl Injections {
                 "after_end": after_end, "scenario_event": scenario_event,
             }))?;
             return Ok(Some(rt));
+        }
+        if !after_end {
+            self.changes.push(event.clone());
         }
         if r.kind == INJECT_FAULT {
             send(
@@ -172,6 +181,12 @@ impl Injections {
             }))
             .map(|_| None)
         }
+    }
+
+    /// The fault and delay injections accepted so far (inside the run), as the timeline events a
+    /// replay of `events.jsonl` reads: `summary.json`'s `events[]` lists them like a replay does.
+    pub fn changes(&self) -> &[Event] {
+        &self.changes
     }
 
     /// The lines written to `events.jsonl` since the last call (the recorder puts the accepted

@@ -161,9 +161,12 @@ pub fn main(args: RunArgs) -> ExitCode {
     // The runs folder must be this user's alone (exit 2 otherwise); records of runs that are over
     // are reaped on the way.
     let runs_dir = match crate::live::registry::checked_runs_dir(true)
-        .and_then(|d| crate::live::registry::list().map(|_| d))
+        .and_then(|d| crate::live::registry::list().map(|live| (d, live)))
     {
-        Ok(d) => d.unwrap_or_else(crate::live::registry::runs_dir),
+        Ok((d, live)) => {
+            crate::live::reap_dead_prefixes(&live);
+            d.unwrap_or_else(crate::live::registry::runs_dir)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::from(cli::EXIT_INVALID);
@@ -371,6 +374,9 @@ fn run(
     if let Err(e) = cleanup::write_iox2_config(&run_dir, prefix) {
         eprintln!("warning: {e}");
     }
+    // The logs of an earlier run in the same folder: a log is appended to across the restarts of
+    // one run only (formation_config::node::logging).
+    let _ = std::fs::remove_dir_all(run_dir.join("logs"));
     if let Err(e) = formation_config::node::logging::init(&run_dir, "orchestrator.log", true) {
         eprintln!("warning: {e}");
     }
@@ -526,6 +532,7 @@ fn run(
     };
     tracing::info!(recorded, outcome = ?outcome, "run ending");
     ports.stop(recorded);
+    recorder.add_events(live.injections.changes());
     drop(live);
     spawn::stop_all(&mut children.0, STOP_GRACE);
     drop(ports);
@@ -540,20 +547,13 @@ fn run(
         recorder.set_timing(t);
     }
     // The live timeline: runtime events (less the supervision's own) and the incidents.
-    let runtime_events = takeover
-        .published()
-        .iter()
-        .filter(|e| {
-            e.to_event(scenario.simulation.dt_s).is_some()
-                || e.kind == formation_config::protocol::messages::EVENT_DOWN
-        })
-        .copied()
-        .collect();
+    let runtime_events = takeover.summary_events(scenario.simulation.dt_s);
     recorder.set_runtime(
         runtime_events,
         takeover.marks(),
         takeover.restarts().to_vec(),
     );
+    recorder.set_checkpoints_refused(takeover.checkpoints_refused().to_vec());
     let summary = recorder
         .finish(recorded, wall.as_secs_f64())
         .map_err(|e| format!("cannot write {}/summary.json: {e}", out.display()))?;

@@ -10,9 +10,9 @@ use formation_config::node::args::ChildArgs;
 use formation_config::node::ports::{
     notifier, poke, publisher, send, subscriber, Input, Output, RunNode, Svc,
 };
-use formation_config::node::restart::{self, Checkpoint, RejoinFile};
+use formation_config::node::restart::{self, RejoinFile};
 use formation_config::protocol::messages::{
-    Role, RuntimeEvent, StepEntry, EVENT_ANY, EVENT_DOWN, EVENT_DOWN_REQUEST, EVENT_JOINED,
+    Role, RuntimeEvent, StepEntry, EVENT_ANY, EVENT_DOWN, EVENT_DOWN_REQUEST, EVENT_JOINED, EVENT_UP_AGAIN,
 };
 use formation_config::protocol::services;
 use formation_config::scenario::events::Runtime;
@@ -65,6 +65,13 @@ pub struct Takeover {
     realtime: bool,
     /// Agents on other hosts are respawned there, with their checkpoints fetched first.
     remote: Option<std::rc::Rc<super::remote::RemoteRun>>,
+    /// Realtime: when each replaced agent was down (its death seen, its successor joined), as
+    /// `EVENT_DOWN` / `EVENT_UP_AGAIN` for the summary only (never sent to the processes).
+    realtime_windows: Vec<RuntimeEvent>,
+    /// Hash of the run's `scenario.toml`, which its checkpoints must carry.
+    scenario_hash: u64,
+    /// Checkpoints refused per agent (restarted cold instead).
+    checkpoints_refused: Vec<u32>,
     /// What happened, in order.
     pub incidents: Vec<Incident>,
 }
@@ -90,7 +97,7 @@ impl Takeover {
         // A restart under the policy (or a live crash) is down for about the announcement lead plus
         // the detection time: two seconds of steps at least. A longer live crash restarts from what
         // the ring still holds (cold if its checkpoint has left it).
-        let longest = history::longest_down(&timeline).max((RESTART_WINDOW_S / dt) as u64);
+        let longest = history::longest_down(&timeline, scenario.n_steps()).max((RESTART_WINDOW_S / dt) as u64);
         let len = history::len(&scenario.runtime, dt, capacity, longest);
         let mut agent_wakes = Vec::with_capacity(n);
         for i in 0..n {
@@ -111,6 +118,9 @@ impl Takeover {
             capacity,
             realtime: false,
             remote,
+            realtime_windows: Vec::new(),
+            scenario_hash: restart::scenario_hash(scenario.to_toml_string().as_bytes()),
+            checkpoints_refused: vec![0; n],
             incidents: Vec::new(),
         })
     }
@@ -120,14 +130,21 @@ impl Takeover {
         self.realtime = realtime;
     }
 
+    /// Checkpoints refused per agent (the restart went cold instead).
+    pub fn checkpoints_refused(&self) -> &[u32] {
+        &self.checkpoints_refused
+    }
+
     /// Restarts under the policy, per agent.
     pub fn restarts(&self) -> &[u32] {
         self.supervisor.restarts()
     }
 
-    /// Every runtime event published or received (live injections, take-downs, announcements).
-    pub fn published(&self) -> &[RuntimeEvent] {
-        &self.published
+    /// The runtime events `summary.json` is built from ([`for_summary`]): the live timeline with
+    /// every agent's down window closed where its new process took over, in lockstep (the
+    /// plant's take-down and the announced rejoin) and realtime (death seen, new process joined).
+    pub fn summary_events(&self, dt: f64) -> Vec<RuntimeEvent> {
+        for_summary(&self.published, &self.realtime_windows, dt)
     }
 
     /// The incidents as marks for the recorder.
@@ -242,6 +259,13 @@ impl Takeover {
                 });
                 let a = match a {
                     Action::TakeDown(i) if self.realtime => {
+                        self.realtime_windows.push(RuntimeEvent {
+                            step: recorded,
+                            kind: EVENT_DOWN,
+                            agent: i as u32,
+                            other: EVENT_ANY,
+                            ..RuntimeEvent::default()
+                        });
                         children[FIRST_AGENT + i].kill_and_reap();
                         node.try_cleanup_dead_nodes();
                         match self.supervisor.on_dead_realtime(i, recorded) {
@@ -304,6 +328,13 @@ impl Takeover {
                 tracing::info!(agent = agent + 1, step, "new agent process joined");
                 if self.realtime {
                     // The realtime plant does not wait for it: it uses its commands as they come.
+                    self.realtime_windows.push(RuntimeEvent {
+                        step: recorded,
+                        kind: EVENT_UP_AGAIN,
+                        agent: agent as u32,
+                        other: EVENT_ANY,
+                        ..RuntimeEvent::default()
+                    });
                     return Ok(());
                 }
                 send(
@@ -360,7 +391,8 @@ impl Takeover {
             }
         }
         if plan.warm {
-            match restart::read::<Checkpoint>(&restart::checkpoint_path(&run_dir, i)) {
+            let path = restart::checkpoint_path(&run_dir, i);
+            match restart::read_checkpoint(&path, i, self.scenario_hash) {
                 Ok(c) if c.step < plan.down_from && c.step >= self.history.oldest() => {
                     checkpoint = Some(c.step)
                 }
@@ -369,6 +401,11 @@ impl Takeover {
                     i + 1,
                     c.step
                 ),
+                Err(e) if path.exists() => {
+                    // Refused (not this agent's, not this run's, damaged): cold at once, counted.
+                    self.checkpoints_refused[i] += 1;
+                    eprintln!("warning: agent {}: {e}; restarting cold", i + 1);
+                }
                 Err(e) => eprintln!("warning: agent {}: no checkpoint ({e}); restarting cold", i + 1),
             }
         }
@@ -437,7 +474,52 @@ impl Takeover {
     }
 }
 
+/// The runtime events a summary is built from: the timeline events (crashes, hangs, links,
+/// losses), the plant's take-downs (`EVENT_DOWN`) and the rejoins that end them
+/// (`EVENT_UP_AGAIN`; without them a restarted agent would count as down to the end of the run),
+/// and a realtime run's `windows` of the same two kinds.
+pub fn for_summary(published: &[RuntimeEvent], windows: &[RuntimeEvent], dt: f64) -> Vec<RuntimeEvent> {
+    published
+        .iter()
+        .chain(windows)
+        .filter(|e| e.to_event(dt).is_some() || e.kind == EVENT_DOWN || e.kind == EVENT_UP_AGAIN)
+        .copied()
+        .collect()
+}
+
 /// The runtime policy's stall timeout (None: disabled).
 pub fn stall_timeout(rt: &Runtime) -> Option<Duration> {
     (rt.stall_timeout_ms > 0).then(|| Duration::from_millis(rt.stall_timeout_ms))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_config::scenario::events::Timeline;
+
+    fn ev(kind: u32, agent: u32, step: u64) -> RuntimeEvent {
+        RuntimeEvent {
+            step,
+            kind,
+            agent,
+            other: EVENT_ANY,
+            ..RuntimeEvent::default()
+        }
+    }
+
+    #[test]
+    fn a_restarted_agent_is_down_only_until_its_new_process_takes_over_in_the_summary() {
+        let dt = 0.001;
+        // Lockstep: the plant's take-down, then the announced rejoin; a JOINED is not a window.
+        let lockstep = [ev(EVENT_DOWN, 2, 1000), ev(EVENT_UP_AGAIN, 2, 1500), ev(EVENT_JOINED, 2, 1500)];
+        // Realtime: nothing is published; the death and the join are the window.
+        let realtime = [ev(EVENT_DOWN, 1, 3000), ev(EVENT_UP_AGAIN, 1, 3200)];
+        let mut t = Timeline::new(&[], dt);
+        for e in for_summary(&lockstep, &realtime, dt) {
+            e.apply(&mut t);
+        }
+        assert!(t.up(2, 999) && !t.up(2, 1000) && !t.up(2, 1499) && t.up(2, 1500));
+        assert!(t.up(2, 100_000), "up again to the end of the run");
+        assert!(t.up(1, 2999) && !t.up(1, 3000) && t.up(1, 3200));
+    }
 }

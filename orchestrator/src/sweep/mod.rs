@@ -88,8 +88,12 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("out/sweep-{}", base.name)));
-    std::fs::create_dir_all(out.join("samples"))
-        .map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    crate::out_lock::check_folder(&out)
+        .and_then(|()| {
+            formation_config::node::files::ensure_private_dir(&out.join("samples"))
+                .map_err(|e| e.to_string())
+        })
+        .map_err(|e| format!("cannot use {}: {e}", out.display()))?;
     eprintln!(
         "sweep: {} samples ({}), {jobs} jobs, writing {}",
         samples.len(),

@@ -169,7 +169,7 @@ pub fn write_csv(path: &Path, names: &[String], outcomes: &[Outcome]) -> std::io
             Err(e) => text.push_str(&format!(",,,,,,,,,,,,,,{:.3},{}\n", o.wall_s, csv_field(e))),
         }
     }
-    std::fs::write(path, text)
+    formation_config::node::files::write_atomic(path, text.as_bytes())
 }
 
 /// Median, 95th percentile and worst of a figure over the samples that have it.
@@ -318,7 +318,7 @@ impl SweepSummary {
     /// Writes it as pretty JSON.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
-        std::fs::write(path, text + "\n")
+        formation_config::node::files::write_atomic(path, (text + "\n").as_bytes())
     }
 
     /// Prints the human-readable summary.
