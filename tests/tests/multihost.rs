@@ -459,7 +459,7 @@ fn a_killed_host_daemon_is_named_at_once_and_the_run_stops_cleanly() {
     let t0 = Instant::now();
     while !std::fs::read_to_string(&err_path)
         .unwrap_or_default()
-        .contains("run registered")
+        .contains("formation run: id")
     {
         assert!(
             t0.elapsed() < Duration::from_secs(30),
