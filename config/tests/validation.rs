@@ -2,8 +2,8 @@
 //! the error names the offending field and the right assumption.
 
 use formation_config::scenario::validate::{
-    validate, validate_event, ValidationError, A1, A2, A4, A5, CTRL, D11, EQ15, EQ35_50, EQ46_49, FINITE, INDEX,
-    MISSION, PHYS, SAT, SIM,
+    validate, validate_event, ValidationError, A1, A2, A4, A5, CTRL, D11, EQ15, EQ35_50, EQ46_49,
+    FINITE, INDEX, MISSION, PHYS, SAT, SIM,
 };
 use formation_config::scenario::{Edge, PAPER_TOML};
 use formation_config::{Scenario, MAX_AGENTS};
@@ -1068,7 +1068,9 @@ fn zero_rbfnn_gains_switch_the_update_off_and_are_accepted() {
 }
 
 /// An event of `kind` for agent 1 at 1 s.
-fn event(kind: formation_config::scenario::events::EventKind) -> formation_config::scenario::events::Event {
+fn event(
+    kind: formation_config::scenario::events::EventKind,
+) -> formation_config::scenario::events::Event {
     let mut e = formation_config::scenario::events::Event::new(1.0, kind);
     e.agent = Some(1);
     e
@@ -1080,16 +1082,31 @@ fn down_times_that_are_infinite_nan_negative_or_beyond_the_runs_end_are_refused(
     let s = Scenario::paper();
     let remaining = s.simulation.duration_s - 1.0;
     for kind in [EventKind::Crash, EventKind::Hang] {
-        for bad in [f64::INFINITY, f64::NAN, -1.0, 0.0, 1e9, 1e15, remaining + 0.5] {
+        for bad in [
+            f64::INFINITY,
+            f64::NAN,
+            -1.0,
+            0.0,
+            1e9,
+            1e15,
+            remaining + 0.5,
+        ] {
             let mut with = s.clone();
             let mut e = event(kind);
             e.down_s = Some(bad);
             with.events.push(e.clone());
-            let assumption = if bad.is_finite() { "timeline" } else { "finite" };
+            let assumption = if bad.is_finite() {
+                "timeline"
+            } else {
+                "finite"
+            };
             assert_rejected(&with, "events[0].down_s", assumption);
             // What `formation inject` and the orchestrator check for a live event.
             let live = validate_event(&s, "inject", &e).unwrap_err();
-            assert!(live.0.iter().any(|x| x.field == "inject.down_s"), "{bad}: {live:?}");
+            assert!(
+                live.0.iter().any(|x| x.field == "inject.down_s"),
+                "{bad}: {live:?}"
+            );
         }
         let mut ok = s.clone();
         let mut e = event(kind);
@@ -1114,7 +1131,10 @@ fn a_timeline_fault_has_the_live_injections_limits_and_times_must_be_finite() {
     f.events[0] = e.clone();
     assert_rejected(&f, "events[0].delta[2]", "finite");
     let live = validate_event(&s, "inject", &e).unwrap_err();
-    assert!(live.0.iter().any(|x| x.field == "inject.delta[2]"), "{live:?}");
+    assert!(
+        live.0.iter().any(|x| x.field == "inject.delta[2]"),
+        "{live:?}"
+    );
     e.delta = Some([max_fault_delta_nm(&s, 0), 0.0, 0.0]);
     f.events[0] = e;
     assert!(errors(&f).is_empty(), "{:?}", errors(&f));
@@ -1125,7 +1145,12 @@ fn a_timeline_fault_has_the_live_injections_limits_and_times_must_be_finite() {
     d.events.push(e.clone());
     assert_rejected(&d, "events[0].angular_rate_rad_s", "finite");
     let live = validate_event(&s, "inject", &e).unwrap_err();
-    assert!(live.0.iter().any(|x| x.field == "inject.angular_rate_rad_s"), "{live:?}");
+    assert!(
+        live.0
+            .iter()
+            .any(|x| x.field == "inject.angular_rate_rad_s"),
+        "{live:?}"
+    );
     let mut t = s.clone();
     let mut e = event(EventKind::LinkDown);
     e.agent = None;

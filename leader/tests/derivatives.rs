@@ -119,12 +119,19 @@ fn concentric_rings_put_each_agent_on_its_own_ring_radius_in_both_phases_and_sta
     ];
     check_derivatives(&s);
     let m = Mission::from_scenario(&s);
-    for (t, radii) in [(20.0, [1.0, 1.0, 3.0, 3.0, 3.0]), (58.0, [0.5, 0.5, 2.0, 2.0, 2.0])] {
+    for (t, radii) in [
+        (20.0, [1.0, 1.0, 3.0, 3.0, 3.0]),
+        (58.0, [0.5, 0.5, 2.0, 2.0, 2.0]),
+    ] {
         let f = frame(&m, t);
         let mut c = [0.0; 2];
         for i in 0..5 {
             let r = f.offset[i][0].hypot(f.offset[i][1]);
-            assert!((r - radii[i]).abs() < 0.03, "agent {} at t = {t}: radius {r}", i + 1);
+            assert!(
+                (r - radii[i]).abs() < 0.03,
+                "agent {} at t = {t}: radius {r}",
+                i + 1
+            );
             for k in 0..2 {
                 c[k] += f.offset[i][k];
             }

@@ -530,8 +530,12 @@ mod tests {
         }
     }
 
-    fn events_file(tag: &str, text: &str) -> Result<Vec<formation_config::scenario::events::Event>, String> {
-        let path = std::env::temp_dir().join(format!("formation-ev-{tag}-{}.jsonl", std::process::id()));
+    fn events_file(
+        tag: &str,
+        text: &str,
+    ) -> Result<Vec<formation_config::scenario::events::Event>, String> {
+        let path =
+            std::env::temp_dir().join(format!("formation-ev-{tag}-{}.jsonl", std::process::id()));
         std::fs::write(&path, text).unwrap();
         let r = read_events(&path);
         let _ = std::fs::remove_file(&path);
@@ -543,7 +547,12 @@ mod tests {
         let ok = r#"{"at_s": 0.5, "kind": "crash", "agent": 1, "down_s": 0.5}"#;
         let rejected = r#"{"event": "rejected", "nonce": 1, "error": "x"}"#;
         let missing = r#"{"kind": "crash", "agent": 1, "down_s": 0.5}"#;
-        assert_eq!(events_file("ok", &format!("{ok}\n{rejected}\n")).unwrap().len(), 1);
+        assert_eq!(
+            events_file("ok", &format!("{ok}\n{rejected}\n"))
+                .unwrap()
+                .len(),
+            1
+        );
         let e = events_file("missing", &format!("{ok}\n\n{missing}\n")).unwrap_err();
         assert!(e.contains("line 3") && e.contains("at_s"), "{e}");
     }

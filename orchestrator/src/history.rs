@@ -107,6 +107,10 @@ mod tests {
         let t = Timeline::new(&[crash(1.0, 0.5), crash(2.0, 1e9)], dt);
         assert_eq!(longest_down(&t, n_steps), 500);
         let t = Timeline::new(&[crash(2.0, 8.0)], dt);
-        assert_eq!(longest_down(&t, n_steps), 0, "rejoins at the end: never replayed");
+        assert_eq!(
+            longest_down(&t, n_steps),
+            0,
+            "rejoins at the end: never replayed"
+        );
     }
 }

@@ -20,7 +20,14 @@ pub const LOCK_NAME: &str = ".formation.lock";
 
 /// The subfolders `run` and `sweep` write into, checked like the folder when they exist (a planted
 /// `checkpoints -> elsewhere` would let its owner swap an agent's checkpoint).
-pub const SUBFOLDERS: [&str; 6] = ["logs", "checkpoints", "iox2", "iox2/config", "timing", "samples"];
+pub const SUBFOLDERS: [&str; 6] = [
+    "logs",
+    "checkpoints",
+    "iox2",
+    "iox2/config",
+    "timing",
+    "samples",
+];
 
 /// Creates `out` owner-only or refuses it (see the module documentation).
 pub fn check_folder(out: &Path) -> Result<(), String> {
@@ -28,8 +35,9 @@ pub fn check_folder(out: &Path) -> Result<(), String> {
     for sub in SUBFOLDERS {
         let p = out.join(sub);
         if std::fs::symlink_metadata(&p).is_ok() {
-            files::check_private_dir(&p)
-                .map_err(|why| format!("output folder: refusing the folder {}: {why}", p.display()))?;
+            files::check_private_dir(&p).map_err(|why| {
+                format!("output folder: refusing the folder {}: {why}", p.display())
+            })?;
         }
     }
     Ok(())
@@ -141,13 +149,19 @@ mod tests {
         drop(acquire(&out, None, "formation sim").unwrap());
         std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o777)).unwrap();
         let e = acquire(&out, None, "formation sim").unwrap_err();
-        assert!(e.contains(&out.display().to_string()) && e.contains("world-writable"), "{e}");
+        assert!(
+            e.contains(&out.display().to_string()) && e.contains("world-writable"),
+            "{e}"
+        );
         std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o700)).unwrap();
         let elsewhere = d.join("elsewhere");
         std::fs::create_dir(&elsewhere).unwrap();
         std::os::unix::fs::symlink(&elsewhere, out.join("checkpoints")).unwrap();
         let e = acquire(&out, None, "formation run").unwrap_err();
-        assert!(e.contains("checkpoints") && e.contains("symbolic link"), "{e}");
+        assert!(
+            e.contains("checkpoints") && e.contains("symbolic link"),
+            "{e}"
+        );
         let _ = std::fs::remove_dir_all(&d);
     }
 

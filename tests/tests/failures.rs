@@ -580,7 +580,13 @@ fn a_live_run_with_injected_fault_and_crash_replayed_from_its_events_jsonl_is_by
             .as_array()
             .unwrap()
             .iter()
-            .map(|e| (e["kind"].as_str().unwrap_or("").to_string(), e["agent"].clone(), format!("{:.3}", e["at_s"].as_f64().unwrap_or(-1.0))))
+            .map(|e| {
+                (
+                    e["kind"].as_str().unwrap_or("").to_string(),
+                    e["agent"].clone(),
+                    format!("{:.3}", e["at_s"].as_f64().unwrap_or(-1.0)),
+                )
+            })
             .collect()
     };
     let live = listed(&out);

@@ -77,12 +77,21 @@ fn backdate(path: &Path) {
         tv_nsec: 0,
     };
     // SAFETY: a valid path and two timespecs.
-    unsafe { libc::utimensat(libc::AT_FDCWD, c.as_ptr(), [t, t].as_ptr(), libc::AT_SYMLINK_NOFOLLOW) };
+    unsafe {
+        libc::utimensat(
+            libc::AT_FDCWD,
+            c.as_ptr(),
+            [t, t].as_ptr(),
+            libc::AT_SYMLINK_NOFOLLOW,
+        )
+    };
 }
 
 #[test]
 fn a_folder_another_user_owns_with_a_planted_summary_link_is_refused_and_the_victim_kept() {
-    if !root_or_skip("a_folder_another_user_owns_with_a_planted_summary_link_is_refused_and_the_victim_kept") {
+    if !root_or_skip(
+        "a_folder_another_user_owns_with_a_planted_summary_link_is_refused_and_the_victim_kept",
+    ) {
         return;
     }
     let dir = temp_dir("hostile-foreign-out");
@@ -96,17 +105,36 @@ fn a_folder_another_user_owns_with_a_planted_summary_link_is_refused_and_the_vic
     chown(&out, OTHER_UID);
     chown(&out.join("summary.json"), OTHER_UID);
     for cmd in ["sim", "run"] {
-        let o = formation(&[cmd, "--set", "simulation.duration_s=1", "--out", out.to_str().unwrap()]);
+        let o = formation(&[
+            cmd,
+            "--set",
+            "simulation.duration_s=1",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert_eq!(o.status.code(), Some(2), "{cmd}: {}", stderr(&o));
         let e = stderr(&o);
-        assert!(e.contains(&out.display().to_string()) && e.contains(&format!("uid {OTHER_UID}")), "{cmd}: {e}");
-        assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious", "{cmd}");
+        assert!(
+            e.contains(&out.display().to_string()) && e.contains(&format!("uid {OTHER_UID}")),
+            "{cmd}: {e}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(&victim).unwrap(),
+            "precious",
+            "{cmd}"
+        );
     }
     // A folder others may write to is refused too, whoever owns it.
     let shared = dir.join("shared");
     std::fs::create_dir(&shared).unwrap();
     std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o777)).unwrap();
-    let o = formation(&["sim", "--set", "simulation.duration_s=1", "--out", shared.to_str().unwrap()]);
+    let o = formation(&[
+        "sim",
+        "--set",
+        "simulation.duration_s=1",
+        "--out",
+        shared.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("world-writable"), "{}", stderr(&o));
 }
@@ -118,13 +146,31 @@ fn links_planted_in_an_own_output_folder_are_replaced_never_written_through() {
     std::fs::write(&victim, "precious").unwrap();
     let out = dir.join("out");
     std::fs::create_dir(&out).unwrap();
-    for name in ["summary.json", "trajectory.csv", "scenario.toml", "run.mcap"] {
+    for name in [
+        "summary.json",
+        "trajectory.csv",
+        "scenario.toml",
+        "run.mcap",
+    ] {
         std::os::unix::fs::symlink(&victim, out.join(name)).unwrap();
     }
-    let o = formation(&["sim", "--set", "simulation.duration_s=0.5", "--record", "mcap", "--out", out.to_str().unwrap()]);
+    let o = formation(&[
+        "sim",
+        "--set",
+        "simulation.duration_s=0.5",
+        "--record",
+        "mcap",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
-    for name in ["summary.json", "trajectory.csv", "scenario.toml", "run.mcap"] {
+    for name in [
+        "summary.json",
+        "trajectory.csv",
+        "scenario.toml",
+        "run.mcap",
+    ] {
         let m = std::fs::symlink_metadata(out.join(name)).unwrap();
         assert!(m.is_file(), "{name} is a file of its own");
         assert_eq!(m.mode() & 0o077, 0, "{name} is owner-only");
@@ -133,7 +179,13 @@ fn links_planted_in_an_own_output_folder_are_replaced_never_written_through() {
     let elsewhere = dir.join("elsewhere");
     std::fs::create_dir(&elsewhere).unwrap();
     std::os::unix::fs::symlink(&elsewhere, out.join("checkpoints")).unwrap();
-    let o = formation(&["run", "--set", "simulation.duration_s=0.2", "--out", out.to_str().unwrap()]);
+    let o = formation(&[
+        "run",
+        "--set",
+        "simulation.duration_s=0.2",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("checkpoints"), "{}", stderr(&o));
     assert_eq!(std::fs::read_dir(&elsewhere).unwrap().count(), 0);
@@ -173,11 +225,21 @@ fn another_uid_cannot_write_16_bytes_into_a_runs_global_mgmt_and_every_file_of_i
         .gid(OTHER_UID)
         .output()
         .expect("sh starts as another uid");
-    assert!(!o.status.success(), "uid {OTHER_UID} wrote into {}", mgmt.display());
+    assert!(
+        !o.status.success(),
+        "uid {OTHER_UID} wrote into {}",
+        mgmt.display()
+    );
     assert_eq!(std::fs::read(&mgmt).unwrap(), before);
     for f in formation_config::node::ipc::residue(&prefix).unwrap() {
         let m = std::fs::symlink_metadata(&f).unwrap();
-        assert_eq!(m.mode() & 0o077, 0, "{} is mode {:o}", f.display(), m.mode() & 0o777);
+        assert_eq!(
+            m.mode() & 0o077,
+            0,
+            "{} is mode {:o}",
+            f.display(),
+            m.mode() & 0o777
+        );
     }
     // The iceoryx2 root holding the node records and event sockets is the user's alone.
     let root = std::fs::symlink_metadata(formation_config::node::ipc::root_dir()).unwrap();
@@ -188,7 +250,9 @@ fn another_uid_cannot_write_16_bytes_into_a_runs_global_mgmt_and_every_file_of_i
 
 #[test]
 fn a_second_user_runs_side_by_side_with_roots_run_and_both_are_byte_identical_to_sim() {
-    if !root_or_skip("a_second_user_runs_side_by_side_with_roots_run_and_both_are_byte_identical_to_sim") {
+    if !root_or_skip(
+        "a_second_user_runs_side_by_side_with_roots_run_and_both_are_byte_identical_to_sim",
+    ) {
         return;
     }
     let dir = temp_dir("hostile-two-users");
@@ -213,12 +277,29 @@ fn a_second_user_runs_side_by_side_with_roots_run_and_both_are_byte_identical_to
         .stdin(Stdio::null())
         .output()
         .expect("formation starts as another uid");
-    assert!(o.status.success(), "the second user's run failed: {}", stderr(&o));
+    assert!(
+        o.status.success(),
+        "the second user's run failed: {}",
+        stderr(&o)
+    );
     let (st, _) = run.wait(TIMEOUT).expect("root's run ends");
     assert_eq!(st.code(), Some(0), "{}", run.stderr());
-    assert_eq!(std::fs::metadata(their_out.join("trajectory.csv")).unwrap().uid(), OTHER_UID);
-    assert_trajectory_is_sims(&their_out, &["--set", "simulation.duration_s=2"], &dir.join("sim2"));
-    assert_trajectory_is_sims(&mine, &["--set", "simulation.duration_s=3"], &dir.join("sim3"));
+    assert_eq!(
+        std::fs::metadata(their_out.join("trajectory.csv"))
+            .unwrap()
+            .uid(),
+        OTHER_UID
+    );
+    assert_trajectory_is_sims(
+        &their_out,
+        &["--set", "simulation.duration_s=2"],
+        &dir.join("sim2"),
+    );
+    assert_trajectory_is_sims(
+        &mine,
+        &["--set", "simulation.duration_s=3"],
+        &dir.join("sim3"),
+    );
 }
 
 #[test]
@@ -254,15 +335,27 @@ fn ps_reaps_the_files_of_a_killed_run_and_never_those_of_a_live_one() {
         }
     }
     let start = Instant::now();
-    while pids.iter().any(|p| Path::new(&format!("/proc/{p}")).exists() && !std::fs::read_to_string(format!("/proc/{p}/stat")).is_ok_and(|s| s.contains(") Z"))) {
-        assert!(start.elapsed() < TIMEOUT, "the killed run's processes linger");
+    while pids.iter().any(|p| {
+        Path::new(&format!("/proc/{p}")).exists()
+            && !std::fs::read_to_string(format!("/proc/{p}/stat")).is_ok_and(|s| s.contains(") Z"))
+    }) {
+        assert!(
+            start.elapsed() < TIMEOUT,
+            "the killed run's processes linger"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     let (live_prefix, dead_prefix) = (live.prefix().unwrap(), dead.prefix().unwrap());
     let residue = |p: &str| formation_config::node::ipc::residue(p).unwrap();
-    assert!(!residue(&dead_prefix).is_empty(), "the killed run left files");
+    assert!(
+        !residue(&dead_prefix).is_empty(),
+        "the killed run left files"
+    );
     // Both old enough to be reaped, were they dead.
-    for f in residue(&dead_prefix).into_iter().chain(residue(&live_prefix)) {
+    for f in residue(&dead_prefix)
+        .into_iter()
+        .chain(residue(&live_prefix))
+    {
         backdate(&f);
     }
     let live_files = residue(&live_prefix).len();
@@ -275,15 +368,29 @@ fn ps_reaps_the_files_of_a_killed_run_and_never_those_of_a_live_one() {
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains(&dead_prefix), "{}", stderr(&o));
-    assert!(residue(&dead_prefix).is_empty(), "{:?}", residue(&dead_prefix));
+    assert!(
+        residue(&dead_prefix).is_empty(),
+        "{:?}",
+        residue(&dead_prefix)
+    );
     assert!(!stderr(&o).contains(&live_prefix), "{}", stderr(&o));
-    assert_eq!(residue(&live_prefix).len(), live_files, "the live run's files are kept");
+    assert_eq!(
+        residue(&live_prefix).len(),
+        live_files,
+        "the live run's files are kept"
+    );
     // The live run goes on and ends normally.
-    let rows = |d: &Path| std::fs::read_to_string(d.join("trajectory.csv")).map_or(0, |t| t.lines().count());
+    let rows = |d: &Path| {
+        std::fs::read_to_string(d.join("trajectory.csv")).map_or(0, |t| t.lines().count())
+    };
     let before = rows(&live_out);
     let start = Instant::now();
     while rows(&live_out) <= before {
-        assert!(start.elapsed() < TIMEOUT, "the live run stopped: {}", live.stderr());
+        assert!(
+            start.elapsed() < TIMEOUT,
+            "the live run stopped: {}",
+            live.stderr()
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     live.signal(libc::SIGINT);
@@ -318,12 +425,18 @@ fn a_restarted_agent_appends_to_its_log_after_a_line_naming_its_new_pid() {
     let (st, _) = run.wait(TIMEOUT).expect("the run ends");
     assert_eq!(st.code(), Some(0), "{}", run.stderr());
     let log = std::fs::read_to_string(out.join("logs").join("agent-1.log")).unwrap();
-    let separators: Vec<&str> = log.lines().filter(|l| l.contains("new process: pid")).collect();
+    let separators: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("new process: pid"))
+        .collect();
     assert_eq!(separators.len(), 1, "{log}");
     let starts = log.lines().filter(|l| l.contains("starting")).count();
     assert_eq!(starts, 2, "the first process's lines are kept: {log}");
     let sep_at = log.find("new process: pid").unwrap();
-    assert!(log[..sep_at].contains("starting") && log[sep_at..].contains("taking over"), "{log}");
+    assert!(
+        log[..sep_at].contains("starting") && log[sep_at..].contains("taking over"),
+        "{log}"
+    );
 }
 
 #[test]
@@ -331,13 +444,24 @@ fn another_agents_checkpoint_is_refused_named_and_the_restart_goes_cold_at_once_
     let dir = temp_dir("hostile-ckpt");
     let out = dir.join("run");
     let mut run = RunningRun::start(
-        &["--set", "simulation.duration_s=6", "--restart", "on-failure", "--restart-state", "warm"],
+        &[
+            "--set",
+            "simulation.duration_s=6",
+            "--restart",
+            "on-failure",
+            "--restart-state",
+            "warm",
+        ],
         &out,
     );
     let ckpt = |id: usize| out.join("checkpoints").join(format!("agent-{id}.ckpt"));
     let start = Instant::now();
     while !(ckpt(2).exists() && ckpt(3).exists()) {
-        assert!(start.elapsed() < TIMEOUT, "no checkpoints: {}", run.stderr());
+        assert!(
+            start.elapsed() < TIMEOUT,
+            "no checkpoints: {}",
+            run.stderr()
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     wait_stepping(&run);
@@ -352,9 +476,16 @@ fn another_agents_checkpoint_is_refused_named_and_the_restart_goes_cold_at_once_
     let (st, _) = run.wait(TIMEOUT).expect("the run ends");
     let e = run.stderr();
     assert_eq!(st.code(), Some(0), "{e}");
-    assert!(e.contains("agent-2.ckpt refused") && e.contains("agent 3's checkpoint"), "{e}");
+    assert!(
+        e.contains("agent-2.ckpt refused") && e.contains("agent 3's checkpoint"),
+        "{e}"
+    );
     assert!(e.contains("restarting cold"), "{e}");
-    assert_eq!(e.matches("taken over").count(), 1, "one restart, not retries: {e}");
+    assert_eq!(
+        e.matches("taken over").count(),
+        1,
+        "one restart, not retries: {e}"
+    );
     let s = summary(&out);
     assert_eq!(s["agents"][1]["checkpoints_refused"], 1);
     assert_eq!(s["agents"][1]["restarts"], 1);

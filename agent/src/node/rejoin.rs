@@ -54,7 +54,7 @@ impl Checkpoints {
                     self.scenario_hash,
                     &Checkpoint { step: k, state },
                 )
-                    .map_err(|e| e.to_string())
+                .map_err(|e| e.to_string())
             });
         if let Err(e) = written {
             tracing::warn!(

@@ -136,7 +136,12 @@ pub struct UnsafeDir {
 
 impl std::fmt::Display for UnsafeDir {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "refusing the folder {}: {}", self.path.display(), self.why)
+        write!(
+            f,
+            "refusing the folder {}: {}",
+            self.path.display(),
+            self.why
+        )
     }
 }
 
@@ -351,7 +356,10 @@ mod tests {
             .unwrap();
         assert!(open_append(&out.join("agent-1.log")).is_err());
         assert_eq!(std::fs::read_to_string(&victim).unwrap(), "precious");
-        assert_eq!(std::fs::read_to_string(out.join("summary.json")).unwrap(), "{}");
+        assert_eq!(
+            std::fs::read_to_string(out.join("summary.json")).unwrap(),
+            "{}"
+        );
         assert!(!std::fs::symlink_metadata(out.join("trajectory.csv"))
             .unwrap()
             .file_type()
@@ -376,7 +384,10 @@ mod tests {
         let shared = d.join("shared");
         std::fs::create_dir(&shared).unwrap();
         std::fs::set_permissions(&shared, std::fs::Permissions::from_mode(0o777)).unwrap();
-        assert!(ensure_private_dir(&shared).unwrap_err().why.contains("world-writable"));
+        assert!(ensure_private_dir(&shared)
+            .unwrap_err()
+            .why
+            .contains("world-writable"));
         let _ = std::fs::remove_dir_all(&d);
     }
 

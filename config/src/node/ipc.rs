@@ -349,8 +349,7 @@ fn collect_matching(
 /// that is alive (or cannot be judged) is left untouched and gives false.
 pub fn cleanup_dead_nodes(prefix: &str) -> Result<bool, IpcError> {
     let cfg = config_for_prefix(prefix)?;
-    let list_err =
-        |e| IpcError::BadName(format!("cannot list the nodes of {prefix}: {e:?}"));
+    let list_err = |e| IpcError::BadName(format!("cannot list the nodes of {prefix}: {e:?}"));
     let mut alive = false;
     Node::<ipc::Service>::list(&cfg, |state| {
         if !matches!(state, NodeState::Dead(_)) {

@@ -105,10 +105,15 @@ pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Ch
     }
     let id = u32_at(12) as usize;
     if id != agent + 1 {
-        return Err(format!("it is agent {id}'s checkpoint, not agent {}'s", agent + 1));
+        return Err(format!(
+            "it is agent {id}'s checkpoint, not agent {}'s",
+            agent + 1
+        ));
     }
     if u64_at(16) != scenario {
-        return Err("it belongs to another scenario (its scenario hash differs from this run's)".into());
+        return Err(
+            "it belongs to another scenario (its scenario hash differs from this run's)".into(),
+        );
     }
     Ok(Checkpoint {
         step: u64_at(24),
@@ -117,7 +122,12 @@ pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Ch
 }
 
 /// Writes agent i's checkpoint (see the module documentation) atomically, owner-only.
-pub fn write_checkpoint(path: &Path, agent: usize, scenario: u64, c: &Checkpoint) -> io::Result<()> {
+pub fn write_checkpoint(
+    path: &Path,
+    agent: usize,
+    scenario: u64,
+    c: &Checkpoint,
+) -> io::Result<()> {
     if let Some(parent) = path.parent() {
         super::files::ensure_private_dir(parent)?;
     }
@@ -238,7 +248,9 @@ mod tests {
             );
         }
         assert!(why(&good[..good.len() - 1], 2, 77).contains("truncated"));
-        let random: Vec<u8> = (0..500u32).map(|k| (k * 2_654_435_761u32 >> 13) as u8).collect();
+        let random: Vec<u8> = (0..500u32)
+            .map(|k| (k * 2_654_435_761u32 >> 13) as u8)
+            .collect();
         assert!(why(&random, 2, 77).contains("magic"));
         // The file of the old format (bare bincode) decodes as nothing.
         let old = encode(&c).unwrap();

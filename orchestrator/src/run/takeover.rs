@@ -12,7 +12,8 @@ use formation_config::node::ports::{
 };
 use formation_config::node::restart::{self, RejoinFile};
 use formation_config::protocol::messages::{
-    Role, RuntimeEvent, StepEntry, EVENT_ANY, EVENT_DOWN, EVENT_DOWN_REQUEST, EVENT_JOINED, EVENT_UP_AGAIN,
+    Role, RuntimeEvent, StepEntry, EVENT_ANY, EVENT_DOWN, EVENT_DOWN_REQUEST, EVENT_JOINED,
+    EVENT_UP_AGAIN,
 };
 use formation_config::protocol::services;
 use formation_config::scenario::events::Runtime;
@@ -97,7 +98,8 @@ impl Takeover {
         // A restart under the policy (or a live crash) is down for about the announcement lead plus
         // the detection time: two seconds of steps at least. A longer live crash restarts from what
         // the ring still holds (cold if its checkpoint has left it).
-        let longest = history::longest_down(&timeline, scenario.n_steps()).max((RESTART_WINDOW_S / dt) as u64);
+        let longest = history::longest_down(&timeline, scenario.n_steps())
+            .max((RESTART_WINDOW_S / dt) as u64);
         let len = history::len(&scenario.runtime, dt, capacity, longest);
         let mut agent_wakes = Vec::with_capacity(n);
         for i in 0..n {
@@ -478,7 +480,11 @@ impl Takeover {
 /// losses), the plant's take-downs (`EVENT_DOWN`) and the rejoins that end them
 /// (`EVENT_UP_AGAIN`; without them a restarted agent would count as down to the end of the run),
 /// and a realtime run's `windows` of the same two kinds.
-pub fn for_summary(published: &[RuntimeEvent], windows: &[RuntimeEvent], dt: f64) -> Vec<RuntimeEvent> {
+pub fn for_summary(
+    published: &[RuntimeEvent],
+    windows: &[RuntimeEvent],
+    dt: f64,
+) -> Vec<RuntimeEvent> {
     published
         .iter()
         .chain(windows)
@@ -511,7 +517,11 @@ mod tests {
     fn a_restarted_agent_is_down_only_until_its_new_process_takes_over_in_the_summary() {
         let dt = 0.001;
         // Lockstep: the plant's take-down, then the announced rejoin; a JOINED is not a window.
-        let lockstep = [ev(EVENT_DOWN, 2, 1000), ev(EVENT_UP_AGAIN, 2, 1500), ev(EVENT_JOINED, 2, 1500)];
+        let lockstep = [
+            ev(EVENT_DOWN, 2, 1000),
+            ev(EVENT_UP_AGAIN, 2, 1500),
+            ev(EVENT_JOINED, 2, 1500),
+        ];
         // Realtime: nothing is published; the death and the join are the window.
         let realtime = [ev(EVENT_DOWN, 1, 3000), ev(EVENT_UP_AGAIN, 1, 3200)];
         let mut t = Timeline::new(&[], dt);

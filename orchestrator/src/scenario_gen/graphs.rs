@@ -338,7 +338,10 @@ mod tests {
             .map(|i| deg[i - 1])
             .min()
             .unwrap();
-        assert!(pinned_max <= free_min, "a pinned agent of degree {pinned_max}, a free one of {free_min}");
+        assert!(
+            pinned_max <= free_min,
+            "a pinned agent of degree {pinned_max}, a free one of {free_min}"
+        );
         assert!(leaders.iter().any(|&l| deg[l - 1] == 1));
     }
 

@@ -159,39 +159,42 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
     s.mission.formation.rings.clear();
     let n_tpl = template.n_agents().max(2);
     let inner = radii::radii(&radii_inputs(template, n_tpl, opts.min_spacing_m));
-    let layout = if rings::one_ring_cannot_cover(&r) && !rings::one_ring_cannot_cover(&inner) && n > n_tpl
-    {
-        // Concentric rings (rings.rs): the template's ring inside, covering; the rest around it.
-        let f = &mut s.mission.formation;
-        f.rings = rings::concentric(
-            n,
-            n_tpl,
-            inner.cover_m,
-            inner.enclose_m,
-            inputs.min_spacing_m,
-            f.first_phase_rad,
-        );
-        f.cover_radius_m = inner.cover_m;
-        f.enclose_radius_m = inner.enclose_m;
-        let outer = &f.rings[f.rings.len() - 1];
-        f.spin_rate_rad_s = rings::spin_rate(
-            inputs.template_spin_rad_s,
-            inputs.template_enclose_m,
-            outer.enclose_radius_m,
-        );
-        let counts: Vec<String> = f.rings.iter().map(|r| r.agents.to_string()).collect();
-        format!(
-            "{} concentric rings ({} agents), cover radii {}..{} m, enclose radii {}..{} m",
-            f.rings.len(),
-            counts.join(" + "),
-            f.rings[0].cover_radius_m,
-            outer.cover_radius_m,
-            f.rings[0].enclose_radius_m,
-            outer.enclose_radius_m
-        )
-    } else {
-        format!("cover radius {} m, enclose radius {} m", r.cover_m, r.enclose_m)
-    };
+    let layout =
+        if rings::one_ring_cannot_cover(&r) && !rings::one_ring_cannot_cover(&inner) && n > n_tpl {
+            // Concentric rings (rings.rs): the template's ring inside, covering; the rest around it.
+            let f = &mut s.mission.formation;
+            f.rings = rings::concentric(
+                n,
+                n_tpl,
+                inner.cover_m,
+                inner.enclose_m,
+                inputs.min_spacing_m,
+                f.first_phase_rad,
+            );
+            f.cover_radius_m = inner.cover_m;
+            f.enclose_radius_m = inner.enclose_m;
+            let outer = &f.rings[f.rings.len() - 1];
+            f.spin_rate_rad_s = rings::spin_rate(
+                inputs.template_spin_rad_s,
+                inputs.template_enclose_m,
+                outer.enclose_radius_m,
+            );
+            let counts: Vec<String> = f.rings.iter().map(|r| r.agents.to_string()).collect();
+            format!(
+                "{} concentric rings ({} agents), cover radii {}..{} m, enclose radii {}..{} m",
+                f.rings.len(),
+                counts.join(" + "),
+                f.rings[0].cover_radius_m,
+                outer.cover_radius_m,
+                f.rings[0].enclose_radius_m,
+                outer.enclose_radius_m
+            )
+        } else {
+            format!(
+                "cover radius {} m, enclose radius {} m",
+                r.cover_m, r.enclose_m
+            )
+        };
     s.agents = (0..n)
         .map(|i| template.agents[i % template.agents.len()].clone())
         .collect();

@@ -128,7 +128,10 @@ mod tests {
             if n > 1 {
                 assert!(2.0 * r * (PI / n as f64).sin() >= S_MIN, "r = {r}, n = {n}");
             }
-            assert!(2.0 * r * (PI / (n + 1) as f64).sin() < S_MIN, "r = {r}, n = {n}");
+            assert!(
+                2.0 * r * (PI / (n + 1) as f64).sin() < S_MIN,
+                "r = {r}, n = {n}"
+            );
         }
         assert_eq!(ring_capacity(1.0, S_MIN), 5); // the paper's enclosing ring, exactly full
     }
