@@ -139,7 +139,29 @@ fn err<'a, E: std::fmt::Debug>(what: &'a str, name: &'a str) -> impl FnOnce(E) -
     move |e| format!("bridge: {what} {name}: {e:?}")
 }
 
-impl Opener<'_> {
+impl<'a> Opener<'a> {
+    /// Opens (`out`: the sending side; else the receiving side) every service of the run's table
+    /// that this host forwards.
+    fn visit_all(
+        node: &'a RunNode,
+        cfg: &'a BridgeConfig,
+        hosts: &'a [String],
+        out: bool,
+    ) -> Result<Opener<'a>, String> {
+        let mut o = Opener {
+            node,
+            cfg,
+            hosts,
+            out,
+            keep: Vec::new(),
+            topics: Vec::new(),
+            events: Vec::new(),
+            ins: HashMap::new(),
+        };
+        services::visit(&cfg.sizing, &mut o)?;
+        Ok(o)
+    }
+
     fn route(
         &self,
         name: &str,
@@ -449,17 +471,7 @@ fn run_in(
 ) {
     let setup = || -> Result<_, String> {
         let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
-        let mut o = Opener {
-            node: &node,
-            cfg: &cfg,
-            hosts: &hosts,
-            out: false,
-            keep: Vec::new(),
-            topics: Vec::new(),
-            events: Vec::new(),
-            ins: HashMap::new(),
-        };
-        services::visit(&cfg.sizing, &mut o)?;
+        let o = Opener::visit_all(&node, &cfg, &hosts, false)?;
         let (keep, ins) = (o.keep, o.ins);
         let sub = session
             .declare_subscriber(proto::run_to(&cfg.run_id, &cfg.me))
@@ -543,17 +555,7 @@ fn run_out(
 ) {
     let setup = || -> Result<_, String> {
         let node = ipc::node(&cfg.prefix, "fm-bridge-out").map_err(|e| e.to_string())?;
-        let mut o = Opener {
-            node: &node,
-            cfg: &cfg,
-            hosts: &hosts,
-            out: true,
-            keep: Vec::new(),
-            topics: Vec::new(),
-            events: Vec::new(),
-            ins: HashMap::new(),
-        };
-        services::visit(&cfg.sizing, &mut o)?;
+        let o = Opener::visit_all(&node, &cfg, &hosts, true)?;
         let (topics, events) = (o.topics, o.events);
         let mut pubs = Vec::new();
         for h in &hosts {

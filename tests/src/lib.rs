@@ -32,6 +32,26 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// Runs `formation <args>` to its end, never building anything (no `CARGO` in its environment).
+pub fn formation(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(bin("formation"))
+        .args(args)
+        .env_remove("CARGO")
+        .output()
+        .expect("formation starts")
+}
+
+/// What a finished command wrote on its standard error.
+pub fn stderr_of(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The `summary.json` a run or sim wrote into `dir`.
+pub fn summary(dir: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json is written");
+    serde_json::from_str(&text).expect("summary.json parses")
+}
+
 /// Runs `formation <args>` to its end with the runs directory `runs` (`FORMATION_RUNS_DIR`), never
 /// building anything (no `CARGO` in its environment).
 pub fn formation_in(runs: &std::path::Path, args: &[&str]) -> std::process::Output {

@@ -5,7 +5,7 @@
 
 use formation::record::table::Trajectory;
 use formation_config::Scenario;
-use formation_tests::{bin, temp_dir};
+use formation_tests::{bin, stderr_of as stderr, summary, temp_dir};
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
@@ -21,15 +21,6 @@ fn formation(dir: &Path, args: &[&str]) -> Output {
         .current_dir(dir)
         .output()
         .expect("formation starts")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json is written");
-    serde_json::from_str(&text).expect("summary.json parses")
 }
 
 /// Writes `s` to `<tmp>/<file>` and runs `formation <args...> <that file>`.

@@ -5,7 +5,7 @@
 //! leader ends the run, named; nothing is left in /dev/shm.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, temp_dir};
+use formation_tests::{bin, formation, summary, temp_dir};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -30,18 +30,6 @@ fn scenario_with(dir: &Path, name: &str, duration_s: f64, events: &str) -> PathB
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, text).unwrap();
     path
-}
-
-fn formation(args: &[&str]) -> std::process::Output {
-    Command::new(bin("formation"))
-        .args(args)
-        .env_remove("CARGO")
-        .output()
-        .expect("formation starts")
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {

@@ -9,11 +9,13 @@
 //! another uid, as in CI's container); they say so and pass vacuously otherwise.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, cpus_allowed, formation_in as formation, temp_dir};
+use formation_tests::{
+    bin, cpus_allowed, formation_in as formation, stderr_of as stderr, temp_dir,
+};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Generous bound for anything to happen; reaching it means a hang.
@@ -30,10 +32,6 @@ fn chown(path: &Path, uid: u32) {
     let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
     // SAFETY: lchown on a valid C string path.
     assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// A private runs folder (mode 0700) under `dir`.

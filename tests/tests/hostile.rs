@@ -6,11 +6,13 @@
 //! `FORMATION_REQUIRE_ROOT=1` (set by `.ci/run`, which runs as root) makes them required.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{assert_trajectory_is_sims, bin, temp_dir};
+use formation_tests::{
+    assert_trajectory_is_sims, bin, formation, stderr_of as stderr, summary, temp_dir,
+};
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Generous bound for anything to happen; reaching it means a hang.
@@ -37,22 +39,6 @@ fn chown(path: &Path, uid: u32) {
     let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
     // SAFETY: lchown on a valid C string path.
     assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn formation(args: &[&str]) -> Output {
-    Command::new(bin("formation"))
-        .args(args)
-        .env_remove("CARGO")
-        .output()
-        .expect("formation starts")
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
 /// Waits until the run's CSV has rows.

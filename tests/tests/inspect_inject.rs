@@ -8,7 +8,7 @@
 
 use formation::record::table::Trajectory;
 use formation_tests::run::RunningRun;
-use formation_tests::{bin, temp_dir};
+use formation_tests::{bin, stderr_of as stderr, temp_dir};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -24,10 +24,6 @@ fn formation(runs: &Path, args: &[&str]) -> Output {
 
 fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 fn ps_json(runs: &Path) -> Value {
