@@ -118,7 +118,8 @@ enum InPort {
         size: usize,
         inject: Inject,
     },
-    Event(Notifier<Svc>),
+    /// Boxed: a notifier is far larger than the topic variant, and ports live in a map.
+    Event(Box<Notifier<Svc>>),
 }
 
 /// Walks the service table: creates services (optionally), and opens the bridge's ports.
@@ -329,7 +330,7 @@ impl Visitor for Opener<'_> {
             });
         } else if !self.out && inbound {
             let n = ports::notifier(self.node, &s).map_err(|e| e.to_string())?;
-            self.ins.insert(s.name.clone(), InPort::Event(n));
+            self.ins.insert(s.name.clone(), InPort::Event(Box::new(n)));
         }
         Ok(())
     }

@@ -353,7 +353,7 @@ impl Daemon {
         if !r.agent_hosts.iter().all(|h| proto::valid_name(h)) || !proto::valid_name(&r.launcher) {
             return Err("a host name of the placement is not key-safe".into());
         }
-        if !r.agent_hosts.iter().any(|h| *h == self.o.name) {
+        if !r.agent_hosts.contains(&self.o.name) {
             return Err(format!("no agent of the run is placed on {}", self.o.name));
         }
         if r.observers > services::MAX_OBSERVERS + 1 {
@@ -482,14 +482,7 @@ impl Daemon {
         // SAFETY: only async-signal-safe calls between fork and exec.
         unsafe {
             cmd.pre_exec(|| {
-                libc::prctl(
-                    libc::PR_SET_PDEATHSIG,
-                    libc::SIGTERM as libc::c_ulong,
-                    0,
-                    0,
-                    0,
-                );
-                libc::signal(libc::SIGINT, libc::SIG_IGN);
+                formation_config::node::process::die_with_parent_ignore_sigint();
                 Ok(())
             });
         }

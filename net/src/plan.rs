@@ -150,17 +150,18 @@ mod tests {
         self, Event, Limits, Message, Named, Sizing, Slice, Topic, Visitor,
     };
 
-    /// (name, senders, receivers, scope, index) of every service.
-    #[derive(Default)]
-    struct All(
-        Vec<(
-            String,
-            &'static [Party],
-            &'static [Party],
-            Scope,
-            Option<usize>,
-        )>,
+    /// (name, senders, receivers, scope, index) of one service.
+    type Service = (
+        String,
+        &'static [Party],
+        &'static [Party],
+        Scope,
+        Option<usize>,
     );
+
+    /// Every service of the table.
+    #[derive(Default)]
+    struct All(Vec<Service>);
 
     impl Visitor for All {
         type Error = ();

@@ -39,16 +39,14 @@ struct Vehicle {
 #[derive(Debug, Clone)]
 pub struct Plant {
     body: Body,
-    torque_lo: Vector3<f64>,
-    torque_hi: Vector3<f64>,
-    thrust_max: f64,
     dt: f64,
     step: u64,
     vehicles: Vec<Vehicle>,
     /// The mission, whose reference of each step the leader broadcasts to every quadrotor: what
     /// the `slot` failsafe flies (the leader process computes the same frame from it).
     mission: Mission,
-    /// What the failsafe flies.
+    /// Mass properties and input limits: what every input is clamped to (thrust to [0, T_max],
+    /// torque by (3)) and what the failsafe flies.
     airframe: Airframe,
     /// The safety distance the failsafe keeps from the other quadrotors, m.
     safety_m: f64,
@@ -98,9 +96,6 @@ impl Plant {
             })
             .collect();
         Plant {
-            torque_lo: Vector3::from(v.torque_min_nm),
-            torque_hi: Vector3::from(v.torque_max_nm),
-            thrust_max: v.thrust_max_n,
             dt: s.simulation.dt_s,
             step: 0,
             vehicles,
@@ -260,8 +255,14 @@ impl Plant {
         veh.delta = delta;
         let u_ac = Vector3::from(cmd.torque_nm);
         veh.input = HeldInput {
-            thrust: cmd.thrust_n.clamp(0.0, self.thrust_max),
-            torque: actuate(&u_ac, &gamma, &delta, &self.torque_lo, &self.torque_hi),
+            thrust: cmd.thrust_n.clamp(0.0, self.airframe.thrust_max),
+            torque: actuate(
+                &u_ac,
+                &gamma,
+                &delta,
+                &self.airframe.torque_lo,
+                &self.airframe.torque_hi,
+            ),
         };
         if cmd.thrust_n.is_nan() {
             veh.input.thrust = f64::NAN;

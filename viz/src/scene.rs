@@ -779,8 +779,8 @@ impl SceneBuilder {
             let n = f.agents.len().max(1) as f64;
             let mut c = [0.0; 3];
             for a in &f.agents {
-                for k in 0..3 {
-                    c[k] += a.position[k] / n;
+                for (ck, pk) in c.iter_mut().zip(a.position) {
+                    *ck += pk / n;
                 }
             }
             c

@@ -16,6 +16,24 @@ extern "C" fn on_term(_sig: libc::c_int) {
     TERMINATED.store(true, Ordering::SeqCst);
 }
 
+/// Asks the kernel for SIGTERM when the parent dies (`PR_SET_PDEATHSIG`) and ignores SIGINT (a
+/// Ctrl-C is the parent's to handle). Async-signal-safe: a spawner calls it between fork and exec
+/// (`Command::pre_exec`), so the child is covered before its first instruction; the role process
+/// sets it again in [`Lifeline::install`].
+pub fn die_with_parent_ignore_sigint() {
+    // SAFETY: two plain syscalls with valid arguments.
+    unsafe {
+        libc::prctl(
+            libc::PR_SET_PDEATHSIG,
+            libc::SIGTERM as libc::c_ulong,
+            0,
+            0,
+            0,
+        );
+        libc::signal(libc::SIGINT, libc::SIG_IGN);
+    }
+}
+
 /// Watches the conditions under which a role process must stop on its own.
 #[derive(Debug)]
 pub struct Lifeline {
@@ -35,17 +53,10 @@ impl Lifeline {
         let bytes = name.as_bytes();
         let len = bytes.len().min(15);
         buf[..len].copy_from_slice(&bytes[..len]);
+        die_with_parent_ignore_sigint();
         // SAFETY: plain syscalls with valid arguments; the handler only stores to an atomic.
         unsafe {
             libc::prctl(libc::PR_SET_NAME, buf.as_ptr() as libc::c_ulong, 0, 0, 0);
-            libc::prctl(
-                libc::PR_SET_PDEATHSIG,
-                libc::SIGTERM as libc::c_ulong,
-                0,
-                0,
-                0,
-            );
-            libc::signal(libc::SIGINT, libc::SIG_IGN);
             libc::signal(libc::SIGTERM, on_term as *const () as libc::sighandler_t);
             libc::signal(libc::SIGHUP, on_term as *const () as libc::sighandler_t);
         }

@@ -249,7 +249,7 @@ mod tests {
         }
         assert!(why(&good[..good.len() - 1], 2, 77).contains("truncated"));
         let random: Vec<u8> = (0..500u32)
-            .map(|k| (k * 2_654_435_761u32 >> 13) as u8)
+            .map(|k| ((k * 2_654_435_761u32) >> 13) as u8)
             .collect();
         assert!(why(&random, 2, 77).contains("magic"));
         // The file of the old format (bare bincode) decodes as nothing.

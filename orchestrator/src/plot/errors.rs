@@ -113,28 +113,33 @@ pub fn events<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     draw_panel(
         &area,
         Panel {
-            title: format!(
-                "dashed: {}",
-                fig.run
-                    .events
-                    .iter()
-                    .map(|(t, what)| format!("{what} at {t:.2} s"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+            title: events_subtitle(fig.run),
             x_desc: "t (s)",
             y_desc: "||e_i|| (m)".to_string(),
-            lines: per_agent(fig.run, |a| {
-                a.derived(&["ex", "ey", "ez"], |r| {
-                    (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
-                })
-            }),
+            lines: per_agent(fig.run, error_norm),
             markers: &fig.run.events,
             legend: Legend::Side,
             y_range: None,
             x_range: None,
         },
     )
+}
+
+/// "dashed: crash 3 at 6.00 s, ...": the events of `run` that the dashed markers show.
+fn events_subtitle(run: &Run) -> String {
+    let events: Vec<String> = run
+        .events
+        .iter()
+        .map(|(t, what)| format!("{what} at {t:.2} s"))
+        .collect();
+    format!("dashed: {}", events.join(", "))
+}
+
+/// The formation error norm ||e_i|| of one agent at each time row.
+fn error_norm(a: &super::data::AgentTrace) -> Vec<(f64, f64)> {
+    a.derived(&["ex", "ey", "ez"], |r| {
+        (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
+    })
 }
 
 /// Seconds shown before the first event in `events_compare`.
@@ -144,15 +149,7 @@ const COMPARE_AFTER_S: f64 = 12.0;
 
 /// The worst agent's formation error at each time row of `run`.
 fn worst_error(run: &Run) -> Vec<(f64, f64)> {
-    let per: Vec<Vec<(f64, f64)>> = run
-        .agents
-        .iter()
-        .map(|a| {
-            a.derived(&["ex", "ey", "ez"], |r| {
-                (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
-            })
-        })
-        .collect();
+    let per: Vec<Vec<(f64, f64)>> = run.agents.iter().map(error_norm).collect();
     let rows = per.iter().map(Vec::len).min().unwrap_or(0);
     (0..rows)
         .map(|k| (per[0][k].0, per.iter().map(|p| p[k].1).fold(0.0, f64::max)))
@@ -190,15 +187,7 @@ pub fn events_compare<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult 
     draw_panel(
         &area,
         Panel {
-            title: format!(
-                "dashed: {}",
-                fig.run
-                    .events
-                    .iter()
-                    .map(|(t, what)| format!("{what} at {t:.2} s"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
+            title: events_subtitle(fig.run),
             x_desc: "t (s)",
             y_desc: "max_i ||e_i|| (m)".to_string(),
             lines,

@@ -4,7 +4,7 @@
 //! frame, and the SceneUpdate messages of the chosen frames are drawn as they are
 //! (`formation_viz::topview`): what the figure shows is what Foxglove's 3D panel gets.
 
-use super::style::{format_tick, titled, Area, Backend, DrawResult, FONT};
+use super::style::{draw_xy_mesh, titled, Area, Backend, DrawResult, FONT};
 use super::PlotError;
 use formation_config::protocol::wire::ReferenceFrame;
 use formation_config::Scenario;
@@ -207,17 +207,7 @@ pub fn draw<DB: Backend>(scenes: &Scenes, title: &str, root: &Area<DB>) -> DrawR
             .x_label_area_size(44)
             .y_label_area_size(60)
             .build_cartesian_2d(c.0 - half..c.0 + half, c.1 - half..c.1 + half)?;
-        chart
-            .configure_mesh()
-            .x_desc("x (m)")
-            .y_desc("y (m)")
-            .label_style((FONT, 14))
-            .axis_desc_style((FONT, 16))
-            .light_line_style(RGBColor(240, 240, 240))
-            .bold_line_style(RGBColor(215, 215, 215))
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
-            .draw()?;
+        draw_xy_mesh(&mut chart)?;
         let plot_w = chart.plotting_area().dim_in_pixel().0 as f64;
         let px_per_m = plot_w / (2.0 * half);
         for s in &all {

@@ -427,6 +427,28 @@ fn legend_segments(stroke: Stroke) -> [(i32, i32); 4] {
     }
 }
 
+/// The mesh of a top view (x and y in m): light grid, tick labels from [`format_tick`].
+pub fn draw_xy_mesh<DB: Backend>(
+    chart: &mut ChartContext<
+        '_,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+) -> DrawResult {
+    chart
+        .configure_mesh()
+        .x_desc("x (m)")
+        .y_desc("y (m)")
+        .label_style((FONT, 14))
+        .axis_desc_style((FONT, 16))
+        .light_line_style(RGBColor(240, 240, 240))
+        .bold_line_style(RGBColor(215, 215, 215))
+        .x_label_formatter(&|v| format_tick(*v))
+        .y_label_formatter(&|v| format_tick(*v))
+        .draw()?;
+    Ok(())
+}
+
 /// Tick labels: few significant digits, scientific notation for very small or large magnitudes.
 pub fn format_tick(v: f64) -> String {
     let a = v.abs();

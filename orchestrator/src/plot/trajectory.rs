@@ -2,8 +2,8 @@
 
 use super::data::AgentTrace;
 use super::style::{
-    agent_color, clip_runs, emptiest_corner, fit_range, format_tick, stroke_pixels, thin, titled,
-    Area, Backend, DrawResult, FONT, REFERENCE,
+    agent_color, clip_runs, draw_xy_mesh, emptiest_corner, fit_range, format_tick, stroke_pixels,
+    thin, titled, Area, Backend, DrawResult, FONT, REFERENCE,
 };
 use super::Figure;
 use plotters::prelude::*;
@@ -364,17 +364,7 @@ fn top_panel<DB: Backend>(
         .x_label_area_size(xlab)
         .y_label_area_size(ylab)
         .build_cartesian_2d(centre.0 - hx..centre.0 + hx, centre.1 - hy..centre.1 + hy)?;
-    chart
-        .configure_mesh()
-        .x_desc("x (m)")
-        .y_desc("y (m)")
-        .label_style((FONT, 14))
-        .axis_desc_style((FONT, 16))
-        .light_line_style(RGBColor(240, 240, 240))
-        .bold_line_style(RGBColor(215, 215, 215))
-        .x_label_formatter(&|v| format_tick(*v))
-        .y_label_formatter(&|v| format_tick(*v))
-        .draw()?;
+    draw_xy_mesh(&mut chart)?;
 
     let run = fig.run;
     let target = &run.agents[0];

@@ -152,10 +152,10 @@ impl Recorder {
             mode,
             dt: s.simulation.dt_s,
             timing: None,
-            series: recovery::Series {
-                safety_m: s.metrics.safety_distance_m,
-                ..recovery::Series::with_capacity(s.n_steps() as usize)
-            },
+            series: recovery::Series::with_capacity(
+                s.n_steps() as usize,
+                s.metrics.safety_distance_m,
+            ),
             events: s.events.clone(),
             timeline: s.timeline(),
             topology: formation_config::scenario::graph::Topology::from_scenario(s),

@@ -133,13 +133,13 @@ pub struct Series {
 }
 
 impl Series {
-    /// Room for `steps` steps.
-    pub fn with_capacity(steps: usize) -> Series {
+    /// Room for `steps` steps; closer than `safety_m` (m) counts as below the safety distance.
+    pub fn with_capacity(steps: usize, safety_m: f64) -> Series {
         Series {
             error: Vec::with_capacity(steps),
             violations: Vec::with_capacity(steps),
             separation: Vec::with_capacity(steps),
-            safety_m: 0.0,
+            safety_m,
         }
     }
 

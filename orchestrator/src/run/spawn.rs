@@ -163,14 +163,7 @@ pub fn spawn(
             if let Some(set) = &pin {
                 set.apply()?;
             }
-            libc::prctl(
-                libc::PR_SET_PDEATHSIG,
-                libc::SIGTERM as libc::c_ulong,
-                0,
-                0,
-                0,
-            );
-            libc::signal(libc::SIGINT, libc::SIG_IGN);
+            formation_config::node::process::die_with_parent_ignore_sigint();
             Ok(())
         });
     }
