@@ -82,7 +82,15 @@ pub struct Bridge {
     pub stats: Arc<Stats>,
     /// Services it forwards out and receives in.
     pub forwarded: (usize, usize),
+    /// Re-plans for the receiving and the sending thread, in that order.
+    replan: [mpsc::Sender<Replan>; 2],
 }
+
+/// A new placement for a thread, and where it answers (services it forwards, or why not).
+type Replan = (Placement, mpsc::Sender<Result<usize, String>>);
+
+/// How long a re-plan may take (each thread looks between two cycles, at most every 100 ms).
+pub const REPLAN_TIMEOUT: Duration = Duration::from_secs(5);
 
 impl Drop for Bridge {
     fn drop(&mut self) {
@@ -133,6 +141,17 @@ struct Opener<'a> {
     topics: Vec<OutTopic>,
     events: Vec<OutEvent>,
     ins: HashMap<String, InPort>,
+    /// A re-plan: the ports of the previous plan, kept (with new destinations) where the service
+    /// is still forwarded, so no sample queued in them is lost; the rest are dropped with them.
+    old: Ports,
+}
+
+/// The ports of one plan, by service name.
+#[derive(Default)]
+struct Ports {
+    topics: HashMap<String, OutTopic>,
+    events: HashMap<String, OutEvent>,
+    ins: HashMap<String, InPort>,
 }
 
 fn err<'a, E: std::fmt::Debug>(what: &'a str, name: &'a str) -> impl FnOnce(E) -> String + 'a {
@@ -148,6 +167,7 @@ impl<'a> Opener<'a> {
         cfg: &'a BridgeConfig,
         hosts: &'a [String],
         out: bool,
+        old: Ports,
     ) -> Result<Opener<'a>, String> {
         let mut o = Opener {
             node,
@@ -158,6 +178,7 @@ impl<'a> Opener<'a> {
             topics: Vec::new(),
             events: Vec::new(),
             ins: HashMap::new(),
+            old,
         };
         services::visit(&cfg.sizing, &mut o)?;
         Ok(o)
@@ -214,6 +235,11 @@ impl Visitor for Opener<'_> {
         )?;
         let type_name = wire_type_name::<T>();
         if self.out && !dests.is_empty() {
+            if let Some(mut t) = self.old.topics.remove(&s.name) {
+                t.dests = dests;
+                self.topics.push(t);
+                return Ok(());
+            }
             let sub = ports::subscriber(self.node, &s).map_err(|e| e.to_string())?;
             let drain: Drain = Box::new(move |f| {
                 let mut n = 0;
@@ -236,6 +262,10 @@ impl Visitor for Opener<'_> {
                 drain,
             });
         } else if !self.out && inbound {
+            if let Some(p) = self.old.ins.remove(&s.name) {
+                self.ins.insert(s.name.clone(), p);
+                return Ok(());
+            }
             let publisher = ports::publisher(self.node, &s).map_err(|e| e.to_string())?;
             let name = s.name.clone();
             let inject: Inject = Box::new(move |bytes| {
@@ -314,6 +344,11 @@ impl Visitor for Opener<'_> {
             s.spec.scope,
         )?;
         if self.out && !dests.is_empty() {
+            if let Some(mut e) = self.old.events.remove(&s.name) {
+                e.dests = dests;
+                self.events.push(e);
+                return Ok(());
+            }
             let listener = self
                 .node
                 .service_builder(&sn)
@@ -329,6 +364,10 @@ impl Visitor for Opener<'_> {
                 listener,
             });
         } else if !self.out && inbound {
+            if let Some(p) = self.old.ins.remove(&s.name) {
+                self.ins.insert(s.name.clone(), p);
+                return Ok(());
+            }
             let n = ports::notifier(self.node, &s).map_err(|e| e.to_string())?;
             self.ins.insert(s.name.clone(), InPort::Event(Box::new(n)));
         }
@@ -419,6 +458,8 @@ impl Bridge {
         let stats = Arc::new(Stats::default());
         let hosts = cfg.placement.hosts();
         let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
+        let (in_tx, in_rx) = mpsc::channel::<Replan>();
+        let (out_tx, out_rx) = mpsc::channel::<Replan>();
         let mut threads = Vec::new();
         {
             let (cfg, stop, stats, hosts, session) = (
@@ -432,7 +473,7 @@ impl Bridge {
             threads.push(
                 std::thread::Builder::new()
                     .name("bridge-in".into())
-                    .spawn(move || run_in(session, cfg, hosts, stop, stats, tx))
+                    .spawn(move || run_in(session, cfg, hosts, stop, stats, tx, in_rx))
                     .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
             );
         }
@@ -441,6 +482,7 @@ impl Bridge {
             threads,
             stats: stats.clone(),
             forwarded: (0, 0),
+            replan: [in_tx, out_tx],
         };
         let inbound = ready_rx
             .recv()
@@ -450,7 +492,7 @@ impl Bridge {
             bridge.threads.push(
                 std::thread::Builder::new()
                     .name("bridge-out".into())
-                    .spawn(move || run_out(session, cfg, hosts, stop, stats, tx))
+                    .spawn(move || run_out(session, cfg, hosts, stop, stats, tx, out_rx))
                     .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
             );
         }
@@ -462,17 +504,41 @@ impl Bridge {
     }
 }
 
+impl Bridge {
+    /// Re-plans the running bridge for a new placement (a lost host's agents moved to another
+    /// host): the receiving side first, so a service this host now receives has its port before
+    /// any host sends it, then the sending side, between two of its cycles (every sample drained
+    /// before went out under the old plan, every one after under the new). Ports of services still
+    /// forwarded are kept, with their new destinations, so nothing queued in them is lost; ports of
+    /// services no longer forwarded are dropped, so a sample still coming from a lost host is
+    /// refused. Returns the services forwarded (out, in).
+    pub fn replan(&mut self, placement: &Placement) -> Result<(usize, usize), String> {
+        let mut counts = [0; 2];
+        for (k, tx) in self.replan.iter().enumerate() {
+            let (ack, answer) = mpsc::channel();
+            tx.send((placement.clone(), ack))
+                .map_err(|_| "bridge: a thread has ended".to_string())?;
+            counts[k] = answer
+                .recv_timeout(REPLAN_TIMEOUT)
+                .map_err(|_| format!("bridge: no re-plan within {REPLAN_TIMEOUT:?}"))??;
+        }
+        self.forwarded = (counts[1], counts[0]);
+        Ok(self.forwarded)
+    }
+}
+
 fn run_in(
     session: zenoh::Session,
-    cfg: BridgeConfig,
+    mut cfg: BridgeConfig,
     hosts: Vec<String>,
     stop: Arc<AtomicBool>,
     stats: Arc<Stats>,
     ready: mpsc::Sender<Result<usize, String>>,
+    replan: mpsc::Receiver<Replan>,
 ) {
     let setup = || -> Result<_, String> {
         let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
-        let o = Opener::visit_all(&node, &cfg, &hosts, false)?;
+        let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
         let (keep, ins) = (o.keep, o.ins);
         let sub = session
             .declare_subscriber(proto::run_to(&cfg.run_id, &cfg.me))
@@ -491,6 +557,19 @@ fn run_in(
     };
     let _ = ready.send(Ok(ins.len()));
     while !stop.load(Ordering::SeqCst) {
+        if let Ok((placement, ack)) = replan.try_recv() {
+            cfg.placement = placement;
+            cfg.create = false;
+            let hosts = cfg.placement.hosts();
+            let old = Ports {
+                ins: std::mem::take(&mut ins),
+                ..Ports::default()
+            };
+            let _ = ack.send(Opener::visit_all(&node, &cfg, &hosts, false, old).map(|o| {
+                ins = o.ins;
+                ins.len()
+            }));
+        }
         let sample = match sub.recv_timeout(Duration::from_millis(100)) {
             Ok(Some(s)) => s,
             Ok(None) => continue,
@@ -548,35 +627,17 @@ fn run_in(
 
 fn run_out(
     session: zenoh::Session,
-    cfg: BridgeConfig,
-    hosts: Vec<String>,
+    mut cfg: BridgeConfig,
+    mut hosts: Vec<String>,
     stop: Arc<AtomicBool>,
     stats: Arc<Stats>,
     ready: mpsc::Sender<Result<usize, String>>,
+    replan: mpsc::Receiver<Replan>,
 ) {
-    let setup = || -> Result<_, String> {
-        let node = ipc::node(&cfg.prefix, "fm-bridge-out").map_err(|e| e.to_string())?;
-        let o = Opener::visit_all(&node, &cfg, &hosts, true)?;
-        let (topics, events) = (o.topics, o.events);
-        let mut pubs = Vec::new();
-        for h in &hosts {
-            pubs.push(
-                session
-                    .declare_publisher(proto::run_to(&cfg.run_id, h))
-                    .congestion_control(CongestionControl::Block)
-                    .priority(Priority::RealTime)
-                    .express(true)
-                    .allowed_destination(Locality::Remote)
-                    .wait()
-                    .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))?,
-            );
-        }
-        Ok((node, topics, events, pubs))
-    };
-    let (node, mut topics, events, pubs) = match setup() {
-        Ok(v) => v,
+    let node = match ipc::node(&cfg.prefix, "fm-bridge-out") {
+        Ok(n) => n,
         Err(e) => {
-            let _ = ready.send(Err(e));
+            let _ = ready.send(Err(e.to_string()));
             return;
         }
     };
@@ -590,73 +651,122 @@ fn run_out(
             return;
         }
     };
-    let mut guards = Vec::new();
-    for e in &events {
-        match waitset.attach_notification(&e.listener) {
-            Ok(g) => guards.push(g),
-            Err(x) => {
-                let _ = ready.send(Err(format!("bridge: cannot wait on {}: {x:?}", e.name)));
+    let mut old = Ports::default();
+    let mut ack = ready;
+    // One plan after the other: the first, then one per re-plan.
+    loop {
+        let plan =
+            Opener::visit_all(&node, &cfg, &hosts, true, std::mem::take(&mut old)).and_then(|o| {
+                let mut pubs = Vec::new();
+                for h in &hosts {
+                    pubs.push(
+                        session
+                            .declare_publisher(proto::run_to(&cfg.run_id, h))
+                            .congestion_control(CongestionControl::Block)
+                            .priority(Priority::RealTime)
+                            .express(true)
+                            .allowed_destination(Locality::Remote)
+                            .wait()
+                            .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))?,
+                    );
+                }
+                Ok((o.topics, o.events, pubs))
+            });
+        let (mut topics, events, pubs) = match plan {
+            Ok(v) => v,
+            Err(e) => {
+                let _ = ack.send(Err(e));
                 return;
             }
+        };
+        let mut guards = Vec::new();
+        for e in &events {
+            match waitset.attach_notification(&e.listener) {
+                Ok(g) => guards.push(g),
+                Err(x) => {
+                    let _ = ack.send(Err(format!("bridge: cannot wait on {}: {x:?}", e.name)));
+                    return;
+                }
+            }
         }
+        let _ = ack.send(Ok(topics.len() + events.len()));
+        let mut frames: Vec<Vec<u8>> = vec![Vec::new(); hosts.len()];
+        let mut fired = vec![false; events.len()];
+        let next = loop {
+            if stop.load(Ordering::SeqCst) {
+                break None;
+            }
+            // Between two cycles: every sample drained so far went out under this plan.
+            if let Ok(r) = replan.try_recv() {
+                break Some(r);
+            }
+            // Events first: any sample published before a notification we saw is in its queue now.
+            let mut any = false;
+            for (k, e) in events.iter().enumerate() {
+                let mut got = false;
+                let _ = e.listener.try_wait(|_| got = true);
+                fired[k] = got;
+                any |= got;
+            }
+            for t in topics.iter_mut() {
+                let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
+                let r = (t.drain)(&mut |bytes| {
+                    for &d in dests {
+                        put_sample(&mut frames[d], name, type_name, bytes);
+                    }
+                });
+                match r {
+                    Ok(n) => {
+                        any |= n > 0;
+                        stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
+                    }
+                    Err(e) => tracing::warn!("bridge: {name}: {e}"),
+                }
+            }
+            for (k, e) in events.iter().enumerate() {
+                if fired[k] {
+                    for &d in &e.dests {
+                        put_event(&mut frames[d], &e.name);
+                    }
+                    stats.events_out.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            for (d, f) in frames.iter_mut().enumerate() {
+                if !f.is_empty() {
+                    if let Err(e) = pubs[d].put(std::mem::take(f)).wait() {
+                        tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
+                    }
+                    stats.frames_out.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            if any {
+                continue;
+            }
+            if guards.is_empty() {
+                std::thread::sleep(IDLE_WAKE);
+            } else {
+                let _ = waitset.wait_and_process_once_with_timeout(
+                    |_| CallbackProgression::Continue,
+                    IDLE_WAKE,
+                );
+            }
+        };
+        drop(guards);
+        drop(pubs);
+        let Some((placement, reply)) = next else {
+            break;
+        };
+        old = Ports {
+            topics: topics.drain(..).map(|t| (t.name.clone(), t)).collect(),
+            events: events.into_iter().map(|e| (e.name.clone(), e)).collect(),
+            ins: HashMap::new(),
+        };
+        cfg.placement = placement;
+        cfg.create = false;
+        hosts = cfg.placement.hosts();
+        ack = reply;
     }
-    let _ = ready.send(Ok(topics.len() + events.len()));
-    let mut frames: Vec<Vec<u8>> = vec![Vec::new(); hosts.len()];
-    let mut fired = vec![false; events.len()];
-    while !stop.load(Ordering::SeqCst) {
-        // Events first: any sample published before a notification we saw is in its queue now.
-        let mut any = false;
-        for (k, e) in events.iter().enumerate() {
-            let mut got = false;
-            let _ = e.listener.try_wait(|_| got = true);
-            fired[k] = got;
-            any |= got;
-        }
-        for t in topics.iter_mut() {
-            let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
-            let r = (t.drain)(&mut |bytes| {
-                for &d in dests {
-                    put_sample(&mut frames[d], name, type_name, bytes);
-                }
-            });
-            match r {
-                Ok(n) => {
-                    any |= n > 0;
-                    stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
-                }
-                Err(e) => tracing::warn!("bridge: {name}: {e}"),
-            }
-        }
-        for (k, e) in events.iter().enumerate() {
-            if fired[k] {
-                for &d in &e.dests {
-                    put_event(&mut frames[d], &e.name);
-                }
-                stats.events_out.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        for (d, f) in frames.iter_mut().enumerate() {
-            if !f.is_empty() {
-                if let Err(e) = pubs[d].put(std::mem::take(f)).wait() {
-                    tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
-                }
-                stats.frames_out.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-        if any {
-            continue;
-        }
-        if guards.is_empty() {
-            std::thread::sleep(IDLE_WAKE);
-        } else {
-            let _ = waitset
-                .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, IDLE_WAKE);
-        }
-    }
-    drop(guards);
     drop(waitset);
-    drop(events);
-    drop(topics);
     drop(node);
 }
 

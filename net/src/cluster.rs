@@ -51,6 +51,43 @@ impl std::fmt::Display for HandshakeError {
 struct Seen {
     exits: Vec<(String, ExitReport)>,
     lost: Vec<(String, Instant)>,
+    checkpoints: Checkpoints,
+}
+
+/// The checkpoints the daemons forwarded, kept with the orchestrator: per agent the
+/// [`Checkpoints::KEPT`] newest by step. A takeover needs one taken before the step the agent went
+/// down and still inside the orchestrator's ring of recorded steps; the newest may be of the very
+/// step the host died in, so the one before it is kept too. No Zenoh: a pure store.
+#[derive(Debug, Default, Clone)]
+pub struct Checkpoints {
+    by_agent: BTreeMap<usize, Vec<(u64, Vec<u8>)>>,
+}
+
+impl Checkpoints {
+    /// Checkpoints kept per agent.
+    pub const KEPT: usize = 2;
+
+    /// A checkpoint of agent `agent` (0-based) taken before step `step`; a newer file of the same
+    /// step replaces the older.
+    pub fn offer(&mut self, agent: usize, step: u64, bytes: Vec<u8>) {
+        let v = self.by_agent.entry(agent).or_default();
+        v.retain(|(s, _)| *s != step);
+        v.push((step, bytes));
+        v.sort_by_key(|(s, _)| *s);
+        let extra = v.len().saturating_sub(Self::KEPT);
+        v.drain(..extra);
+    }
+
+    /// The newest checkpoint of `agent` a takeover can restore: taken before `down_from` (the
+    /// first step it did not compute) and not before `oldest` (the oldest step the orchestrator
+    /// still holds the records of, which the replay needs). `(step, file)`.
+    pub fn pick(&self, agent: usize, down_from: u64, oldest: u64) -> Option<(u64, &[u8])> {
+        self.by_agent
+            .get(&agent)?
+            .iter()
+            .rev()
+            .find_map(|(s, b)| (*s < down_from && *s >= oldest).then_some((*s, b.as_slice())))
+    }
 }
 
 /// An orchestrator's Zenoh session and what it hears.
@@ -218,6 +255,25 @@ impl Cluster {
             .wait()
             .map_err(|e| format!("cannot subscribe to exits: {e}"))?;
         let seen = self.seen.clone();
+        let checkpoints = self
+            .session
+            .declare_subscriber(proto::run_checkpoint(run_id))
+            .callback(move |s| {
+                let data = s.payload().to_bytes();
+                match proto::unframe::<proto::CheckpointNote>(&data) {
+                    Ok((n, bytes)) => {
+                        seen.lock()
+                            .unwrap()
+                            .checkpoints
+                            .offer(n.agent, n.step, bytes.to_vec());
+                    }
+                    Err(e) => tracing::warn!("a forwarded checkpoint was refused: {e}"),
+                }
+            })
+            .wait()
+            .map_err(|e| format!("cannot subscribe to checkpoints: {e}"))?;
+        self._subs.push(checkpoints);
+        let seen = self.seen.clone();
         let hosts = self
             .session
             .liveliness()
@@ -248,6 +304,17 @@ impl Cluster {
             .map(|(_, r)| r.how.clone())
     }
 
+    /// The newest forwarded checkpoint of `agent` a takeover can restore (see
+    /// [`Checkpoints::pick`]): `(step, file)`.
+    pub fn checkpoint(&self, agent: usize, down_from: u64, oldest: u64) -> Option<(u64, Vec<u8>)> {
+        self.seen
+            .lock()
+            .unwrap()
+            .checkpoints
+            .pick(agent, down_from, oldest)
+            .map(|(s, b)| (s, b.to_vec()))
+    }
+
     /// When `host`'s daemon was seen to go (its liveliness token vanished), if it did.
     pub fn lost(&self, host: &str) -> Option<Instant> {
         self.seen
@@ -257,5 +324,34 @@ impl Cluster {
             .iter()
             .find(|(h, _)| h == host)
             .map(|(_, t)| *t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_takeover_restores_the_newest_checkpoint_before_the_step_it_went_down_within_the_records() {
+        let mut c = Checkpoints::default();
+        assert_eq!(c.pick(3, 5000, 0), None, "none forwarded yet");
+        c.offer(3, 0, vec![0]);
+        c.offer(3, 1000, vec![1]);
+        c.offer(3, 2000, vec![2]);
+        c.offer(4, 2000, vec![42]);
+        // Only the two newest are kept.
+        assert_eq!(c.pick(3, 5000, 0), Some((2000, &[2u8][..])));
+        assert_eq!(c.pick(3, 1500, 0), Some((1000, &[1u8][..])));
+        assert_eq!(c.pick(3, 900, 0), None, "step 0's was dropped");
+        // The host died right after the checkpoint of step 2000 was written: down from 2000.
+        assert_eq!(c.pick(3, 2000, 0), Some((1000, &[1u8][..])));
+        // Older than the recorded steps the replay needs: none.
+        assert_eq!(c.pick(3, 2000, 1200), None);
+        // Per agent; a newer copy of the same step replaces the older; out of order is sorted.
+        assert_eq!(c.pick(4, 3000, 0), Some((2000, &[42u8][..])));
+        c.offer(4, 2000, vec![43]);
+        c.offer(4, 1000, vec![41]);
+        assert_eq!(c.pick(4, 3000, 0), Some((2000, &[43u8][..])));
+        assert_eq!(c.pick(4, 2000, 0), Some((1000, &[41u8][..])));
     }
 }

@@ -58,10 +58,36 @@ struct HostRun {
     variant: String,
     children: HashMap<usize, Child>,
     prepared: Instant,
+    /// Hash of the run's scenario, which its checkpoints carry.
+    scenario_hash: u64,
+    /// The checkpoint file of each agent last forwarded (see [`Daemon::forward_checkpoints`]).
+    forwarded: HashMap<usize, FileStamp>,
     // Dropped in this order: bridge, node, membership (see `end`).
     bridge: Option<Bridge>,
     node: Option<RunNode>,
     membership: Option<Membership>,
+}
+
+/// What tells one version of a file from the next: inode (a checkpoint is written to a temporary
+/// name and renamed, so each version is a new inode), size and modification time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FileStamp {
+    ino: u64,
+    len: u64,
+    mtime_ns: i128,
+}
+
+impl FileStamp {
+    /// The stamp of `path`, if it exists.
+    pub fn of(path: &Path) -> Option<FileStamp> {
+        use std::os::unix::fs::MetadataExt;
+        let m = std::fs::metadata(path).ok()?;
+        Some(FileStamp {
+            ino: m.ino(),
+            len: m.len(),
+            mtime_ns: i128::from(m.mtime()) * 1_000_000_000 + i128::from(m.mtime_nsec()),
+        })
+    }
 }
 
 /// Describes how a process ended, as the orchestrator prints it.
@@ -188,6 +214,7 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
             }
         }
         d.reap();
+        d.forward_checkpoints();
         let stale: Vec<String> = d
             .runs
             .iter()
@@ -284,6 +311,10 @@ impl Daemon {
                 signal,
             } => self.signal(&run_id, agent, signal).map(|_| ok(None)),
             Request::Checkpoint { run_id, agent } => self.checkpoint(&run_id, agent),
+            Request::Replan {
+                run_id,
+                agent_hosts,
+            } => self.replan(&run_id, agent_hosts).map(|_| ok(None)),
             Request::End { run_id } => {
                 if self.runs.contains_key(&run_id) {
                     self.end(&run_id);
@@ -422,6 +453,8 @@ impl Daemon {
                 dir,
                 children: HashMap::new(),
                 prepared: Instant::now(),
+                scenario_hash: restart::scenario_hash(r.scenario_toml.as_bytes()),
+                forwarded: HashMap::new(),
                 bridge: Some(bridge),
                 node: Some(node),
                 membership: Some(membership),
@@ -530,6 +563,103 @@ impl Daemon {
         let path = restart::checkpoint_path(&r.dir, agent);
         let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         Ok(proto::frame(&Reply::Ok { pid: None }, &bytes))
+    }
+
+    /// A host of the run was lost and its agents moved: re-plans this host's bridge for the new
+    /// placement. Only the agents of the lost host may move, and not onto this host (a moved
+    /// agent goes to the launcher, `Placement::after_loss`); its own agents stay.
+    fn replan(&mut self, run_id: &str, agent_hosts: Vec<String>) -> Result<(), String> {
+        let me = self.o.name.clone();
+        let r = self.run(run_id)?;
+        if agent_hosts.len() != r.req.agent_hosts.len()
+            || !agent_hosts.iter().all(|h| proto::valid_name(h))
+        {
+            return Err(format!(
+                "re-plan of run {run_id}: {} agent hosts for {} agents, or a name not key-safe",
+                agent_hosts.len(),
+                r.req.agent_hosts.len()
+            ));
+        }
+        for (i, (was, now)) in r.req.agent_hosts.iter().zip(&agent_hosts).enumerate() {
+            if was != now && (*was == me || *now == me) {
+                return Err(format!(
+                    "re-plan of run {run_id}: agent {} would move from {was} to {now}; agents move off a lost host to the launcher only",
+                    i + 1
+                ));
+            }
+        }
+        let scenario =
+            Scenario::from_toml_str(&r.req.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
+        let placement = Placement {
+            agent_hosts: agent_hosts.clone(),
+            launcher: r.req.launcher.clone(),
+            neighbours: Placement::neighbours_of(
+                scenario.n_agents(),
+                scenario.graph.edges.iter().map(|e| (e.a, e.b)),
+            ),
+        };
+        let forwarded = match r.bridge.as_mut() {
+            Some(b) => b.replan(&placement)?,
+            None => (0, 0),
+        };
+        r.req.agent_hosts = agent_hosts;
+        eprintln!(
+            "formation host: run {run_id} re-planned: agents {:?} placed elsewhere now; {} services forwarded out, {} in",
+            r.req
+                .agent_hosts
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| **h != me)
+                .map(|(i, h)| format!("{}@{h}", i + 1))
+                .collect::<Vec<_>>(),
+            forwarded.0,
+            forwarded.1
+        );
+        Ok(())
+    }
+
+    /// Sends the orchestrator every checkpoint file its agents wrote since the last call (each a
+    /// whole file: the agents write to a temporary name and rename), so the orchestrator holds a
+    /// copy of each agent's latest checkpoint and a warm takeover works when this host is gone.
+    fn forward_checkpoints(&mut self) {
+        let mut notes = Vec::new();
+        for (id, r) in self.runs.iter_mut() {
+            for &agent in r.children.keys() {
+                let path = restart::checkpoint_path(&r.dir, agent);
+                let Some(stamp) = FileStamp::of(&path) else {
+                    continue;
+                };
+                if r.forwarded.get(&agent) == Some(&stamp) {
+                    continue;
+                }
+                r.forwarded.insert(agent, stamp);
+                let Ok(bytes) = std::fs::read(&path) else {
+                    continue;
+                };
+                match restart::decode_checkpoint(&bytes, agent, r.scenario_hash) {
+                    Ok(c) => notes.push((
+                        id.clone(),
+                        proto::CheckpointNote {
+                            host: self.o.name.clone(),
+                            agent,
+                            step: c.step,
+                        },
+                        bytes,
+                    )),
+                    Err(e) => eprintln!(
+                        "formation host: run {id}: agent {}'s checkpoint not forwarded: {e}",
+                        agent + 1
+                    ),
+                }
+            }
+        }
+        for (id, note, bytes) in notes {
+            let _ = self
+                .s
+                .put(proto::run_checkpoint(&id), proto::frame(&note, &bytes))
+                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .wait();
+        }
     }
 
     /// Reaps exited children and reports them.

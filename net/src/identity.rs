@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Version of the orchestrator <-> daemon protocol ([`crate::proto`]) and the bridge's frame.
-pub const PROTOCOL: u32 = 1;
+pub const PROTOCOL: u32 = 2;
 
 /// A host's identity as compared at the handshake.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]

@@ -83,6 +83,34 @@ impl Placement {
             .collect()
     }
 
+    /// The host that takes over the agents of a lost host: the launcher. It is always up while
+    /// the run is (the run ends with it), holds the plant every step goes through and the
+    /// forwarded checkpoints, and is the hub of the star topology, so the moved agents add no
+    /// network hop to anyone's traffic.
+    pub fn takeover_host(&self) -> &str {
+        &self.launcher
+    }
+
+    /// The placement once `lost` is gone: its agents move to [`Placement::takeover_host`];
+    /// returns it with the moved agents (0-based, ascending). `Err` for the launcher itself (the
+    /// run ends with it) or a host the placement does not use (already handled).
+    pub fn after_loss(&self, lost: &str) -> Result<(Placement, Vec<usize>), String> {
+        if lost == self.launcher {
+            return Err(format!(
+                "host {lost} is the launcher: the run cannot survive its loss"
+            ));
+        }
+        let moved = self.agents_on(lost);
+        if moved.is_empty() {
+            return Err(format!("no agent of the run is placed on {lost}"));
+        }
+        let mut next = self.clone();
+        for &i in &moved {
+            next.agent_hosts[i] = self.takeover_host().to_string();
+        }
+        Ok((next, moved))
+    }
+
     fn hosts_of(&self, parties: &[Party], scope: Scope, i: Option<usize>) -> BTreeSet<&str> {
         let mut s = BTreeSet::new();
         for p in parties {
@@ -234,6 +262,87 @@ mod tests {
                     p.route(me, name, s, r, *scope, *i).unwrap();
                 }
             }
+        }
+    }
+
+    #[test]
+    fn a_lost_hosts_agents_move_to_the_launcher_and_nothing_else_moves() {
+        let p = Placement {
+            agent_hosts: ["a", "b", "c", "b", "c"].map(String::from).to_vec(),
+            launcher: "a".into(),
+            neighbours: paper_neighbours(),
+        };
+        let (next, moved) = p.after_loss("b").unwrap();
+        assert_eq!(moved, vec![1, 3]);
+        assert_eq!(next.agent_hosts, ["a", "a", "c", "a", "c"]);
+        assert_eq!(next.hosts(), ["a", "c"], "b is gone from the run");
+        assert_eq!(next.launcher, "a");
+        assert!(p.after_loss("a").unwrap_err().contains("launcher"));
+        assert!(
+            next.after_loss("b").is_err(),
+            "a host already handled moves nothing"
+        );
+    }
+
+    #[test]
+    fn after_a_loss_no_bridge_sends_to_or_expects_the_lost_host_and_none_loops() {
+        let mut all = All::default();
+        services::visit(&Sizing::run(5, false), &mut all).unwrap();
+        let names = ["a", "b", "c"];
+        // Every placement of the five agents over three hosts, each host but the launcher lost.
+        for code in 0..3usize.pow(5) {
+            let agent_hosts: Vec<String> = (0..5)
+                .map(|i| names[(code / 3usize.pow(i as u32)) % 3].to_string())
+                .collect();
+            let p = Placement {
+                agent_hosts,
+                launcher: "a".into(),
+                neighbours: paper_neighbours(),
+            };
+            for lost in ["b", "c"] {
+                let Ok((next, moved)) = p.after_loss(lost) else {
+                    assert!(p.agents_on(lost).is_empty());
+                    continue;
+                };
+                for (name, s, r, scope, i) in &all.0 {
+                    for me in next.hosts() {
+                        let route = next.route(&me, name, s, r, *scope, *i).unwrap();
+                        assert!(
+                            !route.out_to.iter().any(|h| h == lost),
+                            "{me} still sends {name} to the lost {lost}"
+                        );
+                    }
+                    // A moved agent's own services stay on the launcher now.
+                    let own = i.is_some_and(|k| moved.contains(&k))
+                        && *scope == Scope::PerAgent
+                        && !s.iter().chain(r.iter()).any(|x| *x == Party::Neighbours);
+                    if own {
+                        for me in next.hosts().iter().filter(|h| *h != "a") {
+                            let route = next.route(me, name, s, r, *scope, *i).unwrap();
+                            assert!(route.is_idle(), "{me} forwards {name} of a moved agent");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn re_planning_a_split_after_its_host_is_lost_leaves_the_launcher_bridge_idle() {
+        let p = Placement {
+            agent_hosts: ["a", "a", "a", "b", "b"].map(String::from).to_vec(),
+            launcher: "a".into(),
+            neighbours: paper_neighbours(),
+        };
+        let (next, moved) = p.after_loss("b").unwrap();
+        assert_eq!(moved, vec![3, 4]);
+        let mut all = All::default();
+        services::visit(&Sizing::run(5, false), &mut all).unwrap();
+        for (name, s, r, scope, i) in &all.0 {
+            assert!(
+                next.route("a", name, s, r, *scope, *i).unwrap().is_idle(),
+                "{name} still crosses"
+            );
         }
     }
 

@@ -9,6 +9,7 @@
 //! | `formation/run/<id>/orchestrator` | liveliness token of a run's orchestrator |
 //! | `formation/run/<id>/exit` | a daemon's [`ExitReport`] for a process of the run |
 //! | `formation/run/<id>/to/<host>` | the bridge's frames for that host ([`crate::bridge`]) |
+//! | `formation/run/<id>/checkpoint` | a daemon's copy of each checkpoint its agents write ([`CheckpointNote`] and the file) |
 
 use crate::identity::Identity;
 use serde::{Deserialize, Serialize};
@@ -34,6 +35,10 @@ pub fn run_token(run: &str) -> String {
 /// Exit reports of a run.
 pub fn run_exit(run: &str) -> String {
     format!("formation/run/{run}/exit")
+}
+/// Checkpoints of a run's remote agents, as their daemons forward them.
+pub fn run_checkpoint(run: &str) -> String {
+    format!("formation/run/{run}/checkpoint")
 }
 /// Bridge frames of a run for `host`.
 pub fn run_to(run: &str, host: &str) -> String {
@@ -129,6 +134,14 @@ pub enum Request {
         /// 0-based agent.
         agent: usize,
     },
+    /// A host of the run was lost and its agents moved: the new host of every agent (the
+    /// daemon re-plans its bridge; it starts and stops nothing).
+    Replan {
+        /// Run id.
+        run_id: String,
+        /// Host of every agent (index = 0-based agent).
+        agent_hosts: Vec<String>,
+    },
     /// End the run: stop its processes, remove its files.
     End {
         /// Run id.
@@ -159,6 +172,18 @@ pub struct ExitReport {
     pub pid: u32,
     /// `exited with code 0`, `was killed (SIGKILL)`, ...
     pub how: String,
+}
+
+/// A checkpoint file an agent wrote on a daemon's host, forwarded to the orchestrator as it is
+/// written (the file follows the JSON, see [`frame`]), so a warm takeover does not need that host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CheckpointNote {
+    /// Host name.
+    pub host: String,
+    /// 0-based agent.
+    pub agent: usize,
+    /// The step it was taken before (read from its header by the daemon).
+    pub step: u64,
 }
 
 /// JSON followed by raw bytes: `[u32 LE json length][json][bytes]`.

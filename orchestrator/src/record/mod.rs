@@ -89,6 +89,8 @@ pub struct Recorder {
     #[cfg(feature = "foxglove")]
     live: Option<live::LiveFeed>,
     checkpoints_refused: Vec<u32>,
+    /// Multi-host runs: each agent's host at the end (empty: one machine).
+    agent_hosts: Vec<String>,
 }
 
 impl Recorder {
@@ -165,6 +167,7 @@ impl Recorder {
             #[cfg(feature = "foxglove")]
             live,
             checkpoints_refused: vec![0; s.n_agents()],
+            agent_hosts: Vec::new(),
         })
     }
 
@@ -225,6 +228,12 @@ impl Recorder {
     /// Checkpoints refused per agent (damaged, another agent's or run's): restarted cold.
     pub fn set_checkpoints_refused(&mut self, refused: Vec<u32>) {
         self.checkpoints_refused = refused;
+    }
+
+    /// Multi-host runs: the host of every agent at the end of the run (`summary.json`
+    /// `agents[i].host`).
+    pub fn set_agent_hosts(&mut self, hosts: Vec<String>) {
+        self.agent_hosts = hosts;
     }
 
     /// Live fault and delay injections: listed in `events[]` like the same events of a replay.
@@ -290,6 +299,9 @@ impl Recorder {
         }
         for (a, r) in summary.agents.iter_mut().zip(&self.checkpoints_refused) {
             a.checkpoints_refused = *r;
+        }
+        for (a, h) in summary.agents.iter_mut().zip(&self.agent_hosts) {
+            a.host = Some(h.clone());
         }
         summary.write(&self.out_dir.join("summary.json"))?;
         Ok(summary)

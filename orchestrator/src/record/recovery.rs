@@ -37,13 +37,16 @@ pub const SETTLE_S: f64 = 2.0;
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct EventSummary {
     /// `fault`, `delay`, `crash`, `hang`, `link_down`, `link_up`, `message_loss`, or a detected
-    /// `died` / `hung`.
+    /// `died` / `hung` / `host_lost`.
     pub kind: String,
     /// The agent (1-based), if one.
     pub agent: Option<usize>,
     /// The edge (1-based), for link events.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub agents: Option<[usize; 2]>,
+    /// `host_lost`: the host the agent was lost with (it was taken over on the launcher).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub host: Option<String>,
     /// Sim time of the event, s.
     pub at_s: f64,
     /// Detected death or stall: wall ms from the last time the process was seen working.
@@ -98,6 +101,8 @@ pub struct Mark {
     pub restarted_after_ms: Option<f64>,
     /// The step its controller is back (events that take an agent down for a known time).
     pub back_step: Option<u64>,
+    /// The host lost with the agent (`host_lost`).
+    pub host: Option<String>,
 }
 
 impl Mark {
@@ -115,6 +120,7 @@ impl Mark {
                 .down_s
                 .filter(|_| e.kind.takes_agent_down())
                 .map(|d| e.step(dt).saturating_add((d / dt).round().max(1.0) as u64)),
+            host: None,
         }
     }
 }
@@ -220,6 +226,7 @@ impl Series {
                 kind: m.kind.clone(),
                 agent: m.agent.map(|a| a + 1),
                 agents: m.agents.map(|[a, b]| [a + 1, b + 1]),
+                host: m.host.clone(),
                 at_s: m.step as f64 * dt,
                 detected_after_ms: m.detected_after_ms,
                 restarted_after_ms: m.restarted_after_ms,
@@ -341,6 +348,7 @@ mod tests {
             detected_after_ms: None,
             restarted_after_ms: Some(80.0),
             back_step: Some(1100),
+            host: None,
         };
         let out = s.measure(&[m], 0.001);
         let e = &out[0];
@@ -387,6 +395,7 @@ mod tests {
             detected_after_ms: None,
             restarted_after_ms: None,
             back_step: Some(2000),
+            host: None,
         };
         let e = &s.measure(&[m], 0.001)[0];
         assert_eq!(
@@ -419,6 +428,7 @@ mod tests {
             detected_after_ms: None,
             restarted_after_ms: None,
             back_step: None,
+            host: None,
         }
     }
 }

@@ -63,6 +63,10 @@ pub struct AgentSummary {
     /// Checkpoints refused at a restart (damaged, another agent's or another run's), each
     /// restarted cold at once instead.
     pub checkpoints_refused: u32,
+    /// Multi-host runs: the host its process ran on at the end of the run (`local`: the
+    /// launching machine; an agent lost with its host was taken over there).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub host: Option<String>,
 }
 
 /// The whole summary.
@@ -177,6 +181,7 @@ impl Summary {
                     },
                     restarts: 0,
                     checkpoints_refused: 0,
+                    host: None,
                 })
                 .collect(),
             timing: None,

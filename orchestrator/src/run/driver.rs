@@ -225,7 +225,7 @@ pub fn drive(
     takeover: &mut super::takeover::Takeover,
     node: &RunNode,
 ) -> (Outcome, u64) {
-    let stall = super::takeover::stall_timeout(&scenario.runtime);
+    let stall = takeover.stall_timeout(&scenario.runtime);
     let mut last_progress = Instant::now();
     let mut hellos: Vec<u32> = Vec::new();
     let n = scenario.n_agents();

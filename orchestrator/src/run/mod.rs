@@ -554,6 +554,9 @@ fn run(
         takeover.restarts().to_vec(),
     );
     recorder.set_checkpoints_refused(takeover.checkpoints_refused().to_vec());
+    if let Some(r) = &remote {
+        recorder.set_agent_hosts(r.agent_hosts());
+    }
     let summary = recorder
         .finish(recorded, wall.as_secs_f64())
         .map_err(|e| format!("cannot write {}/summary.json: {e}", out.display()))?;

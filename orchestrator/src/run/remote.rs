@@ -19,8 +19,13 @@ use formation_net::plan::Placement;
 use formation_net::proto::{self, Reply, Request, RunRequest};
 use formation_net::session::{self, Mode, Options};
 use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Where the agents of a lost host are taken over (`Placement::takeover_host`): this machine.
+pub const TAKEOVER_HOST: &str = LAUNCHER;
 
 /// Placement options of `formation run`.
 #[derive(clap::Args, Debug, Clone)]
@@ -88,6 +93,7 @@ pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<Str
 /// Hosts reached and checked, before the run is prepared.
 pub struct Remote {
     cluster: Cluster,
+    lease: Duration,
     agent_hosts: Vec<String>,
     hosts: Vec<String>,
     neighbours: Vec<Vec<usize>>,
@@ -127,6 +133,7 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
         .map_err(|e| e.to_string())?;
     Ok(Some(Remote {
         cluster,
+        lease: Duration::from_millis(a.link.lease_ms),
         agent_hosts,
         hosts,
         neighbours: Placement::neighbours_of(n, scenario.graph.edges.iter().map(|e| (e.a, e.b))),
@@ -160,15 +167,16 @@ impl Remote {
         let run = RemoteRun {
             cluster: Arc::new(self.cluster),
             run_id: run_id.to_string(),
-            placement: Placement {
+            placement: RefCell::new(Placement {
                 agent_hosts: self.agent_hosts,
                 launcher: LAUNCHER.to_string(),
                 neighbours: self.neighbours,
-            },
-            hosts: Vec::new(),
+            }),
+            hosts: RefCell::new(Vec::new()),
             bridge: RefCell::new(None),
+            lease: self.lease,
+            moved: RefCell::new(BTreeMap::new()),
         };
-        let mut run = run;
         for h in &self.hosts {
             match run.cluster.request(
                 h,
@@ -176,7 +184,7 @@ impl Remote {
                 &[],
                 session::REPLY_TIMEOUT,
             ) {
-                Ok((Reply::Ok { .. }, _)) => run.hosts.push(h.clone()),
+                Ok((Reply::Ok { .. }, _)) => run.hosts.borrow_mut().push(h.clone()),
                 Ok((Reply::Refused(why), _)) => {
                     return Err(format!("host {h} refused the run: {why}"))
                 }
@@ -191,15 +199,21 @@ impl Remote {
 pub struct RemoteRun {
     cluster: Arc<Cluster>,
     run_id: String,
-    placement: Placement,
-    /// Hosts where the run is prepared.
-    hosts: Vec<String>,
+    /// Where every agent lives now (a lost host's agents move, `Placement::after_loss`).
+    placement: RefCell<Placement>,
+    /// Hosts where the run is prepared and that are not lost.
+    hosts: RefCell<Vec<String>>,
     bridge: RefCell<Option<Bridge>>,
+    /// The Zenoh lease: a silent host is declared lost after it.
+    lease: Duration,
+    /// Agents moved off a lost host whose takeover has not restored a checkpoint yet: the host
+    /// they were lost with.
+    moved: RefCell<BTreeMap<usize, String>>,
 }
 
 impl Drop for RemoteRun {
     fn drop(&mut self) {
-        for h in &self.hosts {
+        for h in self.hosts.borrow().iter() {
             let _ = self.cluster.request(
                 h,
                 &Request::End {
@@ -233,7 +247,7 @@ impl RemoteRun {
                 run_id: self.run_id.clone(),
                 prefix: prefix.to_string(),
                 me: LAUNCHER.to_string(),
-                placement: self.placement.clone(),
+                placement: self.placement.borrow().clone(),
                 sizing,
                 create: false,
             },
@@ -250,6 +264,7 @@ impl RemoteRun {
     /// Whether agent i (0-based) runs on another host.
     pub fn is_remote(&self, i: usize) -> bool {
         self.placement
+            .borrow()
             .agent_hosts
             .get(i)
             .is_some_and(|h| h != LAUNCHER)
@@ -258,9 +273,9 @@ impl RemoteRun {
     /// `agents 1,2,3 here, 4,5 on b`.
     pub fn describe(&self) -> String {
         let mut parts = Vec::new();
-        for h in self.placement.hosts() {
-            let ids: Vec<String> = self
-                .placement
+        let placement = self.placement.borrow();
+        for h in placement.hosts() {
+            let ids: Vec<String> = placement
                 .agents_on(&h)
                 .iter()
                 .map(|i| (i + 1).to_string())
@@ -279,7 +294,7 @@ impl RemoteRun {
         label: String,
         args: &ChildArgs,
     ) -> Result<RoleProcess, String> {
-        let host = self.placement.agent_hosts[agent].clone();
+        let host = self.placement.borrow().agent_hosts[agent].clone();
         let rejoin = match args.rejoin_at {
             Some(_) => {
                 let p = restart::rejoin_path(&args.run_dir, agent);
@@ -316,7 +331,7 @@ impl RemoteRun {
     /// Copies agent `agent`'s latest checkpoint from its host into `run_dir` (a warm takeover
     /// reads it here).
     pub fn fetch_checkpoint(&self, agent: usize, run_dir: &Path) -> Result<(), String> {
-        let host = &self.placement.agent_hosts[agent];
+        let host = &self.placement.borrow().agent_hosts[agent].clone();
         let req = Request::Checkpoint {
             run_id: self.run_id.clone(),
             agent,
@@ -340,6 +355,89 @@ impl RemoteRun {
     }
 }
 
+impl RemoteRun {
+    /// The host of every agent now (`local` for this machine).
+    pub fn agent_hosts(&self) -> Vec<String> {
+        self.placement.borrow().agent_hosts.clone()
+    }
+
+    /// The Zenoh lease: a host whose link is silent this long is declared lost.
+    pub fn lease(&self) -> Duration {
+        self.lease
+    }
+
+    /// When `host`'s daemon was seen to go, if it was.
+    pub fn lost_at(&self, host: &str) -> Option<Instant> {
+        self.cluster.lost(host)
+    }
+
+    /// `host` is lost and the run goes on: its agents move to the launcher
+    /// (`Placement::after_loss`), this machine's bridge is re-planned first, then every other
+    /// remaining host's (`Request::Replan`), and the lost host leaves the run. Returns the agents
+    /// moved (0-based), or `None` if `host` was handled already. `Err`: a remaining host could
+    /// not re-plan, and the run must stop.
+    pub fn take_over_host(&self, host: &str) -> Result<Option<Vec<usize>>, String> {
+        if !self.hosts.borrow().iter().any(|h| h == host) {
+            return Ok(None);
+        }
+        let (next, moved) = self.placement.borrow().after_loss(host)?;
+        if let Some(b) = self.bridge.borrow_mut().as_mut() {
+            let (out, inbound) = b.replan(&next)?;
+            tracing::info!(out, inbound, lost = host, "bridge re-planned");
+        }
+        self.hosts.borrow_mut().retain(|h| h != host);
+        for h in self.hosts.borrow().iter() {
+            let req = Request::Replan {
+                run_id: self.run_id.clone(),
+                agent_hosts: next.agent_hosts.clone(),
+            };
+            match self.cluster.request(h, &req, &[], session::REPLY_TIMEOUT)? {
+                (Reply::Ok { .. }, _) => {}
+                (Reply::Refused(why), _) => {
+                    return Err(format!(
+                        "host {h} cannot re-plan after {host} was lost: {why}"
+                    ))
+                }
+            }
+        }
+        let mut m = self.moved.borrow_mut();
+        for &i in &moved {
+            m.insert(i, host.to_string());
+        }
+        *self.placement.borrow_mut() = next;
+        Ok(Some(moved))
+    }
+
+    /// For an agent moved off a lost host: writes the newest checkpoint its daemon forwarded
+    /// that a takeover at `down_from` can restore (taken before it, not before `oldest`, the
+    /// oldest recorded step) into `run_dir`, where the takeover reads it. `Ok(None)`: not a moved
+    /// agent, or no such checkpoint came (the takeover goes cold).
+    pub fn restore_checkpoint(
+        &self,
+        agent: usize,
+        run_dir: &Path,
+        down_from: u64,
+        oldest: u64,
+    ) -> Result<Option<u64>, String> {
+        // Once: a later restart of the moved agent reads the checkpoints it writes here.
+        if self.moved.borrow_mut().remove(&agent).is_none() {
+            return Ok(None);
+        }
+        let Some((step, bytes)) = self.cluster.checkpoint(agent, down_from, oldest) else {
+            return Ok(None);
+        };
+        let p = restart::checkpoint_path(run_dir, agent);
+        if let Some(d) = p.parent() {
+            std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
+        }
+        let tmp = p.with_extension("part");
+        std::fs::write(&tmp, &bytes)
+            .and_then(|_| std::fs::rename(&tmp, &p))
+            .map_err(|e| format!("{}: {e}", p.display()))?;
+        Ok(Some(step))
+    }
+}
+
 /// An agent process on another host.
 struct RemoteAgent {
     cluster: Arc<Cluster>,
@@ -359,6 +457,10 @@ impl RemoteProcess for RemoteAgent {
     }
 
     fn kill_and_reap(&mut self) {
+        if self.cluster.lost(&self.host).is_some() {
+            // Its host is gone, and the process with it (it dies with its daemon).
+            return;
+        }
         let req = Request::Kill {
             run_id: self.run_id.clone(),
             agent: self.agent,
@@ -372,6 +474,9 @@ impl RemoteProcess for RemoteAgent {
     }
 
     fn signal(&self, signal: i32) {
+        if self.cluster.lost(&self.host).is_some() {
+            return;
+        }
         let req = Request::Signal {
             run_id: self.run_id.clone(),
             agent: self.agent,

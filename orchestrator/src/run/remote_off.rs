@@ -6,6 +6,10 @@ use formation_config::node::args::ChildArgs;
 use formation_config::protocol::services::Sizing;
 use formation_config::Scenario;
 use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Where the agents of a lost host would be taken over.
+pub const TAKEOVER_HOST: &str = "local";
 
 /// No placement options without the `multihost` feature.
 #[derive(clap::Args, Debug, Clone)]
@@ -56,6 +60,32 @@ impl RemoteRun {
     }
     /// Unreachable.
     pub fn fetch_checkpoint(&self, _: usize, _: &Path) -> Result<(), String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn agent_hosts(&self) -> Vec<String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn lost_at(&self, _: &str) -> Option<Instant> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn take_over_host(&self, _: &str) -> Result<Option<Vec<usize>>, String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn restore_checkpoint(
+        &self,
+        _: usize,
+        _: &Path,
+        _: u64,
+        _: u64,
+    ) -> Result<Option<u64>, String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn lease(&self) -> Duration {
         match *self {}
     }
 }

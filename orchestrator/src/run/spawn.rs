@@ -191,21 +191,17 @@ pub fn check(children: &mut [RoleProcess]) -> Option<String> {
     check_indexed(children).map(|(_, line)| line)
 }
 
-/// [`check`], with the index of that child.
+/// [`check`], with the index of that child. It stops at the first: another child that died at
+/// the same time (two agents lost with one host) is reported by the next call.
 pub fn check_indexed(children: &mut [RoleProcess]) -> Option<(usize, String)> {
-    let mut first = None;
-    for (idx, c) in children.iter_mut().enumerate() {
-        if let Some(how) = c.poll_exit() {
-            if first.is_none() {
-                let on = c
-                    .host()
-                    .map(|h| format!(" on host {h}"))
-                    .unwrap_or_default();
-                first = Some((idx, format!("{} (pid {}{on}) {how}", c.label, c.pid())));
-            }
-        }
-    }
-    first
+    children.iter_mut().enumerate().find_map(|(idx, c)| {
+        let how = c.poll_exit()?;
+        let on = c
+            .host()
+            .map(|h| format!(" on host {h}"))
+            .unwrap_or_default();
+        Some((idx, format!("{} (pid {}{on}) {how}", c.label, c.pid())))
+    })
 }
 
 /// Waits up to `grace` for every child to exit by itself, then kills and reaps the rest.

@@ -16,7 +16,7 @@ use formation_config::protocol::messages::{
     EVENT_UP_AGAIN,
 };
 use formation_config::protocol::services;
-use formation_config::scenario::events::Runtime;
+use formation_config::scenario::events::{RestartPolicy, Runtime};
 use formation_config::Scenario;
 use iceoryx2::port::notifier::Notifier;
 use std::path::PathBuf;
@@ -32,8 +32,10 @@ pub(super) const FIRST_AGENT: usize = 2;
 /// One handled incident, for `summary.json` (`events`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Incident {
-    /// `crash`, `hang` (timeline), `died`, `hung` (detected).
+    /// `crash`, `hang` (timeline), `died`, `hung`, `host_lost` (detected).
     pub kind: &'static str,
+    /// `host_lost`: the host the agent was lost with.
+    pub host: Option<String>,
     /// Agent index (0-based).
     pub agent: usize,
     /// First step the agent was down.
@@ -73,6 +75,12 @@ pub struct Takeover {
     scenario_hash: u64,
     /// Checkpoints refused per agent (restarted cold instead).
     checkpoints_refused: Vec<u32>,
+    /// `runtime.restart = "on-failure"`: a lost host's agents are taken over here.
+    on_failure: bool,
+    /// When each agent was last seen working: its command in a step record (lockstep: any record,
+    /// every command in one is its agent's own until it is taken down; realtime: a command with
+    /// its send stamp, not the plant's fallback).
+    last_seen: Vec<Option<Instant>>,
     /// What happened, in order.
     pub incidents: Vec<Incident>,
 }
@@ -123,6 +131,8 @@ impl Takeover {
             realtime_windows: Vec::new(),
             scenario_hash: restart::scenario_hash(scenario.to_toml_string().as_bytes()),
             checkpoints_refused: vec![0; n],
+            last_seen: vec![None; n],
+            on_failure: scenario.runtime.restart == RestartPolicy::OnFailure,
             incidents: Vec::new(),
         })
     }
@@ -161,7 +171,9 @@ impl Takeover {
                     step: x.down_from?,
                     detected_after_ms: x.detected_after_ms,
                     restarted_after_ms: x.restarted_after_ms,
-                    back_step: None,
+                    // A lost host's agents are down until their successors take over, as a crash.
+                    back_step: x.rejoin_at.filter(|_| x.host.is_some()),
+                    host: x.host.clone(),
                 })
             })
             .collect()
@@ -169,7 +181,11 @@ impl Takeover {
 
     /// Keeps step k's record.
     pub fn on_record(&mut self, k: u64, entries: &[StepEntry]) {
+        let now = Instant::now();
         for (i, e) in entries.iter().enumerate() {
+            if !self.realtime || e.command.sent_ns != 0 {
+                self.last_seen[i] = Some(now);
+            }
             self.history.set_state(k, i, e.truth.state);
             self.history
                 .set_command(k, i, (e.command.thrust_n, e.command.torque_nm));
@@ -245,20 +261,53 @@ impl Takeover {
                 "{line}; stopping the run (plant and leader are not restarted)"
             ));
         };
+        // A remote agent lost with its host (its daemon's liveliness token vanished): under
+        // on-failure the host's agents move here first, whatever the supervisor decides for this
+        // one (it may be parked for a timeline crash, whose successor starts here then).
+        let lost = self.remote.as_ref().and_then(|r| {
+            let h = children[idx].host()?;
+            r.lost_at(h).map(|t| (h.to_string(), t))
+        });
+        if let (Some((host, _)), Some(r), true) = (&lost, &self.remote, self.on_failure) {
+            if let Some(moved) = r.take_over_host(host)? {
+                let ids: Vec<String> = moved.iter().map(|a| (a + 1).to_string()).collect();
+                eprintln!(
+                    "error: host {host} lost; its agents {} are taken over on {} (runtime.restart = on-failure)",
+                    ids.join(", "),
+                    super::remote::TAKEOVER_HOST
+                );
+            }
+        }
         match self.supervisor.on_death(i, &line) {
             None => Ok(()),
             Some(Action::Fail(m)) => Err(format!("{m}; stopping the run")),
             Some(a) => {
-                eprintln!("error: {line}; restarting it (runtime.restart = on-failure)");
-                self.incidents.push(Incident {
+                let mut incident = Incident {
                     kind: if hung { "hung" } else { "died" },
+                    host: None,
                     agent: i,
                     down_from: None,
                     rejoin_at: None,
                     detected_after_ms: Some(since_seen.as_secs_f64() * 1e3),
                     restarted_after_ms: None,
                     started: Instant::now(),
-                });
+                };
+                match &lost {
+                    Some((host, at)) => {
+                        // From the last time it was seen working to the loss of its host.
+                        let seen = self.last_seen[i].unwrap_or(*at);
+                        incident.kind = "host_lost";
+                        incident.host = Some(host.clone());
+                        incident.detected_after_ms =
+                            Some(at.saturating_duration_since(seen).as_secs_f64() * 1e3);
+                        eprintln!(
+                            "error: {line}; restarting it on {}",
+                            super::remote::TAKEOVER_HOST
+                        );
+                    }
+                    _ => eprintln!("error: {line}; restarting it (runtime.restart = on-failure)"),
+                }
+                self.incidents.push(incident);
                 let a = match a {
                     Action::TakeDown(i) if self.realtime => {
                         self.realtime_windows.push(RuntimeEvent {
@@ -313,6 +362,7 @@ impl Takeover {
                 );
                 self.incidents.push(Incident {
                     kind: if stop { "hang" } else { "crash" },
+                    host: None,
                     agent: i,
                     down_from: None,
                     rejoin_at: None,
@@ -390,6 +440,21 @@ impl Takeover {
         if let (true, Some(r)) = (plan.warm, &remote) {
             if let Err(e) = r.fetch_checkpoint(i, &run_dir) {
                 eprintln!("warning: agent {}: cannot fetch its checkpoint: {e}", i + 1);
+            }
+        }
+        if let (true, Some(r)) = (plan.warm, &self.remote) {
+            // An agent moved off a lost host: the copy its daemon forwarded.
+            match r.restore_checkpoint(i, &run_dir, plan.down_from, self.history.oldest()) {
+                Ok(Some(step)) => tracing::info!(
+                    agent = i + 1,
+                    step,
+                    "checkpoint forwarded from its lost host restored"
+                ),
+                Ok(None) => {}
+                Err(e) => eprintln!(
+                    "warning: agent {}: cannot restore its forwarded checkpoint: {e}",
+                    i + 1
+                ),
             }
         }
         if plan.warm {
@@ -498,6 +563,25 @@ pub fn stall_timeout(rt: &Runtime) -> Option<Duration> {
     (rt.stall_timeout_ms > 0).then(|| Duration::from_millis(rt.stall_timeout_ms))
 }
 
+/// How much longer than the Zenoh lease a multi-host run waits before it calls a stall a stall:
+/// a host whose link went silent stalls a lockstep run until the lease declares it lost, and
+/// must be named (and handled under the policy) as lost, not stop the run as a stall.
+pub const STALL_BEYOND_LEASE: Duration = Duration::from_millis(1000);
+
+/// The stall timeout of a run whose silent hosts are declared lost after `lease` (`None`: one
+/// machine): at least the lease plus [`STALL_BEYOND_LEASE`].
+pub fn stall_timeout_with(rt: &Runtime, lease: Option<Duration>) -> Option<Duration> {
+    let t = stall_timeout(rt)?;
+    Some(lease.map_or(t, |l| t.max(l + STALL_BEYOND_LEASE)))
+}
+
+impl Takeover {
+    /// The stall timeout of this run ([`stall_timeout_with`] its hosts' lease).
+    pub fn stall_timeout(&self, rt: &Runtime) -> Option<Duration> {
+        stall_timeout_with(rt, self.remote.as_ref().map(|r| r.lease()))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -511,6 +595,27 @@ mod tests {
             other: EVENT_ANY,
             ..RuntimeEvent::default()
         }
+    }
+
+    #[test]
+    fn a_multi_host_run_calls_a_stall_only_after_a_silent_host_would_be_declared_lost() {
+        let rt = Runtime {
+            stall_timeout_ms: 2000,
+            ..Runtime::default()
+        };
+        let ms = Duration::from_millis;
+        assert_eq!(stall_timeout_with(&rt, None), Some(ms(2000)));
+        assert_eq!(stall_timeout_with(&rt, Some(ms(3000))), Some(ms(4000)));
+        assert_eq!(stall_timeout_with(&rt, Some(ms(500))), Some(ms(2000)));
+        let off = Runtime {
+            stall_timeout_ms: 0,
+            ..Runtime::default()
+        };
+        assert_eq!(
+            stall_timeout_with(&off, Some(ms(3000))),
+            None,
+            "disabled stays off"
+        );
     }
 
     #[test]
