@@ -448,12 +448,12 @@ impl Daemon {
         self.runs.insert(
             r.run_id.clone(),
             HostRun {
+                scenario_hash: restart::scenario_hash(r.scenario_toml.as_bytes()),
                 variant: variant.name().to_string(),
                 req: r,
                 dir,
                 children: HashMap::new(),
                 prepared: Instant::now(),
-                scenario_hash: restart::scenario_hash(r.scenario_toml.as_bytes()),
                 forwarded: HashMap::new(),
                 bridge: Some(bridge),
                 node: Some(node),
