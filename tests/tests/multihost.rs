@@ -543,7 +543,7 @@ fn mean_rms(s: &serde_json::Value) -> f64 {
 /// one-host realtime run of the same test. The goal of issue 19 is 1.1; realtime on a loaded
 /// 2-core machine varies from run to run by more than that (docs/multi-host.md, "Realtime across
 /// hosts", gives the measured ratios), so the test pins a bound that catches a broken split run
-/// (remote agents on their failsafe: 5-10x) without failing on the machine's noise.
+/// (4-8x before the late-command policy) without failing on the machine's noise.
 const SPLIT_RMS_FACTOR: f64 = 1.5;
 
 #[test]
