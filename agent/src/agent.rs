@@ -279,6 +279,29 @@ impl Agent {
                 .all(|(idx, h)| self.usable_step(idx, kd).is_none_or(|m| h.has(m)))
     }
 
+    /// The delays the control of step k applies, in steps: `(injected, effective)`. Injected:
+    /// k − k_d, tau_i(t_k) on the step grid. Effective: k minus the oldest step of the information
+    /// the control uses (its own delayed state, the leader's reference, the share of every
+    /// neighbour it keeps), i.e. the age of the information as the histories deliver it: the
+    /// injected delay, or more where the information of k_d had not arrived (a late share, a slow
+    /// link) and an older one stood in.
+    pub fn applied_delay_steps(&self, step: u64) -> (u64, u64) {
+        let kd = self.delayed_step(step);
+        let mut oldest = self.own.step_at_or_before(kd).unwrap_or(kd);
+        if let Some(s) = self.leader.step_at_or_before(kd) {
+            oldest = oldest.min(s);
+        }
+        for (idx, h) in self.neighbours.iter().enumerate() {
+            if let Some(s) = self
+                .usable_step(idx, kd)
+                .and_then(|m| h.step_at_or_before(m))
+            {
+                oldest = oldest.min(s);
+            }
+        }
+        (step - kd, step.saturating_sub(oldest))
+    }
+
     /// The controller state without its parameters and timeline, serialised (serde + bincode): what
     /// a restarted process restores with [`Agent::restore`].
     pub fn checkpoint(&self) -> Result<Vec<u8>, crate::checkpoint::CheckpointError> {

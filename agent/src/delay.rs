@@ -42,10 +42,19 @@ impl<T: Copy> StepHistory<T> {
     /// The value of `step`; if it is missing, the newest value stamped before it; if there is none, the
     /// oldest value held. `None` only when the history is empty.
     pub fn at_or_before(&self, step: u64) -> Option<T> {
+        self.entry_at_or_before(step).map(|(_, v)| v)
+    }
+
+    /// The step of the value [`StepHistory::at_or_before`] returns.
+    pub fn step_at_or_before(&self, step: u64) -> Option<u64> {
+        self.entry_at_or_before(step).map(|(s, _)| s)
+    }
+
+    fn entry_at_or_before(&self, step: u64) -> Option<(u64, T)> {
         let n = self.slots.len() as u64;
         if let Some((s, v)) = self.slots[(step % n) as usize] {
             if s == step {
-                return Some(v);
+                return Some((s, v));
             }
         }
         let mut best: Option<(u64, T)> = None;
@@ -58,7 +67,7 @@ impl<T: Copy> StepHistory<T> {
                 oldest = Some((*s, *v));
             }
         }
-        best.or(oldest).map(|(_, v)| v)
+        best.or(oldest)
     }
 }
 
@@ -68,5 +77,27 @@ pub fn delay_steps(tau: f64, dt: f64) -> u64 {
         (tau / dt).round() as u64
     } else {
         0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_step_of_the_value_used_is_the_newest_at_or_before_and_the_value_is_unchanged() {
+        let mut h = StepHistory::new(8);
+        assert_eq!(h.step_at_or_before(5), None);
+        for s in [3u64, 4, 7] {
+            h.push(s, s as f64 * 10.0);
+        }
+        assert_eq!(h.step_at_or_before(7), Some(7));
+        assert_eq!(h.step_at_or_before(6), Some(4), "6 missing: 4 stands in");
+        assert_eq!(h.at_or_before(6), Some(40.0));
+        assert_eq!(
+            h.step_at_or_before(1),
+            Some(3),
+            "nothing before: the oldest held"
+        );
     }
 }

@@ -13,26 +13,37 @@
 //!   publishes each sample into the local service, then notifies each event. On a host other
 //!   than the launcher it first creates every service of the run (limits as the orchestrator's).
 //!
-//! Frame (little endian), records back to back: `u8 kind` (0 sample, 1 event), `u16` name
-//! length, name; for a sample also `u8` type-name length, type name, `u32` size, bytes. The
-//! receiver checks the type name and size against its own service before it publishes.
+//! Frame (little endian), records back to back: `u8 kind` (0 sample, 1 event, 2 sending host),
+//! `u16` name length, name; for a sample also `u8` type-name length, type name, `u32` size, bytes.
+//! Every frame starts with the sending host's record. The receiver checks the type name and size
+//! against its own service before it publishes.
+//!
+//! Realtime stamps: the in thread translates the send stamp (`sent_ns`, the sender's
+//! `CLOCK_MONOTONIC`) of every state, share and command into its own host's clock with the clock
+//! offsets of the handshake ([`crate::clock`]) before it publishes, and records the one-way delay
+//! of the link (sending host -> this host): its clock at the publish minus the translated stamp.
+//! Lockstep messages carry no stamp (0) and are forwarded byte for byte.
 //! Publishers use `CongestionControl::Block` (nothing is dropped), `express` (no batching delay:
 //! the frame is the batch) and `Locality::Remote`; nothing is re-forwarded (see `plan`).
 
+use crate::clock::{self, LinkDelays};
 use crate::plan::{agent_index, Placement};
 use crate::proto;
+use formation_config::node::clock::now_ns;
 use formation_config::node::ipc::{self, event_with_limits, pubsub_with_limits, service_name};
 use formation_config::node::ports::{self, RunNode, Svc};
+use formation_config::node::timing::TimingReport;
 use formation_config::protocol::services::{
     self, wire_type_name, Event, Limits, Message, Named, Sizing, Slice, Topic, Visitor,
 };
+use formation_config::protocol::wire::{ControlCommand, NeighbourState, VehicleState};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::prelude::*;
-use std::any::Any;
-use std::collections::HashMap;
+use std::any::{Any, TypeId};
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{mpsc, Arc};
+use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 use zenoh::qos::{CongestionControl, Priority};
@@ -57,6 +68,8 @@ pub struct BridgeConfig {
     pub sizing: Sizing,
     /// Create every service first (every host but the launcher, where the orchestrator does).
     pub create: bool,
+    /// Every host's clock minus the launcher's, ns (a host not listed: 0).
+    pub clock_offsets_ns: BTreeMap<String, i64>,
 }
 
 /// Counters of a bridge.
@@ -84,6 +97,21 @@ pub struct Bridge {
     pub forwarded: (usize, usize),
     /// Re-plans for the receiving and the sending thread, in that order.
     replan: [mpsc::Sender<Replan>; 2],
+    links: Arc<Mutex<BTreeMap<String, LinkDelays>>>,
+}
+
+impl Bridge {
+    /// The one-way delays of the links into this host so far, as a timing report: histogram
+    /// `link/<from>-><to>` (ns) and counter `negative/<from>-><to>` per link.
+    pub fn link_report(&self) -> TimingReport {
+        let mut r = TimingReport::default();
+        for (name, l) in self.links.lock().unwrap().iter() {
+            r.histograms
+                .insert(format!("link/{name}"), l.delays.clone());
+            r.counters.insert(format!("negative/{name}"), l.negative);
+        }
+        r
+    }
 }
 
 /// A new placement for a thread, and where it answers (services it forwards, or why not).
@@ -102,7 +130,23 @@ impl Drop for Bridge {
 }
 
 type Drain = Box<dyn FnMut(&mut dyn FnMut(&[u8])) -> Result<usize, String>>;
-type Inject = Box<dyn FnMut(&[u8]) -> Result<(), String>>;
+/// Publishes a sample's bytes, its send stamp (if it has one) shifted by the given ns; returns
+/// the shifted stamp (0: none).
+type Inject = Box<dyn FnMut(&[u8], i64) -> Result<u64, String>>;
+
+/// Offset of the send stamp (`sent_ns`) in the stamped wire types, `None` for the others.
+fn stamp_offset<T: Message>() -> Option<usize> {
+    let t = TypeId::of::<T>();
+    if t == TypeId::of::<VehicleState>() {
+        Some(std::mem::offset_of!(VehicleState, sent_ns))
+    } else if t == TypeId::of::<NeighbourState>() {
+        Some(std::mem::offset_of!(NeighbourState, sent_ns))
+    } else if t == TypeId::of::<ControlCommand>() {
+        Some(std::mem::offset_of!(ControlCommand, sent_ns))
+    } else {
+        None
+    }
+}
 
 /// One forwarded publish-subscribe service on the sending side.
 struct OutTopic {
@@ -268,13 +312,14 @@ impl Visitor for Opener<'_> {
             }
             let publisher = ports::publisher(self.node, &s).map_err(|e| e.to_string())?;
             let name = s.name.clone();
-            let inject: Inject = Box::new(move |bytes| {
+            let stamp = stamp_offset::<T>();
+            let inject: Inject = Box::new(move |bytes, shift| {
                 let mut sample = publisher
                     .loan_uninit()
                     .map_err(|e| format!("bridge: cannot loan on {name}: {e:?}"))?;
                 // SAFETY: the size was checked against T's; the bytes are a T's bytes from the
                 // sending host (same build and wire layout, checked at the handshake).
-                let sample = unsafe {
+                let mut sample = unsafe {
                     std::ptr::copy_nonoverlapping(
                         bytes.as_ptr(),
                         sample.payload_mut().as_mut_ptr() as *mut u8,
@@ -282,9 +327,19 @@ impl Visitor for Opener<'_> {
                     );
                     sample.assume_init()
                 };
+                let mut sent = 0;
+                if let Some(at) = stamp {
+                    // SAFETY: `at` is the offset of a u64 field inside T (offset_of!), within
+                    // the sample's payload; unaligned access, whatever the payload's alignment.
+                    unsafe {
+                        let p = (sample.payload_mut() as *mut T as *mut u8).add(at) as *mut u64;
+                        sent = clock::translate(p.read_unaligned(), shift);
+                        p.write_unaligned(sent);
+                    }
+                }
                 sample
                     .send()
-                    .map(|_| ())
+                    .map(|_| sent)
                     .map_err(|e| format!("bridge: cannot publish on {name}: {e:?}"))
             });
             self.ins.insert(
@@ -377,6 +432,13 @@ impl Visitor for Opener<'_> {
 
 const KIND_SAMPLE: u8 = 0;
 const KIND_EVENT: u8 = 1;
+const KIND_FROM: u8 = 2;
+
+fn put_from(frame: &mut Vec<u8>, host: &str) {
+    frame.push(KIND_FROM);
+    frame.extend_from_slice(&(host.len() as u16).to_le_bytes());
+    frame.extend_from_slice(host.as_bytes());
+}
 
 fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
     frame.push(KIND_SAMPLE);
@@ -408,6 +470,8 @@ pub enum Record<'a> {
     },
     /// A wake-up of `name`.
     Event(&'a str),
+    /// The host that sent the frame (its first record).
+    From(&'a str),
 }
 
 /// Parses a frame into its records; `Err` names what is malformed.
@@ -444,6 +508,7 @@ pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
                 });
             }
             KIND_EVENT => v.push(Record::Event(name)),
+            KIND_FROM => v.push(Record::From(name)),
             k => return Err(format!("unknown record kind {k}")),
         }
     }
@@ -456,24 +521,26 @@ impl Bridge {
     pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, String> {
         let stop = Arc::new(AtomicBool::new(false));
         let stats = Arc::new(Stats::default());
+        let links = Arc::new(Mutex::new(BTreeMap::new()));
         let hosts = cfg.placement.hosts();
         let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
         let (in_tx, in_rx) = mpsc::channel::<Replan>();
         let (out_tx, out_rx) = mpsc::channel::<Replan>();
         let mut threads = Vec::new();
         {
-            let (cfg, stop, stats, hosts, session) = (
+            let (cfg, stop, stats, hosts, session, links) = (
                 cfg.clone(),
                 stop.clone(),
                 stats.clone(),
                 hosts.clone(),
                 session.clone(),
+                links.clone(),
             );
             let tx = ready_tx.clone();
             threads.push(
                 std::thread::Builder::new()
                     .name("bridge-in".into())
-                    .spawn(move || run_in(session, cfg, hosts, stop, stats, tx, in_rx))
+                    .spawn(move || run_in(session, cfg, hosts, stop, stats, links, tx, in_rx))
                     .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
             );
         }
@@ -483,6 +550,7 @@ impl Bridge {
             stats: stats.clone(),
             forwarded: (0, 0),
             replan: [in_tx, out_tx],
+            links,
         };
         let inbound = ready_rx
             .recv()
@@ -533,9 +601,26 @@ fn run_in(
     hosts: Vec<String>,
     stop: Arc<AtomicBool>,
     stats: Arc<Stats>,
+    links: Arc<Mutex<BTreeMap<String, LinkDelays>>>,
     ready: mpsc::Sender<Result<usize, String>>,
     replan: mpsc::Receiver<Replan>,
 ) {
+    let offset = |h: &str| cfg.clock_offsets_ns.get(h).copied().unwrap_or(0);
+    let me_offset = offset(&cfg.me);
+    // Per sending host: the shift of its stamps onto this clock, and the link's name.
+    let from: HashMap<&str, (i64, String)> = hosts
+        .iter()
+        .filter(|h| **h != cfg.me)
+        .map(|h| {
+            (
+                h.as_str(),
+                (
+                    clock::shift_ns(offset(h), me_offset),
+                    clock::link_name(h, &cfg.me),
+                ),
+            )
+        })
+        .collect();
     let setup = || -> Result<_, String> {
         let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
         let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
@@ -556,6 +641,7 @@ fn run_in(
         }
     };
     let _ = ready.send(Ok(ins.len()));
+    let mut stamps: Vec<(u64, u64)> = Vec::with_capacity(64);
     while !stop.load(Ordering::SeqCst) {
         if let Ok((placement, ack)) = replan.try_recv() {
             cfg.placement = placement;
@@ -585,10 +671,20 @@ fn run_in(
                 continue;
             }
         };
+        let mut source: Option<&(i64, String)> = None;
+        stamps.clear();
         for r in records {
             let key: &str = match &r {
                 Record::Sample { name, .. } => name,
                 Record::Event(name) => name,
+                Record::From(host) => {
+                    source = from.get(host);
+                    if source.is_none() {
+                        tracing::warn!("bridge: a frame from {host}, not a host of the run");
+                        stats.refused.fetch_add(1, Ordering::Relaxed);
+                    }
+                    continue;
+                }
             };
             match (r, ins.get_mut(key)) {
                 (
@@ -609,8 +705,12 @@ fn run_in(
                             bytes.len()
                         );
                         stats.refused.fetch_add(1, Ordering::Relaxed);
-                    } else if let Err(e) = inject(bytes) {
-                        tracing::warn!("{e}");
+                    } else {
+                        match inject(bytes, source.map_or(0, |s| s.0)) {
+                            Ok(0) => {}
+                            Ok(sent) => stamps.push((sent, now_ns())),
+                            Err(e) => tracing::warn!("{e}"),
+                        }
                     }
                 }
                 (Record::Event(_), Some(InPort::Event(n))) => ports::poke(n),
@@ -618,6 +718,13 @@ fn run_in(
                     tracing::warn!("bridge: no such forwarded service here: {r:?}");
                     stats.refused.fetch_add(1, Ordering::Relaxed);
                 }
+            }
+        }
+        if let (Some((_, link)), false) = (source, stamps.is_empty()) {
+            let mut l = links.lock().unwrap();
+            let d = l.entry(link.clone()).or_default();
+            for &(sent, now) in &stamps {
+                d.record(sent, now);
             }
         }
     }
@@ -690,7 +797,11 @@ fn run_out(
             }
         }
         let _ = ack.send(Ok(topics.len() + events.len()));
-        let mut frames: Vec<Vec<u8>> = vec![Vec::new(); hosts.len()];
+        // Every frame starts with this host's name; a frame with nothing after it is not sent.
+        let mut from = Vec::new();
+        put_from(&mut from, &cfg.me);
+        let header = from.len();
+        let mut frames: Vec<Vec<u8>> = vec![from.clone(); hosts.len()];
         let mut fired = vec![false; events.len()];
         let next = loop {
             if stop.load(Ordering::SeqCst) {
@@ -732,8 +843,8 @@ fn run_out(
                 }
             }
             for (d, f) in frames.iter_mut().enumerate() {
-                if !f.is_empty() {
-                    if let Err(e) = pubs[d].put(std::mem::take(f)).wait() {
+                if f.len() > header {
+                    if let Err(e) = pubs[d].put(std::mem::replace(f, from.clone())).wait() {
                         tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
                     }
                     stats.frames_out.fetch_add(1, Ordering::Relaxed);
@@ -775,6 +886,49 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_send_stamp_is_found_in_states_shares_and_commands_only() {
+        use formation_config::protocol::wire::ReferenceFrame;
+        for (at, sent) in [
+            (stamp_offset::<VehicleState>(), {
+                let v = VehicleState {
+                    sent_ns: 0x0102_0304_0506_0708,
+                    ..Default::default()
+                };
+                // SAFETY: reading the bytes of a repr(C) Copy value.
+                unsafe {
+                    std::slice::from_raw_parts(
+                        &v as *const _ as *const u8,
+                        size_of::<VehicleState>(),
+                    )
+                    .to_vec()
+                }
+            }),
+            (stamp_offset::<ControlCommand>(), {
+                let v = ControlCommand {
+                    sent_ns: 0x0102_0304_0506_0708,
+                    ..Default::default()
+                };
+                // SAFETY: as above.
+                unsafe {
+                    std::slice::from_raw_parts(
+                        &v as *const _ as *const u8,
+                        size_of::<ControlCommand>(),
+                    )
+                    .to_vec()
+                }
+            }),
+        ] {
+            let at = at.unwrap();
+            assert_eq!(
+                u64::from_le_bytes(sent[at..at + 8].try_into().unwrap()),
+                0x0102_0304_0506_0708
+            );
+        }
+        assert!(stamp_offset::<NeighbourState>().is_some());
+        assert!(stamp_offset::<ReferenceFrame>().is_none());
+    }
+
+    #[test]
     fn a_frame_round_trips_its_records_in_order_and_truncation_is_an_error() {
         let mut f = Vec::new();
         put_sample(
@@ -784,6 +938,7 @@ mod tests {
             &[1, 2, 3, 4],
         );
         put_event(&mut f, "formation/wake/agent/3");
+        put_from(&mut f, "b");
         let r = parse_frame(&f).unwrap();
         assert_eq!(
             r,
@@ -794,6 +949,7 @@ mod tests {
                     bytes: &[1, 2, 3, 4]
                 },
                 Record::Event("formation/wake/agent/3"),
+                Record::From("b"),
             ]
         );
         assert!(parse_frame(&f[..f.len() - 3]).is_err());

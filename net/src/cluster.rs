@@ -1,9 +1,11 @@
 //! The orchestrator's side: reach the daemons, compare identities, prepare a run on each host,
 //! start and stop its remote processes, and hear of their exits.
 
+use crate::clock;
 use crate::identity::{self, Identity};
 use crate::proto::{self, ExitReport, HostInfo, Reply, Request};
 use crate::session;
+use formation_config::node::clock::now_ns;
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -157,6 +159,36 @@ impl Cluster {
             }
         }
         None
+    }
+
+    /// The offset of `name`'s `CLOCK_MONOTONIC` from this machine's, from [`clock::PROBES`]
+    /// request/response probes (the one of the shortest round trip, [`clock::estimate`]).
+    pub fn clock_offset(&self, name: &str, timeout: Duration) -> Option<clock::Offset> {
+        let mut probes = Vec::with_capacity(clock::PROBES);
+        for _ in 0..clock::PROBES {
+            let t0 = now_ns();
+            let Ok(replies) = self
+                .session
+                .get(proto::clock_key(name))
+                .timeout(timeout)
+                .wait()
+            else {
+                continue;
+            };
+            while let Ok(r) = replies.recv() {
+                if let Ok(s) = r.result() {
+                    let t3 = now_ns();
+                    if let Ok(b) = <[u8; 8]>::try_from(&s.payload().to_bytes()[..]) {
+                        probes.push(clock::Probe {
+                            t0,
+                            remote: u64::from_le_bytes(b),
+                            t3,
+                        });
+                    }
+                }
+            }
+        }
+        clock::estimate(&probes)
     }
 
     /// Waits until every host in `names` answers (up to `timeout`) and has this identity.

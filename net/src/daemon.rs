@@ -154,6 +154,18 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
         .with(zenoh::handlers::FifoChannel::new(64))
         .wait()
         .map_err(|e| format!("cannot declare the queryable: {e}"))?;
+    // The clock probe is answered at once, in Zenoh's thread: an answer queued behind the request
+    // loop would bias the offset estimate (crate::clock).
+    let _clock = s
+        .declare_queryable(proto::clock_key(&o.name))
+        .callback(|q| {
+            let now = formation_config::node::clock::now_ns();
+            let _ = q
+                .reply(q.key_expr().clone(), now.to_le_bytes().to_vec())
+                .wait();
+        })
+        .wait()
+        .map_err(|e| format!("cannot declare the clock queryable: {e}"))?;
     let orchestrators = s
         .liveliness()
         .declare_subscriber("formation/run/*/orchestrator")
@@ -315,6 +327,7 @@ impl Daemon {
                 run_id,
                 agent_hosts,
             } => self.replan(&run_id, agent_hosts).map(|_| ok(None)),
+            Request::Report { run_id } => self.report(&run_id),
             Request::End { run_id } => {
                 if self.runs.contains_key(&run_id) {
                     self.end(&run_id);
@@ -387,6 +400,9 @@ impl Daemon {
         if !r.agent_hosts.contains(&self.o.name) {
             return Err(format!("no agent of the run is placed on {}", self.o.name));
         }
+        if r.rt_priority > 99 {
+            return Err(format!("rt_priority {}: at most 99", r.rt_priority));
+        }
         if r.observers > services::MAX_OBSERVERS + 1 {
             return Err(format!(
                 "{} observers: at most {}",
@@ -422,6 +438,7 @@ impl Daemon {
                 placement,
                 sizing: Sizing::run(n, r.realtime).with_observers(r.observers),
                 create: true,
+                clock_offsets_ns: r.clock_offsets_ns.clone(),
             },
         );
         let bridge = match bridge {
@@ -504,7 +521,7 @@ impl Daemon {
             agent: Some(agent),
             realtime: r.req.realtime,
             spin_us: 0,
-            rt_priority: 0,
+            rt_priority: r.req.rt_priority,
             rejoin_at,
         };
         let mut cmd = Command::new(&exe);
@@ -660,6 +677,44 @@ impl Daemon {
                 .congestion_control(zenoh::qos::CongestionControl::Block)
                 .wait();
         }
+    }
+
+    /// The run's timing files on this host (its agents', once they have stopped, and its bridge's
+    /// link delays as `bridge-<host>.json`).
+    fn report(&mut self, run_id: &str) -> Result<Vec<u8>, String> {
+        let me = self.o.name.clone();
+        let r = self.run(run_id)?;
+        // The agents write their files when they stop: give them the grace of an ending run.
+        let deadline = Instant::now() + STOP_GRACE;
+        while Instant::now() < deadline
+            && r.children
+                .values_mut()
+                .any(|c| matches!(c.try_wait(), Ok(None)))
+        {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        if let Some(b) = &r.bridge {
+            b.link_report()
+                .write(&r.dir, &format!("bridge-{me}"))
+                .map_err(|e| e.to_string())?;
+        }
+        let mut out = proto::HostReport::default();
+        let dir = formation_config::node::timing::dir(&r.dir);
+        for e in std::fs::read_dir(&dir)
+            .map_err(|e| format!("{}: {e}", dir.display()))?
+            .flatten()
+        {
+            let name = e.file_name().to_string_lossy().into_owned();
+            if name.ends_with(".json") {
+                let text = std::fs::read_to_string(e.path())
+                    .map_err(|x| format!("{}: {x}", e.path().display()))?;
+                out.timing.insert(name, text);
+            }
+        }
+        Ok(proto::frame(
+            &Reply::Ok { pid: None },
+            &serde_json::to_vec(&out).unwrap(),
+        ))
     }
 
     /// Reaps exited children and reports them.

@@ -7,6 +7,7 @@
 //! * [`plan`]: which services cross hosts for a placement, and in which direction.
 //! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
 //!   bytes with their wire type name.
+//! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //!
@@ -17,6 +18,7 @@
 #![warn(missing_docs)]
 
 pub mod bridge;
+pub mod clock;
 pub mod cluster;
 pub mod daemon;
 pub mod identity;

@@ -10,9 +10,11 @@
 //! | `formation/run/<id>/exit` | a daemon's [`ExitReport`] for a process of the run |
 //! | `formation/run/<id>/to/<host>` | the bridge's frames for that host ([`crate::bridge`]) |
 //! | `formation/run/<id>/checkpoint` | a daemon's copy of each checkpoint its agents write ([`CheckpointNote`] and the file) |
+//! | `formation/clock/<name>` | queryable: a daemon's `CLOCK_MONOTONIC`, ns, 8 bytes LE ([`crate::clock`]) |
 
 use crate::identity::Identity;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
 /// Liveliness key of a daemon.
 pub fn host_token(name: &str) -> String {
@@ -43,6 +45,11 @@ pub fn run_checkpoint(run: &str) -> String {
 /// Bridge frames of a run for `host`.
 pub fn run_to(run: &str, host: &str) -> String {
     format!("formation/run/{run}/to/{host}")
+}
+
+/// Clock queryable of a daemon (answered at once, outside its request loop).
+pub fn clock_key(name: &str) -> String {
+    format!("formation/clock/{name}")
 }
 
 /// True for a host name usable in keys: 1..=32 of `[A-Za-z0-9_-]`.
@@ -90,10 +97,15 @@ pub struct RunRequest {
     pub launcher: String,
     /// Realtime mode.
     pub realtime: bool,
+    /// `SCHED_FIFO` priority of the agents in realtime mode (`--rt-priority`; 0: normal policy).
+    pub rt_priority: u32,
     /// Outside observer slots of every service (the run's, plus one for the bridge).
     pub observers: usize,
     /// The orchestrator's identity (checked again).
     pub identity: Identity,
+    /// Every host's `CLOCK_MONOTONIC` minus the launcher's, ns (estimated at the handshake,
+    /// [`crate::clock`]); the bridges translate send stamps with them.
+    pub clock_offsets_ns: BTreeMap<String, i64>,
 }
 
 /// What an orchestrator asks a daemon.
@@ -142,6 +154,12 @@ pub enum Request {
         /// Host of every agent (index = 0-based agent).
         agent_hosts: Vec<String>,
     },
+    /// What the run measured on this host, once its processes have stopped: its agents' timing
+    /// files and its bridge's link delays (the reply carries a JSON [`HostReport`]).
+    Report {
+        /// Run id.
+        run_id: String,
+    },
     /// End the run: stop its processes, remove its files.
     End {
         /// Run id.
@@ -159,6 +177,14 @@ pub enum Reply {
     },
     /// Refused, nothing changed; why.
     Refused(String),
+}
+
+/// What a run measured on one host: its timing files by name (`agent-4.json`, `bridge-b.json`),
+/// in the format of `formation_config::node::timing::TimingReport`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct HostReport {
+    /// File name -> contents.
+    pub timing: BTreeMap<String, String>,
 }
 
 /// A process of a run that exited on a daemon's host.

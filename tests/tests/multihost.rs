@@ -717,3 +717,124 @@ fn a_killed_host_daemon_under_on_failure_has_its_agents_taken_over_warm_here_and
     assert_gone(&r.remote_pids);
     let _ = std::fs::remove_dir_all(&r.dir);
 }
+
+/// Runs `formation run ARGS --out OUT` in the launcher namespace without any host (one machine);
+/// (exit code, stderr).
+fn run_one_host(hosts: &Hosts, dir: &Path, args: &[&str], out: &Path) -> (i32, String) {
+    let residue = dir.join("residue-one-host.txt");
+    let mut v: Vec<&str> = vec!["run"];
+    v.extend_from_slice(args);
+    let o = out.display().to_string();
+    v.extend_from_slice(&["--out", &o]);
+    let r = hosts
+        .command(0, Some(&residue), &v)
+        .stdout(Stdio::null())
+        .output()
+        .expect("formation run starts");
+    (
+        r.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&r.stderr).into_owned(),
+    )
+}
+
+/// Mean over the agents of the whole-run RMS formation error, m.
+fn mean_rms(s: &serde_json::Value) -> f64 {
+    let a = s["agents"].as_array().expect("agents");
+    a.iter()
+        .map(|x| x["rms_formation_error_m"]["whole"].as_f64().unwrap())
+        .sum::<f64>()
+        / a.len() as f64
+}
+
+/// How much worse (mean whole-run RMS formation error) the split realtime run may be than the
+/// one-host realtime run of the same test. The goal of issue 19 is 1.1; realtime on a loaded
+/// 2-core machine varies from run to run by more than that (docs/multi-host.md, "Realtime across
+/// hosts", gives the measured ratios), so the test pins a bound that catches a broken split run
+/// (4-8x before the late-command policy) without failing on the machine's noise.
+const SPLIT_RMS_FACTOR: f64 = 1.5;
+
+#[test]
+fn a_realtime_split_run_measures_every_cross_host_link_and_flies_as_well_as_on_one_host() {
+    if !available(
+        "a_realtime_split_run_measures_every_cross_host_link_and_flies_as_well_as_on_one_host",
+    ) {
+        return;
+    }
+    let dir = work_dir("realtime");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let common = ["paper", "--realtime", "--set", "simulation.duration_s=12"];
+    let one = dir.join("one");
+    let (code, err) = run_one_host(&hosts, &dir, &common, &one);
+    assert_eq!(code, 0, "one-host realtime run failed:\n{err}");
+    let split = dir.join("split");
+    let mut args = common.to_vec();
+    args.extend_from_slice(&["--hosts", "h1", "--place", "4,5@h1"]);
+    let (code, err, residue) = run_in(&hosts, &dir, &args, &split, true);
+    assert_eq!(code, 0, "realtime split run failed:\n{err}");
+    assert!(
+        !err.contains("no timing statistics") && !err.contains("timing statistics of the other"),
+        "every agent's timing is collected: {err}"
+    );
+    assert_no_residue("the launcher", &residue);
+    let left = hosts.stop_daemons();
+    assert_no_residue("host h1", &left[0]);
+
+    let s = formation_tests::summary(&split);
+    let t = &s["timing"];
+    // Both directions of the one cross-host link, measured on every step's messages.
+    let links = t["links"].as_array().expect("timing.links");
+    let names: Vec<&str> = links.iter().map(|l| l["link"].as_str().unwrap()).collect();
+    assert!(
+        names.contains(&"local->h1") && names.contains(&"h1->local"),
+        "links named: {names:?}"
+    );
+    let steps = t["timed_steps"].as_u64().unwrap();
+    for l in links {
+        let q = |k: &str| l[k].as_f64().unwrap_or(f64::NAN);
+        let (p50, p99, max) = (q("p50"), q("p99"), q("max"));
+        assert!(
+            p50.is_finite() && p50 > 0.0 && p50 <= p99 && p99 <= max && max < 1e6,
+            "plausible one-way delays, µs: {l}"
+        );
+        assert!(
+            l["samples"].as_u64().unwrap() >= steps,
+            "at least one stamped message a step: {l}"
+        );
+    }
+    // One kernel, one CLOCK_MONOTONIC: the estimate is within its own uncertainty of 0.
+    let c = &t["clocks"][0];
+    assert_eq!(c["host"], "h1");
+    assert!(
+        c["offset_us"].as_f64().unwrap().abs() <= c["uncertainty_us"].as_f64().unwrap() + 1.0,
+        "{c}"
+    );
+    // Every agent's timing and delays, the remote ones included.
+    let per_agent = t["delays"]["per_agent"].as_array().unwrap();
+    assert_eq!(per_agent.len(), 5);
+    for a in per_agent {
+        let e = &a["effective_us"];
+        assert!(e["samples"].as_u64().unwrap() > 0, "{a}");
+        assert!(
+            e["p50"].as_f64().unwrap() >= a["injected_us"]["p50"].as_f64().unwrap(),
+            "the effective delay is at least the injected one: {a}"
+        );
+    }
+    for a in t["state_to_command_latency_us"]["per_agent"]
+        .as_array()
+        .unwrap()
+    {
+        assert!(a["samples"].as_u64().unwrap() > 0, "{a}");
+    }
+    let (rms_one, rms_split) = (mean_rms(&formation_tests::summary(&one)), mean_rms(&s));
+    eprintln!(
+        "mean RMS formation error: one host {rms_one:.4} m, split {rms_split:.4} m (ratio {:.3}); links {}",
+        rms_split / rms_one,
+        serde_json::to_string(&t["links"]).unwrap()
+    );
+    assert!(
+        rms_split <= SPLIT_RMS_FACTOR * rms_one,
+        "split {rms_split} m vs one host {rms_one} m"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -6,7 +6,8 @@
 //!
 //! If several states are queued (the agent fell behind), all enter the history and only the newest
 //! is answered. Measures, per process: state hop (plant send stamp -> received), share hop
-//! (neighbour send stamp -> received) and the compute time of `Agent::step`; written at the stop
+//! (neighbour send stamp -> received), the compute time of `Agent::step`, and the injected and
+//! effective delay of every step (`Agent::applied_delay_steps`); written at the stop
 //! to `<run dir>/timing/agent-<i>.json`. Live telemetry for `formation inspect` goes out on the
 //! same service and with the same sim-time period as in lockstep ([`super::telemetry`]).
 //! It checkpoints as in lockstep (`super::rejoin::Checkpoints`), so that under `--restart
@@ -34,6 +35,12 @@ struct Meters {
     state_hop: NsHistogram,
     share_hop: NsHistogram,
     compute: NsHistogram,
+    /// tau_i(t_k) on the step grid, ns.
+    injected: NsHistogram,
+    /// Age of the oldest information the control used (`Agent::applied_delay_steps`), ns.
+    effective: NsHistogram,
+    /// Steps whose effective delay exceeded tau_M.
+    over_tau_m: u64,
     skipped: u64,
 }
 
@@ -53,6 +60,8 @@ pub fn run(
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut latest: Option<VehicleState> = None;
     let mut sampler = Sampler::new(&b.scenario, i);
+    let dt_ns = (b.scenario.simulation.dt_s * 1e9).round() as u64;
+    let tau_m_ns = (b.scenario.simulation.max_delay_s * 1e9).round() as u64;
     loop {
         while let Some(c) = ports.control.receive()? {
             if c.kind == CONTROL_STOP {
@@ -114,6 +123,10 @@ pub fn run(
                 let mut cmd = agent.step(&s);
                 let t1 = now_ns();
                 m.compute.record(t1 - t0);
+                let (injected, effective) = agent.applied_delay_steps(k);
+                m.injected.record(injected * dt_ns);
+                m.effective.record(effective * dt_ns);
+                m.over_tau_m += u64::from(effective * dt_ns > tau_m_ns);
                 cmd.sent_ns = t1;
                 send(&ports.command, cmd)?;
                 poke(&ports.plant_wake);
@@ -142,6 +155,12 @@ fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), NodeError> {
     r.histograms.insert("share_hop".into(), m.share_hop.clone());
     r.histograms
         .insert("controller_step".into(), m.compute.clone());
+    r.histograms
+        .insert("injected_delay".into(), m.injected.clone());
+    r.histograms
+        .insert("effective_delay".into(), m.effective.clone());
+    r.counters
+        .insert("effective_over_tau_m".into(), m.over_tau_m);
     r.counters.insert("skipped_states".into(), m.skipped);
     r.write(&b.args.run_dir, &format!("agent-{}", i + 1))
 }

@@ -216,6 +216,7 @@ pub fn main(args: RunArgs) -> ExitCode {
                 variant.name(),
                 mode.realtime,
                 mode.observers,
+                mode.rt_priority,
             )
         })
         .transpose()
@@ -539,8 +540,26 @@ fn run(
     drop(services);
     drop(node);
     if mode.realtime && matches!(outcome, Outcome::Completed) {
-        match timing::collect(&run_dir, n, mode.wait, mode.spin_us, mode.rt_priority) {
-            Ok(t) => recorder.set_timing(t),
+        if let Some(r) = &remote {
+            if let Err(e) = r.collect_timing(&run_dir) {
+                eprintln!("warning: timing statistics of the other hosts: {e}");
+            }
+        }
+        match timing::collect(
+            &run_dir,
+            n,
+            mode.wait,
+            mode.spin_us,
+            mode.rt_priority,
+            scenario.simulation.max_delay_s,
+        ) {
+            Ok(mut t) => {
+                if let Some(r) = &remote {
+                    t["clocks"] = r.clocks_json();
+                }
+                timing::warn_over_tau_m(&t);
+                recorder.set_timing(t)
+            }
             Err(e) => eprintln!("warning: no timing statistics: {e}"),
         }
     } else if let Some(t) = step_timing.summary() {

@@ -14,6 +14,7 @@ use formation_config::node::restart;
 use formation_config::protocol::services::Sizing;
 use formation_config::Scenario;
 use formation_net::bridge::{Bridge, BridgeConfig};
+use formation_net::clock::Offset;
 use formation_net::cluster::{Cluster, LAUNCHER};
 use formation_net::plan::Placement;
 use formation_net::proto::{self, Reply, Request, RunRequest};
@@ -97,6 +98,7 @@ pub struct Remote {
     agent_hosts: Vec<String>,
     hosts: Vec<String>,
     neighbours: Vec<Vec<usize>>,
+    offsets: BTreeMap<String, Offset>,
 }
 
 /// Opens the session and runs the handshake; `None` without `--hosts`.
@@ -131,11 +133,25 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
     cluster
         .handshake(&hosts, &me, session::REPLY_TIMEOUT)
         .map_err(|e| e.to_string())?;
+    let mut offsets = BTreeMap::new();
+    for h in &hosts {
+        let o = cluster
+            .clock_offset(h, std::time::Duration::from_secs(1))
+            .ok_or_else(|| format!("host {h} did not answer the clock probe"))?;
+        tracing::info!(
+            host = h.as_str(),
+            offset_ns = o.offset_ns,
+            rtt_ns = o.rtt_ns,
+            "clock offset"
+        );
+        offsets.insert(h.clone(), o);
+    }
     Ok(Some(Remote {
         cluster,
         lease: Duration::from_millis(a.link.lease_ms),
         agent_hosts,
         hosts,
+        offsets,
         neighbours: Placement::neighbours_of(n, scenario.graph.edges.iter().map(|e| (e.a, e.b))),
     }))
 }
@@ -151,6 +167,7 @@ impl Remote {
         variant: &str,
         realtime: bool,
         observers: usize,
+        rt_priority: u32,
     ) -> Result<RemoteRun, String> {
         self.cluster.announce(run_id)?;
         let req = RunRequest {
@@ -161,8 +178,10 @@ impl Remote {
             agent_hosts: self.agent_hosts.clone(),
             launcher: LAUNCHER.to_string(),
             realtime,
+            rt_priority,
             observers,
             identity: formation_net::identity::local(),
+            clock_offsets_ns: clock_offsets_ns(&self.offsets),
         };
         let run = RemoteRun {
             cluster: Arc::new(self.cluster),
@@ -176,6 +195,7 @@ impl Remote {
             bridge: RefCell::new(None),
             lease: self.lease,
             moved: RefCell::new(BTreeMap::new()),
+            offsets: self.offsets,
         };
         for h in &self.hosts {
             match run.cluster.request(
@@ -209,6 +229,28 @@ pub struct RemoteRun {
     /// Agents moved off a lost host whose takeover has not restored a checkpoint yet: the host
     /// they were lost with.
     moved: RefCell<BTreeMap<usize, String>>,
+    offsets: BTreeMap<String, Offset>,
+}
+
+/// Every host's clock minus this machine's, ns, this machine included (0).
+fn clock_offsets_ns(offsets: &BTreeMap<String, Offset>) -> BTreeMap<String, i64> {
+    let mut m: BTreeMap<String, i64> = offsets
+        .iter()
+        .map(|(h, o)| (h.clone(), o.offset_ns))
+        .collect();
+    m.insert(LAUNCHER.to_string(), 0);
+    m
+}
+
+/// True for a timing file name a host may send: `[A-Za-z0-9_-]+.json` (nothing that leaves the
+/// timing folder).
+fn timing_file_name(name: &str) -> bool {
+    name.strip_suffix(".json").is_some_and(|stem| {
+        !stem.is_empty()
+            && stem
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+    })
 }
 
 impl Drop for RemoteRun {
@@ -250,6 +292,7 @@ impl RemoteRun {
                 placement: self.placement.borrow().clone(),
                 sizing,
                 create: false,
+                clock_offsets_ns: clock_offsets_ns(&self.offsets),
             },
         )?;
         tracing::info!(
@@ -259,6 +302,55 @@ impl RemoteRun {
         );
         *self.bridge.borrow_mut() = Some(b);
         Ok(())
+    }
+
+    /// Brings the run's timing files of every host into `<run_dir>/timing/` (the remote agents'
+    /// `agent-<id>.json`, each bridge's link delays as `bridge-<host>.json`, this machine's
+    /// included), once the processes have stopped.
+    pub fn collect_timing(&self, run_dir: &Path) -> Result<(), String> {
+        if let Some(b) = self.bridge.borrow().as_ref() {
+            b.link_report()
+                .write(run_dir, &format!("bridge-{LAUNCHER}"))
+                .map_err(|e| e.to_string())?;
+        }
+        let dir = formation_config::node::timing::dir(run_dir);
+        for h in &self.hosts {
+            let req = Request::Report {
+                run_id: self.run_id.clone(),
+            };
+            let (reply, bytes) = self.cluster.request(h, &req, &[], session::REPLY_TIMEOUT)?;
+            if let Reply::Refused(why) = reply {
+                return Err(format!("host {h}: {why}"));
+            }
+            let report: proto::HostReport = serde_json::from_slice(&bytes)
+                .map_err(|e| format!("host {h}: a malformed report: {e}"))?;
+            for (name, text) in report.timing {
+                if !timing_file_name(&name) {
+                    return Err(format!("host {h}: refused a timing file named '{name}'"));
+                }
+                let p = dir.join(&name);
+                formation_config::node::files::write_atomic(&p, text.as_bytes())
+                    .map_err(|e| format!("{}: {e}", p.display()))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The clock of every host as the handshake estimated it (`summary.json` `timing.clocks`).
+    pub fn clocks_json(&self) -> serde_json::Value {
+        serde_json::Value::Array(
+            self.offsets
+                .iter()
+                .map(|(h, o)| {
+                    serde_json::json!({
+                        "host": h,
+                        "offset_us": o.offset_ns as f64 / 1e3,
+                        "rtt_us": o.rtt_ns as f64 / 1e3,
+                        "uncertainty_us": o.uncertainty_ns as f64 / 1e3,
+                    })
+                })
+                .collect(),
+        )
     }
 
     /// Whether agent i (0-based) runs on another host.
@@ -527,6 +619,16 @@ mod tests {
             placement(4, &hc, &["1@c".into(), "2@b".into()]).unwrap(),
             ["c", "b", "local", "local"]
         );
+    }
+
+    #[test]
+    fn a_host_may_send_only_plain_timing_file_names() {
+        assert!(timing_file_name("agent-4.json"));
+        assert!(timing_file_name("bridge-b.json"));
+        assert!(!timing_file_name("../x.json"));
+        assert!(!timing_file_name("a/b.json"));
+        assert!(!timing_file_name(".json"));
+        assert!(!timing_file_name("plant.toml"));
     }
 
     #[test]

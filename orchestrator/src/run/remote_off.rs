@@ -36,6 +36,7 @@ impl Remote {
         _: &str,
         _: bool,
         _: usize,
+        _: u32,
     ) -> Result<RemoteRun, String> {
         match self {}
     }
@@ -56,6 +57,14 @@ impl RemoteRun {
     }
     /// Unreachable.
     pub fn spawn(&self, _: usize, _: String, _: &ChildArgs) -> Result<RoleProcess, String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn collect_timing(&self, _: &Path) -> Result<(), String> {
+        match *self {}
+    }
+    /// Unreachable.
+    pub fn clocks_json(&self) -> serde_json::Value {
         match *self {}
     }
     /// Unreachable.

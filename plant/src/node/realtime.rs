@@ -9,13 +9,14 @@
 //! 3. apply them, integrate [t_k, t_{k+1}] and publish the step record. An agent whose command did
 //!    not arrive in time is flown on its fallback (`super::deadline`): its last command held for
 //!    `runtime.hold_s` (zero-order hold), then the failsafe of `crate::fallback`, until its
-//!    commands come in again; such a step counts as one deadline miss. Commands for a step already
-//!    integrated are dropped and counted as late.
+//!    commands come in again; such a step counts as one deadline miss. A command for a step already
+//!    integrated is counted as late; the newest late one of an agent is applied at the next step
+//!    that has no command of its own from it (`late_applied`), in place of the held command.
 //!
 //! The plant never waits for the recorder here: the step records buffer is sized for a second of
 //! steps instead.
 
-use super::deadline::{Decision, Silence};
+use super::deadline::{Arrival, Decision, Silence};
 use super::ports::Ports;
 use crate::Plant;
 use formation_config::node::boot::Boot;
@@ -38,6 +39,7 @@ struct Meters {
     jitter: NsHistogram,
     misses: u64,
     late: u64,
+    late_applied: u64,
     timed_steps: u64,
 }
 
@@ -48,6 +50,8 @@ struct Loop<'a> {
     plant: Plant,
     n: usize,
     commands: Vec<Option<ControlCommand>>,
+    /// Per agent, the newest command that came after its step's deadline and is not applied yet.
+    late: Vec<Option<ControlCommand>>,
     silence: Silence,
     entries: Vec<StepEntry>,
     faults: Vec<FaultInjection>,
@@ -80,6 +84,7 @@ pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), NodeError> {
         plant,
         n,
         commands: vec![None; n],
+        late: vec![None; n],
         silence: Silence::new(n),
         entries: vec![StepEntry::default(); n],
         // The scenario's fault events go the way of the live injections, as in lockstep.
@@ -92,6 +97,7 @@ pub fn run(b: &Boot, ports: &Ports, plant: Plant) -> Result<(), NodeError> {
             jitter: NsHistogram::new(),
             misses: 0,
             late: 0,
+            late_applied: 0,
             timed_steps: 0,
         },
     };
@@ -221,6 +227,9 @@ impl Loop<'_> {
                 }
                 if c.step < self.k || self.commands[i].is_some() {
                     self.m.late += 1;
+                    if c.step < self.k && self.late[i].is_none_or(|l| l.step < c.step) {
+                        self.late[i] = Some(*c);
+                    }
                     continue;
                 }
                 if c.sent_ns != 0 {
@@ -261,9 +270,18 @@ impl Loop<'_> {
             }
         });
         for i in 0..self.n {
-            let arrived = self.commands[i].take();
-            let cmd = match (self.silence.decide(i, arrived.is_some()), arrived) {
-                (Decision::Command, Some(mut c)) => {
+            let on_time = self.commands[i].take();
+            let late = self.late[i].take();
+            let arrival = match (&on_time, &late) {
+                (Some(_), _) => Arrival::OnTime,
+                (None, Some(_)) => Arrival::Late,
+                (None, None) => Arrival::Nothing,
+            };
+            let cmd = match (self.silence.decide(i, arrival), on_time.or(late)) {
+                (Decision::Command | Decision::Late, Some(mut c)) => {
+                    if arrival == Arrival::Late {
+                        self.m.late_applied += 1;
+                    }
                     c.step = k;
                     self.plant.apply(i, &c);
                     c
@@ -272,7 +290,9 @@ impl Loop<'_> {
                     self.plant
                         .apply_fallback(i, since_steps, &self.b.scenario.runtime)
                 }
-                (Decision::Command, None) => unreachable!("a command decision has its command"),
+                (Decision::Command | Decision::Late, None) => {
+                    unreachable!("a command decision has its command")
+                }
             };
             self.entries[i] = StepEntry {
                 truth: self.plant.truth(i),
@@ -300,6 +320,8 @@ impl Loop<'_> {
         r.histograms.insert("jitter".into(), self.m.jitter.clone());
         r.counters.insert("deadline_misses".into(), self.m.misses);
         r.counters.insert("late_commands".into(), self.m.late);
+        r.counters
+            .insert("late_commands_applied".into(), self.m.late_applied);
         r.counters.insert("timed_steps".into(), self.m.timed_steps);
         r.write(&self.b.args.run_dir, "plant")
     }
