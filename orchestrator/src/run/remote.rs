@@ -314,7 +314,7 @@ impl RemoteRun {
                 .map_err(|e| e.to_string())?;
         }
         let dir = formation_config::node::timing::dir(run_dir);
-        for h in &self.hosts {
+        for h in self.hosts.borrow().iter() {
             let req = Request::Report {
                 run_id: self.run_id.clone(),
             };
