@@ -162,6 +162,27 @@ impl ReferenceFrame {
         self.offset_vel[..n].copy_from_slice(&src.offset_vel[..n]);
         self.offset_acc[..n].copy_from_slice(&src.offset_acc[..n]);
     }
+
+    /// Copies the header of `src` and only the entries at `ids` (those below its `n_agents`) into
+    /// `self`; every other entry of `self` is left as it was. An agent reads only its own entry and
+    /// its neighbours': copying those keeps its per-step copy independent of N (the valid part of
+    /// a 128-agent frame is 9.2 kB, 128 agents copying it every step is 1.2 MB per step).
+    pub fn copy_entries_from(&mut self, src: &ReferenceFrame, ids: &[usize]) {
+        let n = (src.n_agents as usize).min(MAX_AGENTS);
+        self.step = src.step;
+        self.t = src.t;
+        self.n_agents = src.n_agents;
+        self._pad = src._pad;
+        self.target = src.target;
+        self.p_d = src.p_d;
+        self.v_d = src.v_d;
+        self.a_d = src.a_d;
+        for &i in ids.iter().filter(|&&i| i < n) {
+            self.offset[i] = src.offset[i];
+            self.offset_vel[i] = src.offset_vel[i];
+            self.offset_acc[i] = src.offset_acc[i];
+        }
+    }
 }
 
 impl Default for ReferenceFrame {
