@@ -16,6 +16,9 @@ use std::process::{Command, Stdio};
 /// steps/s on a 2-core machine; N = 100 at ~0.5-1 k). A slower machine just takes longer.
 const EXPECTED_AGENT_STEPS_PER_S: f64 = 50_000.0;
 
+/// The lockstep run's stall timeout (`--stall-timeout-ms`): a minute without a recorded step.
+const BENCH_STALL_TIMEOUT_MS: u64 = 60_000;
+
 /// Runs `formation run` with `n` agents for about `seconds` of steady state (plus the warm-up) in
 /// `scratch`, and returns its row. `n = 5` runs the paper scenario; other `n` a generated path
 /// scenario (`formation scenario --n N`).
@@ -43,6 +46,10 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
         .arg(&out)
         .arg("--set")
         .arg(format!("simulation.duration_s={duration_s}"))
+        // A benchmark on a loaded machine is slow, not hung: the run's stall detector (2 s
+        // without a recorded step by default) stopped N = 100 runs at load average 30-50.
+        .arg("--stall-timeout-ms")
+        .arg(BENCH_STALL_TIMEOUT_MS.to_string())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped());
@@ -361,9 +368,25 @@ mod tests {
             ..fan(1, 30.0)
         };
         let rounds = vec![
-            vec![ping.clone(), fan(20, 200.0), lock(20, 260.0), fan(100, 900.0), lock(100, 1800.0)],
-            vec![fan(20, 400.0), lock(20, 480.0), fan(100, 1000.0), lock(100, 1100.0)],
-            vec![fan(20, 200.0), lock(20, 220.0), fan(100, 800.0), lock(100, 1200.0)],
+            vec![
+                ping.clone(),
+                fan(20, 200.0),
+                lock(20, 260.0),
+                fan(100, 900.0),
+                lock(100, 1800.0),
+            ],
+            vec![
+                fan(20, 400.0),
+                lock(20, 480.0),
+                fan(100, 1000.0),
+                lock(100, 1100.0),
+            ],
+            vec![
+                fan(20, 200.0),
+                lock(20, 220.0),
+                fan(100, 800.0),
+                lock(100, 1200.0),
+            ],
         ];
         let c = across_rounds_per_n(&rounds);
         let got: Vec<(usize, f64, Vec<f64>)> =
