@@ -145,30 +145,15 @@ pub fn rk4(
 ) -> RigidState {
     let t0 = TimeTerms::at(spec, t);
     let t1 = TimeTerms::at(spec, t + h);
-    rk4_with(body, spec, x, u, t, h, &t0, &t1)
+    let f_p0 = uncertainty(&spec.uncertainty, &x.p, &x.v);
+    rk4_with(body, spec, x, u, t, h, &t0, &t1, &f_p0)
 }
 
 /// RK4 with the time-only terms at the ends of the step given (the plant reuses the end of one step
-/// as the start of the next).
+/// as the start of the next), and F_iP (61) at the start state (the plant computes it once for the
+/// step's truth and the first stage).
 #[allow(clippy::too_many_arguments)]
 pub fn rk4_with(
-    body: &Body,
-    spec: &AgentSpec,
-    x: &RigidState,
-    u: &HeldInput,
-    t: f64,
-    h: f64,
-    t0: &TimeTerms,
-    t1: &TimeTerms,
-) -> RigidState {
-    let f_p0 = uncertainty(&spec.uncertainty, &x.p, &x.v);
-    rk4_given(body, spec, x, u, t, h, t0, t1, &f_p0)
-}
-
-/// [`rk4_with`] with F_iP at the start state given as well (the plant computes it once for the
-/// step's truth and its first stage).
-#[allow(clippy::too_many_arguments)]
-pub fn rk4_given(
     body: &Body,
     spec: &AgentSpec,
     x: &RigidState,

@@ -1,6 +1,6 @@
 //! N quadrotors stepped together: the plant of a run.
 
-use crate::dynamics::{rk4_given, Body, HeldInput, RigidState, TimeTerms};
+use crate::dynamics::{rk4_with, Body, HeldInput, RigidState, TimeTerms};
 use crate::fallback::{Airframe, Failsafe, Target};
 use crate::faults::{actuate, FaultModel};
 use crate::perturbations::uncertainty;
@@ -303,7 +303,7 @@ impl Plant {
         }
         let terms_next = TimeTerms::at(&veh.spec, t_next);
         veh.p_step = veh.state.p;
-        veh.state = rk4_given(
+        veh.state = rk4_with(
             &self.body,
             &veh.spec,
             &veh.state,
