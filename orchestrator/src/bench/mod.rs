@@ -145,8 +145,7 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<Vec<PlanInput>, String> 
             cpus: cpus.clone(),
             allowed: allowed.to_vec(),
             lockstep: !a.no_lockstep
-                && n >= 2
-                && n <= formation_config::MAX_AGENTS
+                && (2..=formation_config::MAX_AGENTS).contains(&n)
                 && (only.is_empty() || only.contains(&Transport::IoxEvent)),
             only: only.clone(),
         })
