@@ -107,9 +107,20 @@ pub fn derivative_with(
     tt: &TimeTerms,
 ) -> RigidState {
     let f_p = uncertainty(&spec.uncertainty, &x.p, &x.v);
+    derivative_given(body, x, u, tt, &f_p)
+}
+
+/// Time derivative with the time-only terms and the position uncertainty F_iP(x) (eq. (61)) given.
+pub fn derivative_given(
+    body: &Body,
+    x: &RigidState,
+    u: &HeldInput,
+    tt: &TimeTerms,
+    f_p: &Vector3<f64>,
+) -> RigidState {
     let trig = AttitudeTrig::of(&x.a);
     let acc =
-        trig.thrust_axis() * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + f_p;
+        trig.thrust_axis() * (u.thrust / body.mass) - Vector3::new(0.0, 0.0, body.gravity) + *f_p;
     let w = &x.w;
     let a_dot = trig.euler_rates(w);
     let w_dot = tt.model * rotational_drift(&body.inertia, &body.drag, w)
@@ -134,11 +145,13 @@ pub fn rk4(
 ) -> RigidState {
     let t0 = TimeTerms::at(spec, t);
     let t1 = TimeTerms::at(spec, t + h);
-    rk4_with(body, spec, x, u, t, h, &t0, &t1)
+    let f_p0 = uncertainty(&spec.uncertainty, &x.p, &x.v);
+    rk4_with(body, spec, x, u, t, h, &t0, &t1, &f_p0)
 }
 
 /// RK4 with the time-only terms at the ends of the step given (the plant reuses the end of one step
-/// as the start of the next).
+/// as the start of the next), and F_iP (61) at the start state (the plant computes it once for the
+/// step's truth and the first stage).
 #[allow(clippy::too_many_arguments)]
 pub fn rk4_with(
     body: &Body,
@@ -149,9 +162,10 @@ pub fn rk4_with(
     h: f64,
     t0: &TimeTerms,
     t1: &TimeTerms,
+    f_p0: &Vector3<f64>,
 ) -> RigidState {
     let tm = TimeTerms::at(spec, t + 0.5 * h);
-    let k1 = derivative_with(body, spec, x, u, t0);
+    let k1 = derivative_given(body, x, u, t0, f_p0);
     let k2 = derivative_with(body, spec, &x.axpy(0.5 * h, &k1), u, &tm);
     let k3 = derivative_with(body, spec, &x.axpy(0.5 * h, &k2), u, &tm);
     let k4 = derivative_with(body, spec, &x.axpy(h, &k3), u, t1);

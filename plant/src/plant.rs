@@ -3,7 +3,7 @@
 use crate::dynamics::{rk4_with, Body, HeldInput, RigidState, TimeTerms};
 use crate::fallback::{Airframe, Failsafe, Target};
 use crate::faults::{actuate, FaultModel};
-use crate::perturbations::{disturbance, uncertainty};
+use crate::perturbations::uncertainty;
 use formation_config::protocol::wire::{
     ControlCommand, FaultInjection, PlantTruth, ReferenceFrame, VehicleState,
 };
@@ -23,6 +23,8 @@ struct Vehicle {
     delta: Vector3<f64>,
     /// Time-only terms of eq. (2) at the start of the current step (the end of the previous one).
     terms_now: TimeTerms,
+    /// F_iP (61) of `state`: the step's truth and the first RK4 stage both need it.
+    f_p_now: Vector3<f64>,
     /// The last command its controller sent (held by the fallback while the controller is down).
     last_command: ControlCommand,
     /// True once [`Plant::advance_vehicle`] has integrated this quadrotor over the current step:
@@ -69,15 +71,17 @@ impl Plant {
             .map(|a| {
                 let faults = FaultModel::new(&a.fault);
                 let (gamma, delta) = faults.at(0, 0.0);
+                let state = RigidState {
+                    p: Vector3::from(a.initial_position_m),
+                    v: Vector3::zeros(),
+                    a: Vector3::from(a.initial_attitude_rad),
+                    w: Vector3::zeros(),
+                };
                 Vehicle {
                     spec: a.clone(),
                     faults,
-                    state: RigidState {
-                        p: Vector3::from(a.initial_position_m),
-                        v: Vector3::zeros(),
-                        a: Vector3::from(a.initial_attitude_rad),
-                        w: Vector3::zeros(),
-                    },
+                    f_p_now: uncertainty(&a.uncertainty, &state.p, &state.v),
+                    state,
                     input: HeldInput {
                         thrust: body.mass * body.gravity,
                         torque: Vector3::zeros(),
@@ -272,15 +276,16 @@ impl Plant {
     /// What only the plant knows about quadrotor `i` at the current step (after [`Plant::apply`]).
     pub fn truth(&self, i: usize) -> PlantTruth {
         let veh = &self.vehicles[i];
-        let x = &veh.state;
         PlantTruth {
             state: self.vehicle_state(i),
             thrust_n: veh.input.thrust,
             torque_applied_nm: veh.input.torque.into(),
             gamma: veh.gamma.into(),
             delta: veh.delta.into(),
-            uncertainty: uncertainty(&veh.spec.uncertainty, &x.p, &x.v).into(),
-            disturbance: disturbance(&veh.spec.disturbance, self.time()).into(),
+            // F_iP of the state of step k, computed once per state (also RK4's first stage).
+            uncertainty: veh.f_p_now.into(),
+            // D_iA(t_k): the start-of-step term RK4 uses, `disturbance(spec, t_k)` computed once.
+            disturbance: veh.terms_now.disturbance.into(),
         }
     }
 
@@ -307,7 +312,9 @@ impl Plant {
             t_next - t,
             &veh.terms_now,
             &terms_next,
+            &veh.f_p_now,
         );
+        veh.f_p_now = uncertainty(&veh.spec.uncertainty, &veh.state.p, &veh.state.v);
         veh.terms_now = terms_next;
         veh.advanced = true;
     }

@@ -2,10 +2,10 @@
 //! held until the agent reaches that step: handing reference k to the agent only at step k keeps
 //! its delay histories exactly those of the in-process run.
 //!
-//! A ring of preallocated frames indexed by step, filled with only the valid part of each frame
-//! ([`ReferenceFrame::copy_valid_from`]): a whole frame is ~4.6 kB, and copying it into and out of
-//! a queue was the largest memory traffic of an agent process (`perf record`: `memmove` from
-//! `VecDeque::pop_front`, ~6 % of the agent's time).
+//! A ring of preallocated frames indexed by step, filled with only the entries the agent reads
+//! (its own and its neighbours', [`ReferenceFrame::copy_entries_from`]): a whole frame is ~9.3 kB,
+//! its valid part N x 72 B, and copying either into a queue made an agent's memory traffic grow
+//! with N (`perf record`: `memmove`, docs/runtime.md, "Cost of a step").
 
 use formation_config::node::error::NodeError;
 use formation_config::protocol::pacing::REFERENCE_BUFFER;
@@ -14,6 +14,9 @@ use formation_config::protocol::wire::ReferenceFrame;
 /// The held references, steps `next..=newest`, contiguous.
 pub struct EarlyReferences {
     slots: Vec<ReferenceFrame>,
+    /// The entries kept of each frame (the agent's own and its neighbours'); every valid one if
+    /// `None`.
+    ids: Option<Vec<usize>>,
     /// Next step to hand to the agent.
     next: u64,
     /// Newest step held.
@@ -27,10 +30,22 @@ impl Default for EarlyReferences {
 }
 
 impl EarlyReferences {
+    /// The ring of an agent that reads only the entries `ids` of each frame (its own and its
+    /// neighbours'): only those are copied, whatever N.
+    pub fn for_entries(ids: Vec<usize>) -> EarlyReferences {
+        EarlyReferences {
+            ids: Some(ids),
+            ..Self::default()
+        }
+    }
+}
+
+impl EarlyReferences {
     /// Room for `capacity` steps (allocated once here).
     pub fn with_capacity(capacity: usize) -> EarlyReferences {
         EarlyReferences {
             slots: vec![ReferenceFrame::default(); capacity.max(1)],
+            ids: None,
             next: 0,
             newest: None,
         }
@@ -52,7 +67,11 @@ impl EarlyReferences {
                 r.step, self.next
             )));
         }
-        self.slots[(r.step % cap) as usize].copy_valid_from(r);
+        let slot = &mut self.slots[(r.step % cap) as usize];
+        match &self.ids {
+            Some(ids) => slot.copy_entries_from(r, ids),
+            None => slot.copy_valid_from(r),
+        }
         self.newest = Some(r.step);
         Ok(())
     }
@@ -106,6 +125,32 @@ mod tests {
         seen.clear();
         q.take_due(9, |r| seen.push(*r));
         assert_eq!(seen, [frame(2), frame(3), frame(4), frame(5)]);
+    }
+
+    #[test]
+    fn a_ring_for_some_entries_hands_over_the_header_and_exactly_those_entries() {
+        let mut q = EarlyReferences::for_entries(vec![1, 3, 200]);
+        let mut r = frame(0);
+        r.n_agents = 4;
+        for j in 0..4 {
+            r.offset[j] = [j as f64; 3];
+            r.offset_vel[j] = [10.0 + j as f64; 3];
+            r.offset_acc[j] = [20.0 + j as f64; 3];
+        }
+        q.push(&r).unwrap();
+        let mut seen = Vec::new();
+        q.take_due(0, |h| seen.push(*h));
+        let h = &seen[0];
+        assert_eq!((h.step, h.t, h.n_agents, h.p_d), (r.step, r.t, 4, r.p_d));
+        for j in [1, 3] {
+            assert_eq!(
+                (h.offset[j], h.offset_vel[j], h.offset_acc[j]),
+                (r.offset[j], r.offset_vel[j], r.offset_acc[j])
+            );
+        }
+        for j in [0, 2] {
+            assert_eq!(h.offset[j], [0.0; 3], "entry {j} is not copied");
+        }
     }
 
     #[test]

@@ -49,7 +49,11 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     }
     let mut local_reference = formation_config::protocol::wire::ReferenceFrame::default();
     let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);
-    let mut refs = early_references::EarlyReferences::default();
+    let mut refs = early_references::EarlyReferences::for_entries(
+        std::iter::once(i)
+            .chain(neighbours.iter().copied())
+            .collect(),
+    );
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut own: Option<VehicleState> = None;
     let mut observed = false;

@@ -11,6 +11,12 @@ use iceoryx2::prelude::*;
 use std::cell::{Cell, RefCell};
 use std::time::{Duration, Instant};
 
+/// How long the peers of a case get to exit after the stop message, at least.
+const EXIT_GRACE: Duration = Duration::from_secs(5);
+/// And per peer: on a loaded 2-vCPU machine 100 peers waking, closing their iceoryx2 nodes and
+/// exiting at once took more than 5 s (2026-12-02, load average 30).
+const EXIT_GRACE_PER_PEER: Duration = Duration::from_millis(200);
+
 /// Everything a case needs besides the case itself.
 pub struct Ctx<'a> {
     /// The run's iceoryx2 node (under the run prefix).
@@ -149,7 +155,7 @@ fn measure(
     let hist = link::run_plant(link, case.n, case.wait, ctx.budget, &alive)?;
     peers
         .into_inner()
-        .finish(Duration::from_secs(5))
+        .finish(EXIT_GRACE + EXIT_GRACE_PER_PEER * case.n as u32)
         .map_err(|e| format!("peers: {e}"))?;
     Ok(hist)
 }

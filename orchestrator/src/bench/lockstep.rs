@@ -11,9 +11,13 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-/// Expected pace used to size the run to the time budget, steps per wall-clock second (the paper
-/// scenario runs at ~10-12 k steps/s on a 2-core machine; a slower machine just takes longer).
-const EXPECTED_STEPS_PER_S: f64 = 10_000.0;
+/// Expected pace used to size the run to the time budget, agent-steps per wall-clock second: a
+/// step costs about the same per agent at any N (the paper scenario, N = 5, runs at ~10-15 k
+/// steps/s on a 2-core machine; N = 100 at ~0.5-1 k). A slower machine just takes longer.
+const EXPECTED_AGENT_STEPS_PER_S: f64 = 50_000.0;
+
+/// The lockstep run's stall timeout (`--stall-timeout-ms`): a minute without a recorded step.
+const BENCH_STALL_TIMEOUT_MS: u64 = 60_000;
 
 /// Runs `formation run` with `n` agents for about `seconds` of steady state (plus the warm-up) in
 /// `scratch`, and returns its row. `n = 5` runs the paper scenario; other `n` a generated path
@@ -36,12 +40,16 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
         cmd.arg(&path);
     }
     let dt = formation_config::Scenario::paper().simulation.dt_s;
-    let steps = WARMUP_STEPS as f64 + seconds * EXPECTED_STEPS_PER_S;
+    let steps = WARMUP_STEPS as f64 + seconds * EXPECTED_AGENT_STEPS_PER_S / n as f64;
     let duration_s = (steps * dt).ceil();
     cmd.arg("--out")
         .arg(&out)
         .arg("--set")
         .arg(format!("simulation.duration_s={duration_s}"))
+        // A benchmark on a loaded machine is slow, not hung: the run's stall detector (2 s
+        // without a recorded step by default) stopped N = 100 runs at load average 30-50.
+        .arg("--stall-timeout-ms")
+        .arg(BENCH_STALL_TIMEOUT_MS.to_string())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped());
@@ -86,6 +94,8 @@ fn row(n: usize, timing: &Value) -> Option<Row> {
 /// The lockstep row set against one bare fan-out row of the same run.
 #[derive(Debug, Clone, Serialize)]
 pub struct Comparison {
+    /// Agents N of both.
+    pub n: usize,
     /// Waiting strategy and placement of the fan-out case (`block`, `block/batch`, ...).
     pub fan_out_wait: String,
     /// Median lockstep step, µs.
@@ -143,6 +153,7 @@ pub fn comparisons(rows: &[Row]) -> Vec<Comparison> {
         .map(|f| {
             let ratio = round3(lock.p50_us / f.p50_us);
             Comparison {
+                n: lock.n,
                 fan_out_wait: f.wait.clone(),
                 lockstep_p50_us: lock.p50_us,
                 fan_out_p50_us: f.p50_us,
@@ -193,6 +204,7 @@ pub fn across_rounds(rounds: &[Vec<Row>]) -> Vec<Comparison> {
             let ratios: Vec<f64> = of.iter().map(|c| c.ratio_p50).collect();
             let ratio = m(|c| c.ratio_p50);
             Comparison {
+                n: of.first().map_or(0, |c| c.n),
                 fan_out_wait: wait,
                 lockstep_p50_us: m(|c| c.lockstep_p50_us),
                 fan_out_p50_us: m(|c| c.fan_out_p50_us),
@@ -210,6 +222,27 @@ pub fn across_rounds(rounds: &[Vec<Row>]) -> Vec<Comparison> {
         .collect();
     out.sort_by(|a, b| a.fan_out_p50_us.total_cmp(&b.fan_out_p50_us));
     out
+}
+
+/// [`across_rounds`] for each N of the rounds' lockstep rows, in the order of their first
+/// appearance: each round's rows of one N (its fan-outs and its lockstep run) compared within that
+/// round.
+pub fn across_rounds_per_n(rounds: &[Vec<Row>]) -> Vec<Comparison> {
+    let mut ns: Vec<usize> = Vec::new();
+    for r in rounds.iter().flatten() {
+        if r.pattern == "lockstep" && !ns.contains(&r.n) {
+            ns.push(r.n);
+        }
+    }
+    ns.into_iter()
+        .flat_map(|n| {
+            let of_n: Vec<Vec<Row>> = rounds
+                .iter()
+                .map(|r| r.iter().filter(|r| r.n == n).cloned().collect())
+                .collect();
+            across_rounds(&of_n)
+        })
+        .collect()
 }
 
 /// One row per case over several rounds: for each case (transport, pattern, wait, n, in the order
@@ -313,6 +346,56 @@ mod tests {
                 ("block", 50.0),
                 ("block/batch", 40.0),
                 ("block/pinned/batch", 60.0)
+            ]
+        );
+    }
+
+    #[test]
+    fn several_n_in_one_run_are_compared_each_with_its_own_fan_outs_round_by_round() {
+        let t = |p50: f64| {
+            json!({"step_us": {"mean": p50, "p50": p50, "p99": 1.0, "p999": 1.0,
+                               "max": 1.0, "samples": 5000}})
+        };
+        let lock = |n: usize, p50: f64| row(n, &t(p50)).unwrap();
+        let fan = |n: usize, p50: f64| Row {
+            pattern: "fan-out".into(),
+            wait: "block".into(),
+            ..lock(n, p50)
+        };
+        let ping = Row {
+            pattern: "ping-pong".into(),
+            n: 1,
+            ..fan(1, 30.0)
+        };
+        let rounds = vec![
+            vec![
+                ping.clone(),
+                fan(20, 200.0),
+                lock(20, 260.0),
+                fan(100, 900.0),
+                lock(100, 1800.0),
+            ],
+            vec![
+                fan(20, 400.0),
+                lock(20, 480.0),
+                fan(100, 1000.0),
+                lock(100, 1100.0),
+            ],
+            vec![
+                fan(20, 200.0),
+                lock(20, 220.0),
+                fan(100, 800.0),
+                lock(100, 1200.0),
+            ],
+        ];
+        let c = across_rounds_per_n(&rounds);
+        let got: Vec<(usize, f64, Vec<f64>)> =
+            c.iter().map(|c| (c.n, c.ratio, c.ratios.clone())).collect();
+        assert_eq!(
+            got,
+            [
+                (20, 1.2, vec![1.3, 1.2, 1.1]),
+                (100, 1.5, vec![2.0, 1.1, 1.5]),
             ]
         );
     }

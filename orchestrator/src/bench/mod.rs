@@ -42,9 +42,11 @@ pub const MAX_ROUNDS: usize = 20;
 /// Arguments of `formation bench`.
 #[derive(clap::Args, Debug)]
 pub struct BenchArgs {
-    /// Agent processes of the fan-out cases.
-    #[arg(long, default_value_t = 5, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
-    pub n: usize,
+    /// Agent processes of the fan-out cases (and of the lockstep run); a comma-separated list
+    /// (`--n 20,50,100,128`) measures every N in one run: each round runs the cases of every N in
+    /// turn, and the lockstep / fan-out ratio is given per N.
+    #[arg(long, default_value = "5", value_delimiter = ',', value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    pub n: Vec<usize>,
     /// Message size, bytes (16..=60000), both directions, every transport. Default: the sizes of
     /// the lockstep's per-step messages, the state sent to an agent (`VehicleState`) and the
     /// command it answers with (`ControlCommand`), so the fan-out is comparable with the lockstep
@@ -65,7 +67,9 @@ pub struct BenchArgs {
     #[arg(long)]
     pub transports: Option<String>,
     /// Skip the lockstep case (a real `formation run` in lockstep, timed per step and set against
-    /// the iceoryx2 event fan-out; it runs whenever iox2-event is measured and `--n` <= 64).
+    /// the iceoryx2 event fan-out; it runs for every N from 2 to MAX_AGENTS (128) whenever
+    /// iox2-event is measured: the paper scenario for N = 5, a generated path formation
+    /// otherwise).
     #[arg(long)]
     pub no_lockstep: bool,
     /// Run every case (and the lockstep) this many times, alternated: round 1 runs them all, then
@@ -87,9 +91,13 @@ fn parse_transports(s: &str) -> Result<Vec<Transport>, String> {
         .collect()
 }
 
-fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
-    if a.n == 0 || a.n > MAX_N {
-        return Err(format!("--n must be in 1..={MAX_N}, got {}", a.n));
+/// The plan input of each N of `--n`, in order (a repeated N counts once).
+fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<Vec<PlanInput>, String> {
+    if a.n.is_empty() {
+        return Err("--n needs at least one number".into());
+    }
+    if let Some(n) = a.n.iter().find(|&&n| n == 0 || n > MAX_N) {
+        return Err(format!("--n must be in 1..={MAX_N}, got {n}"));
     }
     if let Some(p) = a
         .payload
@@ -123,17 +131,45 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<PlanInput, String> {
         Some(s) => parse_transports(s)?,
         None => Vec::new(),
     };
-    Ok(PlanInput {
-        n: a.n,
-        spin: Duration::from_micros(a.spin_us),
-        cpus,
-        allowed: allowed.to_vec(),
-        lockstep: !a.no_lockstep
-            && a.n >= 2
-            && a.n <= formation_config::MAX_AGENTS
-            && (only.is_empty() || only.contains(&Transport::IoxEvent)),
-        only,
-    })
+    let mut ns: Vec<usize> = Vec::new();
+    for &n in &a.n {
+        if !ns.contains(&n) {
+            ns.push(n);
+        }
+    }
+    Ok(ns
+        .into_iter()
+        .map(|n| PlanInput {
+            n,
+            spin: Duration::from_micros(a.spin_us),
+            cpus: cpus.clone(),
+            allowed: allowed.to_vec(),
+            lockstep: !a.no_lockstep
+                && (2..=formation_config::MAX_AGENTS).contains(&n)
+                && (only.is_empty() || only.contains(&Transport::IoxEvent)),
+            only: only.clone(),
+        })
+        .collect())
+}
+
+/// The cases of every N in order and what is skipped; the ping-pong cases (one peer, whatever N)
+/// run once, with the first N.
+fn plan_all(inputs: &[PlanInput]) -> (Vec<plan::Case>, Vec<(String, String)>) {
+    let mut cases = Vec::new();
+    let mut skipped = Vec::new();
+    for (k, input) in inputs.iter().enumerate() {
+        let (c, s) = plan::plan(input);
+        cases.extend(
+            c.into_iter()
+                .filter(|c| k == 0 || c.pattern != plan::Pattern::PingPong),
+        );
+        for s in s {
+            if !skipped.contains(&s) {
+                skipped.push(s);
+            }
+        }
+    }
+    (cases, skipped)
 }
 
 /// A prefix unique to this run: process id plus clock.
@@ -149,14 +185,14 @@ fn unique_prefix() -> String {
 /// when interrupted.
 pub fn main(args: BenchArgs) -> ExitCode {
     let allowed = procs::allowed_cpus();
-    let input = match validate(&args, &allowed) {
+    let inputs = match validate(&args, &allowed) {
         Ok(i) => i,
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let (cases, skipped) = plan::plan(&input);
+    let (cases, skipped) = plan_all(&inputs);
     let sizes = args
         .payload
         .map_or_else(Sizes::lockstep_wire, |p| Sizes { down: p, up: p });
@@ -204,7 +240,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
             &ctx,
             &cases,
             (round - 1) * cases.len(),
-            &input,
+            &inputs,
             &args,
             &mut rows,
         );
@@ -220,7 +256,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         return ExitCode::from(130);
     }
     let rows = lockstep::median_rows(&rounds);
-    let comparisons = lockstep::across_rounds(&rounds);
+    let comparisons = lockstep::across_rounds_per_n(&rounds);
     if args.json {
         println!("{}", report::json(&rows, &comparisons, rounds.len()));
     } else {
@@ -236,19 +272,43 @@ pub fn main(args: BenchArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// One round: every case, then the lockstep run if planned. Appends the rows to `rows` and returns
-/// the number of failed cases. Case numbers (which name services and sockets) start at `first`, so
-/// that no round reuses a name of an earlier one.
+/// One round: for each N in turn, its cases, then its lockstep run if planned. Appends the rows to
+/// `rows` and returns the number of failed cases. Case numbers (which name services and sockets)
+/// start at `first`, so that no round reuses a name of an earlier one.
 fn run_round(
     ctx: &case::Ctx,
     cases: &[plan::Case],
     first: usize,
-    input: &PlanInput,
+    inputs: &[PlanInput],
     args: &BenchArgs,
     rows: &mut Vec<report::Row>,
 ) -> usize {
     let mut failures = 0;
-    for (idx, c) in cases.iter().enumerate() {
+    for (k, input) in inputs.iter().enumerate() {
+        // The ping-pong cases (n = 1) run with the first N.
+        let of_n = |c: &plan::Case| match c.pattern {
+            plan::Pattern::PingPong => k == 0,
+            plan::Pattern::FanOut => c.n == input.n,
+        };
+        let mine: Vec<(usize, &plan::Case)> =
+            cases.iter().enumerate().filter(|(_, c)| of_n(c)).collect();
+        failures += run_cases(ctx, &mine, first, rows);
+        if input.lockstep && !procs::aborted() {
+            failures += run_lockstep(input.n, args.seconds, rows);
+        }
+    }
+    failures
+}
+
+/// Runs `cases` (with their index in the round's list); returns the number that failed.
+fn run_cases(
+    ctx: &case::Ctx,
+    cases: &[(usize, &plan::Case)],
+    first: usize,
+    rows: &mut Vec<report::Row>,
+) -> usize {
+    let mut failures = 0;
+    for &(idx, c) in cases {
         if procs::aborted() {
             break;
         }
@@ -279,26 +339,33 @@ fn run_round(
             }
         }
     }
-    if input.lockstep && !procs::aborted() {
-        let what = format!("lockstep (formation run) n={}", args.n);
-        let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
-        match lockstep::run(args.n, args.seconds, &scratch) {
-            Ok(row) => {
-                eprintln!(
-                    "  {what}: mean {:.1} µs per step ({} steps)",
-                    row.mean_us, row.samples
-                );
-                rows.push(row);
-            }
-            Err(e) if procs::aborted() => eprintln!("  {what}: interrupted ({e})"),
-            Err(e) => {
-                eprintln!("  {what}: FAILED: {e}");
-                failures += 1;
-            }
-        }
-        let _ = std::fs::remove_dir_all(&scratch);
-    }
     failures
+}
+
+/// Runs the lockstep case with `n` agents; returns 1 if it failed.
+fn run_lockstep(n: usize, seconds: f64, rows: &mut Vec<report::Row>) -> usize {
+    let what = format!("lockstep (formation run) n={n}");
+    let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
+    let failed = match lockstep::run(n, seconds, &scratch) {
+        Ok(row) => {
+            eprintln!(
+                "  {what}: p50 {:.1} µs, mean {:.1} µs per step ({} steps)",
+                row.p50_us, row.mean_us, row.samples
+            );
+            rows.push(row);
+            0
+        }
+        Err(e) if procs::aborted() => {
+            eprintln!("  {what}: interrupted ({e})");
+            0
+        }
+        Err(e) => {
+            eprintln!("  {what}: FAILED: {e}");
+            1
+        }
+    };
+    let _ = std::fs::remove_dir_all(&scratch);
+    failed
 }
 
 #[cfg(test)]

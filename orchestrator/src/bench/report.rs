@@ -58,15 +58,34 @@ impl Row {
     }
 }
 
+/// The comparison with the fastest blocking fan-out of each N (`all` holds, per N in order, the
+/// comparisons fastest first).
+fn fastest_per_n(all: &[super::lockstep::Comparison]) -> Vec<&super::lockstep::Comparison> {
+    let mut out: Vec<&super::lockstep::Comparison> = Vec::new();
+    for c in all {
+        if !out.iter().any(|o| o.n == c.n) {
+            out.push(c);
+        }
+    }
+    out
+}
+
 /// `{"results": [...]}`, plus, when both were measured, `lockstep_vs_fan_out` (against the
-/// fastest blocking fan-out) and `lockstep_vs_fan_out_cases` (against each).
+/// fastest blocking fan-out, of the first N), `lockstep_vs_fan_out_by_n` (the same for every N)
+/// and `lockstep_vs_fan_out_cases` (against each fan-out of each N).
 pub fn json(rows: &[Row], all: &[super::lockstep::Comparison], rounds: usize) -> String {
     let mut v = serde_json::json!({ "results": rows, "rounds": rounds });
     if let Some(fastest) = all.first() {
         v["lockstep_vs_fan_out"] = serde_json::json!(fastest);
+        v["lockstep_vs_fan_out_by_n"] = serde_json::json!(fastest_per_n(all));
         v["lockstep_vs_fan_out_cases"] = serde_json::json!(all);
     }
     v.to_string()
+}
+
+/// Real-time factor of a lockstep step of `step_us` at the paper's time step.
+fn realtime_factor(step_us: f64) -> f64 {
+    1e6 * formation_config::Scenario::paper().simulation.dt_s / step_us
 }
 
 /// A fixed-width table, with a note on what a sample is.
@@ -128,14 +147,16 @@ pub fn table(
         ));
     }
     for (k, c) in all.iter().enumerate() {
-        let what = if k == 0 { "fastest bare" } else { "bare" };
+        let fastest = k == 0 || all[k - 1].n != c.n;
+        let what = if fastest { "fastest bare" } else { "bare" };
         if c.rounds > 1 {
             // Over rounds the ratio is the median of the ratios taken within each round, not the
             // quotient of the two median steps shown.
             s.push_str(&format!(
-                "lockstep step / {what} iox2-event fan-out ({}, same n and message sizes), over {} \
-                 rounds: median steps {:.1} / {:.1} µs; ratio of the medians within a round: \
-                 {:.2}x (median; range {:.2}-{:.2}x), of the means: {:.2}x\n",
+                "n={}: lockstep step / {what} iox2-event fan-out ({}, same n and message sizes), \
+                 over {} rounds: median steps {:.1} / {:.1} µs; ratio of the medians within a \
+                 round: {:.2}x (median; range {:.2}-{:.2}x), of the means: {:.2}x\n",
+                c.n,
                 c.fan_out_wait,
                 c.rounds,
                 c.lockstep_p50_us,
@@ -148,8 +169,9 @@ pub fn table(
             continue;
         }
         s.push_str(&format!(
-            "lockstep step / {what} iox2-event fan-out ({}, same n and message sizes): medians \
-             {:.1} / {:.1} µs = {:.2}x, means {:.1} / {:.1} µs = {:.2}x\n",
+            "n={}: lockstep step / {what} iox2-event fan-out ({}, same n and message sizes): \
+             medians {:.1} / {:.1} µs = {:.2}x, means {:.1} / {:.1} µs = {:.2}x\n",
+            c.n,
             c.fan_out_wait,
             c.lockstep_p50_us,
             c.fan_out_p50_us,
@@ -158,6 +180,31 @@ pub fn table(
             c.fan_out_mean_us,
             c.ratio_mean
         ));
+    }
+    let fastest = fastest_per_n(all);
+    if !fastest.is_empty() {
+        s.push_str(&format!(
+            "\n{:>4} {:>14} {:>14} {:<20} {:>7} {:>13} {:>10}\n",
+            "n", "lockstep µs", "fan-out µs", "(fastest fan-out)", "ratio", "range", "real time"
+        ));
+        for c in fastest {
+            s.push_str(&format!(
+                "{:>4} {:>14.1} {:>14.1} {:<20} {:>6.2}x {:>5.2}-{:<5.2}x {:>9.2}x\n",
+                c.n,
+                c.lockstep_p50_us,
+                c.fan_out_p50_us,
+                c.fan_out_wait,
+                c.ratio_p50,
+                c.ratio_min,
+                c.ratio_max,
+                realtime_factor(c.lockstep_p50_us)
+            ));
+        }
+        s.push_str(
+            "per n: median steps over the rounds, ratio = median of the ratios taken within each \
+             round (range over the rounds), real time = simulated / wall time of a lockstep step \
+             (1 ms steps).\n",
+        );
     }
     for (what, why) in skipped {
         s.push_str(&format!("skipped {what}: {why}\n"));
