@@ -82,6 +82,16 @@ impl Blend {
         })
     }
 
+    /// The generator of a member that is already flying, at position `p` and velocity `v` at time
+    /// `t` (s), with slot `s` then: as [`Blend::new`], but its acceleration limit is a_S from the
+    /// start (no rise at j_S): a controller that comes back, or a neighbour's generator it resumes
+    /// (docs/failures.md, bumpless re-entry). `None` when the member is exactly on its slot.
+    pub fn resumed(p: [f64; 3], v: [f64; 3], t: f64, s: &Slot, g: BlendGains) -> Option<Blend> {
+        let mut b = Blend::new(p, v, t, s, g)?;
+        b.t0 = f64::NEG_INFINITY;
+        Some(b)
+    }
+
     /// Advances the reference to time `t` (s, not before the last update) with the member's slot `s`
     /// at `t`, and returns the offset e, e', e'' to add to it; `None` once the generator is over.
     pub fn advance(&mut self, t: f64, s: &Slot) -> Option<Slot> {
@@ -221,5 +231,53 @@ mod tests {
         assert!(b.offset().is_some());
         b.out = None;
         assert_eq!(b.advance(1.0, &s), None);
+    }
+
+    /// A member resumed while flying (a controller back from its failsafe, 0.3 m off a slot that
+    /// circles at 0.8 rad/s and 0.5 m/s off its velocity) gets a reference that turns with the slot
+    /// from the first step, within a_R, and brings it to the slot without growing the error; a
+    /// start-up generator would first fly straight (its limit rising from 0).
+    #[test]
+    fn a_resumed_generator_turns_with_its_slot_at_once_and_reaches_it_within_the_limit() {
+        let slot = |t: f64| -> Slot {
+            let (s, c) = (0.8 * t).sin_cos();
+            [
+                [c, s, 5.0],
+                [-0.8 * s, 0.8 * c, 0.0],
+                [-0.64 * c, -0.64 * s, 0.0],
+            ]
+        };
+        let g = BlendGains {
+            accel: 2.0,
+            jerk: f64::INFINITY,
+            rate: 1.0,
+        };
+        let (p, v) = ([1.3, 0.0, 5.0], [0.0, 0.3, 0.0]);
+        let dt = 1e-3;
+        let mut b = Blend::resumed(p, v, 0.0, &slot(0.0), g).unwrap();
+        let first = b.advance(dt, &slot(dt)).unwrap();
+        let a: [f64; 3] = std::array::from_fn(|k| slot(dt)[2][k] + first[2][k]);
+        assert!(norm(a) > 0.5 && norm(a) <= g.accel * (1.0 + 1e-9), "{a:?}");
+        let mut fresh = Blend::new(p, v, 0.0, &slot(0.0), G).unwrap();
+        let e = fresh.advance(dt, &slot(dt)).unwrap();
+        let a0: [f64; 3] = std::array::from_fn(|k| slot(dt)[2][k] + e[2][k]);
+        assert!(norm(a0) <= G.jerk * dt * (1.0 + 1e-9), "start-up: {a0:?}");
+        let e0 = norm(sub(p, slot(0.0)[0]));
+        let mut peak: f64 = 0.0;
+        for i in 2..20_000 {
+            let t = i as f64 * dt;
+            match b.advance(t, &slot(t)) {
+                None => {
+                    assert!(peak <= e0 + 0.05, "peak offset {peak} m from {e0} m");
+                    return;
+                }
+                Some(e) => {
+                    let a: [f64; 3] = std::array::from_fn(|k| slot(t)[2][k] + e[2][k]);
+                    assert!(norm(a) <= g.accel * (1.0 + 1e-9), "t = {t}: {a:?}");
+                    peak = peak.max(norm(e[0]));
+                }
+            }
+        }
+        panic!("the resumed generator did not end within 20 s");
     }
 }
