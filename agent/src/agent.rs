@@ -43,6 +43,9 @@ pub struct Agent {
     /// Start-up blends (D19), index 0: this agent's, then one per neighbour; set at the first step.
     startup: Vec<Option<Blend>>,
     startup_set: bool,
+    /// Per member (as `startup`): the step it came back at whose re-entry generator is armed
+    /// (`runtime.rejoin_reference`; 0: none yet).
+    rearmed: Vec<u64>,
 }
 
 /// The share an agent sends its neighbours for its state `s`.
@@ -97,6 +100,7 @@ impl Agent {
             timeline: Timeline::default(),
             startup: vec![None; n_nb + 1],
             startup_set: false,
+            rearmed: vec![0; n_nb + 1],
             p,
         }
     }
@@ -316,6 +320,7 @@ impl Agent {
             &self.attitude,
             &self.startup,
             self.startup_set,
+            &self.rearmed,
         ))
     }
 
@@ -333,11 +338,13 @@ impl Agent {
             AttitudeLoop,
             Vec<Option<Blend>>,
             bool,
+            Vec<u64>,
         );
-        let (id, own, neighbours, leader, offsets, nn, filter, attitude, startup, set): State =
+        let (id, own, neighbours, leader, offsets, nn, filter, attitude, startup, set, rearmed): State =
             crate::checkpoint::decode(bytes)?;
         if id != self.p.id as u64
             || neighbours.len() != self.neighbours.len()
+            || rearmed.len() != self.rearmed.len()
             || offsets.len() != self.offsets.len()
             || own.capacity() != self.own.capacity()
         {
@@ -358,6 +365,7 @@ impl Agent {
         self.attitude = attitude;
         self.startup = startup;
         self.startup_set = set;
+        self.rearmed = rearmed;
         Ok(())
     }
 
@@ -388,33 +396,55 @@ impl Agent {
         let leader = self.leader.at_or_before(kd).unwrap_or_default();
         let t_kd = kd as f64 * self.p.dt;
         // Start-up reference generators (D19): every member's from its first shared state, the same
-        // on all agents, advanced on the delayed time axis with the member's delayed slot.
-        for (m, slot) in self.startup.iter_mut().enumerate() {
-            if self.startup_set && slot.is_none() {
+        // on all agents, advanced on the delayed time axis with the member's delayed slot. A member
+        // that came back from a down window gets a fresh one from its state then (re-entry,
+        // `runtime.rejoin_reference`): itself at its first step back, a neighbour at its first
+        // usable share from then on; and a controller that comes back resumes the generators of
+        // its neighbours still running (or, cold, unknown to it) from their states then: it did not
+        // advance them while it was down.
+        let mut self_back = false;
+        for m in 0..self.startup.len() {
+            let rejoin = self.p.rejoin_reference.and_then(|gains| {
+                let (j, seen) = match m {
+                    0 => (self.p.id, k),
+                    _ => (self.p.neighbours[m - 1].0, self.usable_step(m - 1, kd)?),
+                };
+                let back = self.timeline.latest_return(j, self.rearmed[m], seen)?;
+                Some((gains, back, seen))
+            });
+            let resume = self_back && (!self.startup_set || self.startup[m].is_some());
+            if rejoin.is_none() && !resume && self.startup_set && self.startup[m].is_none() {
                 continue; // off, or over: nothing to look up
             }
             let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
             let s = std::array::from_fn(|d| {
                 std::array::from_fn(|k| [leader.p, leader.v, leader.a][d][k] + o[d][k])
             });
-            if !self.startup_set {
-                let (p, v) = match m {
-                    0 => (p_d, v_d),
-                    _ => self.neighbours[m - 1]
-                        .at_or_before(kd)
-                        .unwrap_or((p_d, v_d)),
-                };
-                *slot = g.position.startup_blend_accel_m_s2.and_then(|a_s| {
-                    let gains = BlendGains {
-                        accel: a_s,
-                        jerk: g.position.startup_blend_jerk_m_s3,
-                        rate: g.position.startup_blend_rate_1_s,
-                    };
-                    Blend::new(p, v, t_kd, &s, gains)
-                });
-            } else if let Some(b) = slot {
+            let state_at = |m: usize, step: u64| match m {
+                0 => (p_d, v_d),
+                _ => self.neighbours[m - 1]
+                    .at_or_before(step)
+                    .unwrap_or((p_d, v_d)),
+            };
+            let startup = g.position.startup_blend_accel_m_s2.map(|a_s| BlendGains {
+                accel: a_s,
+                jerk: g.position.startup_blend_jerk_m_s3,
+                rate: g.position.startup_blend_rate_1_s,
+            });
+            if let Some((gains, back, seen)) = rejoin {
+                let (p, v) = state_at(m, seen);
+                self.rearmed[m] = back;
+                self_back |= m == 0;
+                self.startup[m] = Blend::resumed(p, v, t_kd, &s, gains);
+            } else if resume {
+                let (p, v) = state_at(m, kd);
+                self.startup[m] = startup.and_then(|g| Blend::resumed(p, v, t_kd, &s, g));
+            } else if !self.startup_set {
+                let (p, v) = state_at(m, kd);
+                self.startup[m] = startup.and_then(|g| Blend::new(p, v, t_kd, &s, g));
+            } else if let Some(b) = &mut self.startup[m] {
                 if b.advance(t_kd, &s).is_none() {
-                    *slot = None;
+                    self.startup[m] = None;
                 }
             }
         }

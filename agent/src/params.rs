@@ -1,5 +1,6 @@
 //! Parameters of one agent, taken from the scenario once at construction.
 
+use crate::startup::BlendGains;
 use formation_config::scenario::graph::Topology;
 use formation_config::scenario::{Controller, DelaySpec, Scenario};
 use formation_config::Variant;
@@ -47,6 +48,9 @@ pub struct AgentParams {
     /// A new or resumed controller re-synchronises its filters to the vehicle before its first
     /// command (`runtime.rejoin_resync`, [`crate::Agent::resync`]).
     pub rejoin_resync: bool,
+    /// The gains of the reference generator re-armed for a member that comes back
+    /// (`runtime.rejoin_reference`, docs/failures.md); `None`: off.
+    pub rejoin_reference: Option<BlendGains>,
 }
 
 impl AgentParams {
@@ -72,6 +76,11 @@ impl AgentParams {
             gains: s.controller.clone(),
             stale_steps: s.runtime.stale_steps(s.simulation.dt_s),
             rejoin_resync: s.runtime.rejoin_resync,
+            rejoin_reference: s.runtime.rejoin_reference.then_some(BlendGains {
+                accel: s.runtime.rejoin_reference_accel_m_s2,
+                jerk: f64::INFINITY, // unused: a re-armed generator starts with its limit up
+                rate: s.runtime.rejoin_reference_rate_1_s,
+            }),
         }
     }
 

@@ -82,6 +82,16 @@ impl Blend {
         })
     }
 
+    /// The generator of a member that is already flying, at position `p` and velocity `v` at time
+    /// `t` (s), with slot `s` then: as [`Blend::new`], but its acceleration limit is a_S from the
+    /// start (no rise at j_S): a controller that comes back, or a neighbour's generator it resumes
+    /// (docs/failures.md, bumpless re-entry). `None` when the member is exactly on its slot.
+    pub fn resumed(p: [f64; 3], v: [f64; 3], t: f64, s: &Slot, g: BlendGains) -> Option<Blend> {
+        let mut b = Blend::new(p, v, t, s, g)?;
+        b.t0 = f64::NEG_INFINITY;
+        Some(b)
+    }
+
     /// Advances the reference to time `t` (s, not before the last update) with the member's slot `s`
     /// at `t`, and returns the offset e, e', e'' to add to it; `None` once the generator is over.
     pub fn advance(&mut self, t: f64, s: &Slot) -> Option<Slot> {

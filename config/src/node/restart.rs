@@ -44,7 +44,7 @@ pub struct Checkpoint {
 /// The first bytes of every checkpoint file.
 pub const CHECKPOINT_MAGIC: [u8; 8] = *b"FMCKPT\r\n";
 /// The checkpoint file format [`write_checkpoint`] writes.
-pub const CHECKPOINT_VERSION: u32 = 1;
+pub const CHECKPOINT_VERSION: u32 = 2;
 /// Bytes before the state: magic, version, agent id, scenario hash, step, state length.
 const HEADER_LEN: usize = 8 + 4 + 4 + 8 + 8 + 8;
 

@@ -208,6 +208,19 @@ pub struct Runtime {
     /// the vehicle's current attitude and rate before its first command (adaptive estimates and
     /// RBFNN weights are kept). Default true.
     pub rejoin_resync: bool,
+    /// A controller that comes back re-arms the reference generator of D19 for its quadrotor, and
+    /// each of its neighbours for it: the reference starts at the quadrotor's state where the
+    /// failsafe left it and reaches its slot within `rejoin_reference_accel_m_s2`, so the
+    /// returning controller and its neighbours start from zero consensus errors instead of the
+    /// failsafe's tracking error (docs/failures.md, bumpless re-entry; docs/deviations.md D21).
+    /// Default false: measured better in some crash-time samples and worse in others.
+    pub rejoin_reference: bool,
+    /// a_R: largest acceleration of the re-armed reference, m/s² (the generator's a_S; its limit
+    /// is up at once: the quadrotor is flying). Default 1.0 (D19's a_S).
+    pub rejoin_reference_accel_m_s2: f64,
+    /// lambda_R: rate of its final approach to the slot (double pole at -2 lambda_R), 1/s.
+    /// Default 0.5 (D19's lambda_S).
+    pub rejoin_reference_rate_1_s: f64,
     /// Level-hover fallback: attitude gain (torque = -J (k_att A + k_rate omega)), 1/s². Default 16.
     pub fallback_attitude_gain: f64,
     /// Level-hover fallback: rate gain, 1/s. Default 8.
@@ -228,6 +241,9 @@ impl Default for Runtime {
             hold_s: 0.2,
             fallback: Fallback::Slot,
             rejoin_resync: true,
+            rejoin_reference: false,
+            rejoin_reference_accel_m_s2: 1.0,
+            rejoin_reference_rate_1_s: 0.5,
             fallback_attitude_gain: 16.0,
             fallback_rate_gain: 8.0,
             stale_after_s: 0.1,
@@ -457,6 +473,16 @@ impl Timeline {
             .find(|w| w.agent == agent && w.from <= k && k < w.to)
     }
 
+    /// The latest step in (`after`, `upto`] at which agent i came back from a down window (the
+    /// first step its new or resumed controller computes), if any.
+    pub fn latest_return(&self, agent: usize, after: u64, upto: u64) -> Option<u64> {
+        self.down
+            .iter()
+            .filter(|w| w.agent == agent && w.to > after && w.to <= upto && w.to > w.from)
+            .map(|w| w.to)
+            .max()
+    }
+
     /// Every down window, in the order they were added.
     pub fn down_windows(&self) -> &[DownWindow] {
         &self.down
@@ -563,5 +589,29 @@ mod tests {
         assert!(!t.up(1, 10_000));
         t.set_up_again(1, 800);
         assert!(!t.up(1, 799) && t.up(1, 800) && t.up(1, 499));
+    }
+
+    #[test]
+    fn the_latest_return_is_the_end_of_a_closed_down_window_inside_the_span() {
+        let mut c = ev(20.0, EventKind::Crash);
+        c.agent = Some(3);
+        c.down_s = Some(2.0);
+        let mut h = ev(40.0, EventKind::Hang);
+        h.agent = Some(3);
+        h.down_s = Some(0.5);
+        let mut t = Timeline::new(&[c, h], 0.001);
+        assert_eq!(t.latest_return(2, 0, 21_999), None, "still down");
+        assert_eq!(t.latest_return(2, 0, 22_000), Some(22_000));
+        assert_eq!(t.latest_return(2, 22_000, 40_499), None, "already seen");
+        assert_eq!(t.latest_return(2, 0, 50_000), Some(40_500), "the latest");
+        assert_eq!(t.latest_return(1, 0, 50_000), None, "only agent 3");
+        t.set_down(1, 500, EventKind::Crash);
+        assert_eq!(
+            t.latest_return(1, 0, 50_000),
+            None,
+            "an open window never returns"
+        );
+        t.set_up_again(1, 800);
+        assert_eq!(t.latest_return(1, 0, 50_000), Some(800));
     }
 }

@@ -982,6 +982,16 @@ fn check_runtime(s: &Scenario, c: &mut Collector) {
     );
     c.positive("runtime.fallback_rate_gain", r.fallback_rate_gain, RUNTIME);
     c.non_negative("runtime.stale_after_s", r.stale_after_s, RUNTIME);
+    c.positive(
+        "runtime.rejoin_reference_accel_m_s2",
+        r.rejoin_reference_accel_m_s2,
+        RUNTIME,
+    );
+    c.positive(
+        "runtime.rejoin_reference_rate_1_s",
+        r.rejoin_reference_rate_1_s,
+        RUNTIME,
+    );
 }
 
 /// Most events of a timeline (scenario and `--events FILE` together): every process asks the
