@@ -155,7 +155,7 @@ mod tests {
                 Decision::Fallback { since_steps } => {
                     applied.push(plant.apply_fallback(0, since_steps, &rt))
                 }
-                Decision::Command => unreachable!("no command came"),
+                Decision::Command | Decision::Late => unreachable!("no command came"),
             }
             plant.advance();
         }
