@@ -528,11 +528,10 @@ impl Bridge {
         let (out_tx, out_rx) = mpsc::channel::<Replan>();
         let mut threads = Vec::new();
         {
-            let (cfg, stop, stats, hosts, session, links) = (
+            let (cfg, stop, stats, session, links) = (
                 cfg.clone(),
                 stop.clone(),
                 stats.clone(),
-                hosts.clone(),
                 session.clone(),
                 links.clone(),
             );
@@ -540,7 +539,7 @@ impl Bridge {
             threads.push(
                 std::thread::Builder::new()
                     .name("bridge-in".into())
-                    .spawn(move || run_in(session, cfg, hosts, stop, stats, links, tx, in_rx))
+                    .spawn(move || run_in(session, cfg, stop, stats, links, tx, in_rx))
                     .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
             );
         }
@@ -598,13 +597,13 @@ impl Bridge {
 fn run_in(
     session: zenoh::Session,
     mut cfg: BridgeConfig,
-    hosts: Vec<String>,
     stop: Arc<AtomicBool>,
     stats: Arc<Stats>,
     links: Arc<Mutex<BTreeMap<String, LinkDelays>>>,
     ready: mpsc::Sender<Result<usize, String>>,
     replan: mpsc::Receiver<Replan>,
 ) {
+    let hosts = cfg.placement.hosts();
     let offset = |h: &str| cfg.clock_offsets_ns.get(h).copied().unwrap_or(0);
     let me_offset = offset(&cfg.me);
     // Per sending host: the shift of its stamps onto this clock, and the link's name.

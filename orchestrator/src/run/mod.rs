@@ -110,6 +110,17 @@ impl Mode {
     }
 }
 
+/// What every host of a run spread over hosts is told of its pacing.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HostPacing {
+    /// Wall-clock run (`--realtime`) rather than lockstep.
+    pub realtime: bool,
+    /// Outside observers the services make room for.
+    pub observers: usize,
+    /// `SCHED_FIFO` priority of the role processes (0: none).
+    pub rt_priority: u32,
+}
+
 /// How long the role processes get to exit by themselves before they are killed.
 const STOP_GRACE: Duration = Duration::from_millis(1000);
 
@@ -214,9 +225,11 @@ pub fn main(args: RunArgs) -> ExitCode {
                 &prefix,
                 &scenario,
                 variant.name(),
-                mode.realtime,
-                mode.observers,
-                mode.rt_priority,
+                HostPacing {
+                    realtime: mode.realtime,
+                    observers: mode.observers,
+                    rt_priority: mode.rt_priority,
+                },
             )
         })
         .transpose()

@@ -8,6 +8,7 @@
 //! daemons. Plant, leader and orchestrator always stay on the launching machine.
 
 use super::spawn::{RemoteProcess, RoleProcess};
+use super::HostPacing;
 use crate::hosts::LinkArgs;
 use formation_config::node::args::ChildArgs;
 use formation_config::node::restart;
@@ -165,9 +166,7 @@ impl Remote {
         prefix: &str,
         scenario: &Scenario,
         variant: &str,
-        realtime: bool,
-        observers: usize,
-        rt_priority: u32,
+        pacing: HostPacing,
     ) -> Result<RemoteRun, String> {
         self.cluster.announce(run_id)?;
         let req = RunRequest {
@@ -177,9 +176,9 @@ impl Remote {
             variant: variant.to_string(),
             agent_hosts: self.agent_hosts.clone(),
             launcher: LAUNCHER.to_string(),
-            realtime,
-            rt_priority,
-            observers,
+            realtime: pacing.realtime,
+            rt_priority: pacing.rt_priority,
+            observers: pacing.observers,
             identity: formation_net::identity::local(),
             clock_offsets_ns: clock_offsets_ns(&self.offsets),
         };

@@ -34,9 +34,7 @@ impl Remote {
         _: &str,
         _: &Scenario,
         _: &str,
-        _: bool,
-        _: usize,
-        _: u32,
+        _: super::HostPacing,
     ) -> Result<RemoteRun, String> {
         match self {}
     }
