@@ -685,14 +685,7 @@ impl Daemon {
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         // The agents write their files when they stop: give them the grace of an ending run.
-        let deadline = Instant::now() + STOP_GRACE;
-        while Instant::now() < deadline
-            && r.children
-                .values_mut()
-                .any(|c| matches!(c.try_wait(), Ok(None)))
-        {
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        wait_for_exit(&mut r.children, STOP_GRACE);
         if let Some(b) = &r.bridge {
             b.link_report()
                 .write(&r.dir, &format!("bridge-{me}"))
@@ -760,14 +753,7 @@ impl Daemon {
         let Some(mut r) = self.runs.remove(run_id) else {
             return;
         };
-        let deadline = Instant::now() + STOP_GRACE;
-        while Instant::now() < deadline
-            && r.children
-                .values_mut()
-                .any(|c| matches!(c.try_wait(), Ok(None)))
-        {
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        wait_for_exit(&mut r.children, STOP_GRACE);
         for c in r.children.values_mut() {
             let _ = c.kill();
             let _ = c.wait();
@@ -781,5 +767,17 @@ impl Daemon {
         eprintln!(
             "formation host: run {run_id} ended; {removed} iceoryx2 files and its folder removed"
         );
+    }
+}
+
+/// Gives `children` up to `grace` to exit by themselves (polled every 10 ms).
+fn wait_for_exit(children: &mut HashMap<usize, Child>, grace: Duration) {
+    let deadline = Instant::now() + grace;
+    while Instant::now() < deadline
+        && children
+            .values_mut()
+            .any(|c| matches!(c.try_wait(), Ok(None)))
+    {
+        std::thread::sleep(Duration::from_millis(10));
     }
 }

@@ -431,16 +431,7 @@ impl RemoteRun {
             .cluster
             .request(host, &req, &[], session::REPLY_TIMEOUT)?
         {
-            (Reply::Ok { .. }, bytes) => {
-                let p = restart::checkpoint_path(run_dir, agent);
-                if let Some(d) = p.parent() {
-                    std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
-                }
-                let tmp = p.with_extension("part");
-                std::fs::write(&tmp, &bytes)
-                    .and_then(|_| std::fs::rename(&tmp, &p))
-                    .map_err(|e| format!("{}: {e}", p.display()))
-            }
+            (Reply::Ok { .. }, bytes) => write_checkpoint(run_dir, agent, &bytes),
             (Reply::Refused(why), _) => Err(format!("host {host}: {why}")),
         }
     }
@@ -517,16 +508,20 @@ impl RemoteRun {
         let Some((step, bytes)) = self.cluster.checkpoint(agent, down_from, oldest) else {
             return Ok(None);
         };
-        let p = restart::checkpoint_path(run_dir, agent);
-        if let Some(d) = p.parent() {
-            std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
-        }
-        let tmp = p.with_extension("part");
-        std::fs::write(&tmp, &bytes)
-            .and_then(|_| std::fs::rename(&tmp, &p))
-            .map_err(|e| format!("{}: {e}", p.display()))?;
+        write_checkpoint(run_dir, agent, &bytes)?;
         Ok(Some(step))
     }
+}
+
+/// Puts a checkpoint that came from a host where agent `agent`'s successor reads it: whole, owner
+/// only, never through a symbolic link (`files::write_atomic`).
+fn write_checkpoint(run_dir: &Path, agent: usize, bytes: &[u8]) -> Result<(), String> {
+    let p = restart::checkpoint_path(run_dir, agent);
+    if let Some(d) = p.parent() {
+        std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
+    }
+    formation_config::node::files::write_atomic(&p, bytes)
+        .map_err(|e| format!("{}: {e}", p.display()))
 }
 
 /// An agent process on another host.
