@@ -287,7 +287,8 @@ pub fn connectivity(topology: &Topology, timeline: &Timeline, steps: u64, dt: f6
 }
 
 /// The marks of a run: the scenario's events, the runtime events (live crashes, hangs, links,
-/// losses), and the supervision's incidents, sorted by step.
+/// losses), and the supervision's incidents, sorted by step, then agent (two agents lost with one
+/// host are detected in whichever order the supervision polls them).
 pub fn marks(events: &[Event], runtime: &[RuntimeEvent], incidents: &[Mark], dt: f64) -> Vec<Mark> {
     let mut out: Vec<Mark> = events.iter().map(|e| Mark::of_event(e, dt)).collect();
     out.extend(
@@ -309,7 +310,7 @@ pub fn marks(events: &[Event], runtime: &[RuntimeEvent], incidents: &[Mark], dt:
             None => out.push(inc.clone()),
         }
     }
-    out.sort_by_key(|m| m.step);
+    out.sort_by_key(|m| (m.step, m.agent));
     out
 }
 
