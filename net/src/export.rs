@@ -25,7 +25,8 @@
 //! queue is replaced; the publishers never wait for this reader), the thread runs at background
 //! priority, and the Zenoh publishers use `CongestionControl::Drop`: a reader that is slow or far
 //! away loses samples, it never holds the lockstep back. Each sample carries its step, so a
-//! reader sees what it lost.
+//! reader sees what it lost. A key no reader subscribes to (Zenoh's matching status) is not put
+//! at all: without readers the export only drains its queues.
 
 use crate::session::{Mode, Options};
 use formation_config::node::error::PortError;
@@ -309,23 +310,61 @@ fn bytes_of<T: Message>(v: &T) -> &[u8] {
     unsafe { std::slice::from_raw_parts(v as *const T as *const u8, size_of::<T>()) }
 }
 
+/// A Zenoh publisher and whether any subscriber matches it now (kept by Zenoh's matching
+/// listener): without a reader nothing is copied or sent.
+struct Out {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    matching: Arc<AtomicBool>,
+}
+
+impl Out {
+    fn declare(s: &zenoh::Session, key: String, type_name: &str) -> Result<Out, String> {
+        let publisher = s
+            .declare_publisher(key)
+            .encoding(encoding(type_name))
+            .congestion_control(CongestionControl::Drop)
+            .wait()
+            .map_err(|e| format!("export: cannot declare a publisher: {e}"))?;
+        let matching = Arc::new(AtomicBool::new(false));
+        let flag = matching.clone();
+        publisher
+            .matching_listener()
+            .callback(move |m| flag.store(m.matching(), Ordering::Relaxed))
+            .background()
+            .wait()
+            .map_err(|e| format!("export: cannot watch for readers: {e}"))?;
+        Ok(Out {
+            publisher,
+            matching,
+        })
+    }
+
+    /// Whether a reader subscribes to it.
+    fn wanted(&self) -> bool {
+        self.matching.load(Ordering::Relaxed)
+    }
+
+    fn put(&self, bytes: &[u8], stats: &Stats) {
+        // Drop congestion control: a full link drops the sample here, it never waits.
+        if self.wanted() && self.publisher.put(bytes.to_vec()).wait().is_ok() {
+            stats.puts.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
 /// The Zenoh publishers of one run.
 struct Writers {
-    states: Vec<zenoh::pubsub::Publisher<'static>>,
-    steps: zenoh::pubsub::Publisher<'static>,
-    reference: zenoh::pubsub::Publisher<'static>,
-    events: zenoh::pubsub::Publisher<'static>,
-    telemetry: Vec<zenoh::pubsub::Publisher<'static>>,
+    states: Vec<Out>,
+    steps: Out,
+    reference: Out,
+    events: Out,
+    telemetry: Vec<Out>,
 }
 
 impl Writers {
     fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, String> {
         let p = |topic: &str, agent: Option<usize>, type_name: &str| {
-            s.declare_publisher(key(run_id, topic, agent))
-                .encoding(encoding(type_name))
-                .congestion_control(CongestionControl::Drop)
-                .wait()
-                .map_err(|e| format!("export: cannot declare a publisher: {e}"))
+            Out::declare(s, key(run_id, topic, agent), type_name)
         };
         Ok(Writers {
             states: (1..=n)
@@ -341,13 +380,6 @@ impl Writers {
     }
 }
 
-fn put(p: &zenoh::pubsub::Publisher<'static>, bytes: &[u8], stats: &Stats) {
-    // Drop congestion control: a full link drops the sample here, it never waits.
-    if p.put(bytes.to_vec()).wait().is_ok() {
-        stats.puts.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
 /// Drains every reader and puts what it held; the number of samples read.
 fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
     let mut n = 0;
@@ -358,29 +390,27 @@ fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
         .map_err(|e| format!("export: {}: {e:?}", services::STEPS.pattern))?
     {
         let entries: &[StepEntry] = s.payload();
-        for (i, entry) in entries.iter().enumerate() {
-            if let Some(p) = w.states.get(i) {
-                put(p, bytes_of(&entry.truth.state), stats);
-            }
+        for (entry, p) in entries.iter().zip(&w.states) {
+            p.put(bytes_of(&entry.truth.state), stats);
         }
         // SAFETY: a slice of `#[repr(C)]` wire values, read as the bytes they lie in.
         let all = unsafe {
             std::slice::from_raw_parts(entries.as_ptr() as *const u8, size_of_val(entries))
         };
-        put(&w.steps, all, stats);
+        w.steps.put(all, stats);
         n += 1;
     }
     while let Some(s) = r.reference.receive().map_err(e)? {
-        put(&w.reference, bytes_of(s.payload()), stats);
+        w.reference.put(bytes_of(s.payload()), stats);
         n += 1;
     }
     while let Some(s) = r.events.receive().map_err(e)? {
-        put(&w.events, bytes_of(s.payload()), stats);
+        w.events.put(bytes_of(s.payload()), stats);
         n += 1;
     }
     for (t, p) in r.telemetry.iter().zip(&w.telemetry) {
         while let Some(s) = t.receive().map_err(e)? {
-            put(p, bytes_of(s.payload()), stats);
+            p.put(bytes_of(s.payload()), stats);
             n += 1;
         }
     }
