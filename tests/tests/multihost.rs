@@ -469,12 +469,16 @@ enum KillAt {
     Checkpoint(u64),
 }
 
-fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostHost {
-    let dir = work_dir(tag);
-    let mut hosts = Hosts::new(2, &dir);
-    hosts.start_daemon(1, &dir, &[]);
-    let residue = dir.join("residue-launcher.txt");
-    let out = dir.join("run");
+/// Starts `formation run paper --hosts h1 --place 4,5@h1 ARGS` (with credentials, output `out`)
+/// in the launcher namespace, its stderr into `err_path`, with the runs folder `runs` if given.
+fn spawn_split_paper_run(
+    hosts: &Hosts,
+    residue: &Path,
+    args: &[&str],
+    out: &Path,
+    err_path: &Path,
+    runs: Option<&Path>,
+) -> Child {
     let mut v: Vec<String> = ["run", "paper", "--hosts", "h1", "--place", "4,5@h1"]
         .iter()
         .chain(args)
@@ -484,13 +488,24 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
     v.extend(["--auth".to_string(), hosts.auth.display().to_string()]);
     v.extend(["--out".to_string(), out.display().to_string()]);
     let refs: Vec<&str> = v.iter().map(String::as_str).collect();
-    let err_path = dir.join("run.err");
-    let mut run = hosts
-        .command(0, Some(&residue), &refs)
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&err_path).unwrap())
+    let mut c = hosts.command(0, Some(residue), &refs);
+    if let Some(runs) = runs {
+        c.env("FORMATION_RUNS_DIR", runs);
+    }
+    c.stdout(Stdio::null())
+        .stderr(std::fs::File::create(err_path).unwrap())
         .spawn()
-        .expect("formation run starts");
+        .expect("formation run starts")
+}
+
+fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostHost {
+    let dir = work_dir(tag);
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let mut run = spawn_split_paper_run(&hosts, &residue, args, &out, &err_path, None);
     // Let it fly, then SIGKILL the daemon (and with it its agents).
     let t0 = Instant::now();
     let start_line = loop {
@@ -881,31 +896,15 @@ fn ps_and_inspect_show_the_agents_placed_on_another_host_with_that_host_and_its_
         .unwrap();
     let residue = dir.join("residue-launcher.txt");
     let out = dir.join("run");
-    let mut v: Vec<String> = [
-        "run",
-        "paper",
-        "--set",
-        "simulation.duration_s=20",
-        "--hosts",
-        "h1",
-        "--place",
-        "4,5@h1",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    v.extend(hosts.connect_args());
-    v.extend(["--auth".to_string(), hosts.auth.display().to_string()]);
-    v.extend(["--out".to_string(), out.display().to_string()]);
-    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
     let err_path = dir.join("run.err");
-    let mut run = hosts
-        .command(0, Some(&residue), &refs)
-        .env("FORMATION_RUNS_DIR", &runs)
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&err_path).unwrap())
-        .spawn()
-        .expect("formation run starts");
+    let mut run = spawn_split_paper_run(
+        &hosts,
+        &residue,
+        &["--set", "simulation.duration_s=20"],
+        &out,
+        &err_path,
+        Some(&runs),
+    );
     let listed = listed_run(&runs, &mut run, &err_path);
     let procs = listed["processes"].as_array().unwrap();
     let orchestrator = procs[0]["pid"].as_u64().unwrap() as u32;

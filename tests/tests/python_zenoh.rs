@@ -15,6 +15,7 @@ use formation::record::table::Trajectory;
 use formation_config::protocol::layout::WireLayout;
 use formation_config::protocol::wire::VehicleState;
 use formation_tests::run::RunningRun;
+use formation_tests::wire::{assert_state_is_row, from_raw, rows_by_agent_and_step};
 use formation_tests::{formation, python_or_skip, stderr_of, temp_dir, workspace_root};
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
@@ -48,11 +49,7 @@ fn python_with_zenoh(test: &str) -> Option<PathBuf> {
             py.display(),
             String::from_utf8_lossy(&o.stderr).trim()
         );
-        if std::env::var("FORMATION_REQUIRE_PYTHON").as_deref() == Ok("1") {
-            panic!("{test}: FORMATION_REQUIRE_PYTHON=1 but {why}");
-        }
-        eprintln!("{test}: skipped: {why}");
-        return None;
+        return formation_tests::skip_python_test(test, &why);
     }
     Some(py)
 }
@@ -70,19 +67,6 @@ fn free_port() -> u16 {
         .and_then(|l| l.local_addr())
         .expect("a free loopback port")
         .port()
-}
-
-/// The wire struct `T` whose bytes the reader printed in hex (`"raw"`).
-fn decode<T: Copy>(v: &Value) -> T {
-    let hex = v["raw"].as_str().expect("raw bytes");
-    let bytes: Vec<u8> = (0..hex.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).expect("hex"))
-        .collect();
-    assert_eq!(bytes.len(), size_of::<T>(), "the payload has the Rust size");
-    // SAFETY: the length is checked; T is a #[repr(C)] wire struct of u32, u64 and f64 fields, for
-    // which every bit pattern is a valid value.
-    unsafe { std::ptr::read_unaligned(bytes.as_ptr().cast::<T>()) }
 }
 
 #[test]
@@ -161,38 +145,15 @@ fn a_python_reader_over_zenoh_gets_the_info_and_exactly_the_recorded_states() {
 
     // Every state read over Zenoh equals the recorded row of its step, float for float.
     let tr = Trajectory::read(&run.out.join("trajectory.csv")).unwrap();
-    let rows: std::collections::HashMap<(usize, u64), &[f64]> = tr
-        .rows()
-        .iter()
-        .map(|r| {
-            (
-                (tr.value(r, "agent") as usize, tr.value(r, "step") as u64),
-                r.as_slice(),
-            )
-        })
-        .collect();
+    let rows = rows_by_agent_and_step(&tr);
     let mut per_agent = [0usize; 5];
     for v in read.iter().filter(|v| v.get("state").is_some()) {
-        let s: VehicleState = decode(v);
+        let s: VehicleState = from_raw(v);
         let agent = s.agent as usize + 1;
         let r = rows
             .get(&(agent, s.step))
             .unwrap_or_else(|| panic!("row of agent {agent} at step {}", s.step));
-        for (values, cols) in [
-            (s.position, ["px", "py", "pz"]),
-            (s.velocity, ["vx", "vy", "vz"]),
-            (s.attitude, ["phi", "theta", "psi"]),
-            (s.rate, ["p", "q", "r"]),
-        ] {
-            for (k, col) in cols.iter().enumerate() {
-                assert_eq!(
-                    values[k],
-                    tr.value(r, col),
-                    "{col} of agent {agent} at {}",
-                    s.step
-                );
-            }
-        }
+        assert_state_is_row(&tr, r, &s);
         per_agent[agent - 1] += 1;
     }
     assert!(
