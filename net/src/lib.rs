@@ -10,6 +10,7 @@
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
+//! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
 //!
 //! The topology (docs/multi-host.md): every host daemon listens (loopback only unless
 //! authenticated); the launching orchestrator opens a Zenoh *router* session that connects to each
@@ -21,6 +22,7 @@ pub mod bridge;
 pub mod clock;
 pub mod cluster;
 pub mod daemon;
+pub mod export;
 pub mod identity;
 pub mod plan;
 pub mod proto;

@@ -31,6 +31,9 @@ pub enum Mode {
     Orchestrator,
     /// `formation hosts`: a client that connects, asks and leaves.
     Client,
+    /// `formation run --zenoh-listen`: a run's telemetry for outside readers ([`crate::export`]),
+    /// a peer that listens and, like a daemon, admits only the users of its `--auth` file.
+    Export,
 }
 
 /// What a session is opened with.
@@ -107,7 +110,7 @@ impl Options {
                 .map_err(|e| OptionError(format!("zenoh config {k} = {v}: {e}")))
         };
         let mode = match self.mode {
-            Mode::Daemon => "peer",
+            Mode::Daemon | Mode::Export => "peer",
             Mode::Orchestrator => "router",
             Mode::Client => "client",
         };
@@ -146,7 +149,7 @@ impl Options {
                 "transport/auth/usrpwd/password",
                 serde_json::to_string(&password).unwrap(),
             )?;
-            if self.mode == Mode::Daemon {
+            if matches!(self.mode, Mode::Daemon | Mode::Export) {
                 set(
                     &mut c,
                     "transport/auth/usrpwd/dictionary_file",

@@ -96,6 +96,7 @@ pub fn cpus_allowed(pid: u32) -> Vec<usize> {
 }
 
 pub mod run;
+pub mod wire;
 
 /// The workspace root (the parent of this crate's directory).
 pub fn workspace_root() -> PathBuf {
@@ -132,14 +133,18 @@ pub fn python_with_iceoryx2() -> Result<PathBuf, String> {
 pub fn python_or_skip(test: &str) -> Option<PathBuf> {
     match python_with_iceoryx2() {
         Ok(py) => Some(py),
-        Err(why) if std::env::var("FORMATION_REQUIRE_PYTHON").as_deref() == Ok("1") => {
-            panic!("{test}: FORMATION_REQUIRE_PYTHON=1 but {why}")
-        }
-        Err(why) => {
-            eprintln!("{test}: skipped: {why}");
-            None
-        }
+        Err(why) => skip_python_test(test, &why),
     }
+}
+
+/// A Python test cannot run (`why`): `None` after printing that it is skipped, or a panic when
+/// `FORMATION_REQUIRE_PYTHON=1` (CI, which installs what the Python tests need).
+pub fn skip_python_test<T>(test: &str, why: &str) -> Option<T> {
+    if std::env::var("FORMATION_REQUIRE_PYTHON").as_deref() == Ok("1") {
+        panic!("{test}: FORMATION_REQUIRE_PYTHON=1 but {why}");
+    }
+    eprintln!("{test}: skipped: {why}");
+    None
 }
 
 /// Asserts that the run whose outputs are in `run_out` wrote byte for byte the `trajectory.csv`

@@ -469,12 +469,16 @@ enum KillAt {
     Checkpoint(u64),
 }
 
-fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostHost {
-    let dir = work_dir(tag);
-    let mut hosts = Hosts::new(2, &dir);
-    hosts.start_daemon(1, &dir, &[]);
-    let residue = dir.join("residue-launcher.txt");
-    let out = dir.join("run");
+/// Starts `formation run paper --hosts h1 --place 4,5@h1 ARGS` (with credentials, output `out`)
+/// in the launcher namespace, its stderr into `err_path`, with the runs folder `runs` if given.
+fn spawn_split_paper_run(
+    hosts: &Hosts,
+    residue: &Path,
+    args: &[&str],
+    out: &Path,
+    err_path: &Path,
+    runs: Option<&Path>,
+) -> Child {
     let mut v: Vec<String> = ["run", "paper", "--hosts", "h1", "--place", "4,5@h1"]
         .iter()
         .chain(args)
@@ -484,13 +488,24 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
     v.extend(["--auth".to_string(), hosts.auth.display().to_string()]);
     v.extend(["--out".to_string(), out.display().to_string()]);
     let refs: Vec<&str> = v.iter().map(String::as_str).collect();
-    let err_path = dir.join("run.err");
-    let mut run = hosts
-        .command(0, Some(&residue), &refs)
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&err_path).unwrap())
+    let mut c = hosts.command(0, Some(residue), &refs);
+    if let Some(runs) = runs {
+        c.env("FORMATION_RUNS_DIR", runs);
+    }
+    c.stdout(Stdio::null())
+        .stderr(std::fs::File::create(err_path).unwrap())
         .spawn()
-        .expect("formation run starts");
+        .expect("formation run starts")
+}
+
+fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostHost {
+    let dir = work_dir(tag);
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let mut run = spawn_split_paper_run(&hosts, &residue, args, &out, &err_path, None);
     // Let it fly, then SIGKILL the daemon (and with it its agents).
     let t0 = Instant::now();
     let start_line = loop {
@@ -838,5 +853,137 @@ fn a_realtime_split_run_measures_every_cross_host_link_and_flies_as_well_as_on_o
         rms_split <= SPLIT_RMS_FACTOR * rms_one,
         "split {rms_split} m vs one host {rms_one} m"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `formation ps --json` read from outside the launcher's namespace (the runs folder is outside
+/// its private /tmp; /proc is shared): the first run listed, once all its processes are.
+fn listed_run(runs: &Path, run: &mut Child, err_path: &Path) -> serde_json::Value {
+    let t0 = Instant::now();
+    loop {
+        let o = formation_tests::formation_in(runs, &["ps", "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_default();
+        if v["runs"][0]["processes"]
+            .as_array()
+            .is_some_and(|p| p.len() == 8)
+        {
+            return v["runs"][0].clone();
+        }
+        assert!(
+            run.try_wait().unwrap().is_none() && t0.elapsed() < Duration::from_secs(60),
+            "the run was never listed: {}",
+            std::fs::read_to_string(err_path).unwrap_or_default()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn ps_and_inspect_show_the_agents_placed_on_another_host_with_that_host_and_its_pid() {
+    if !available(
+        "ps_and_inspect_show_the_agents_placed_on_another_host_with_that_host_and_its_pid",
+    ) {
+        return;
+    }
+    let dir = work_dir("ps");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let runs = dir.join("runs");
+    use std::os::unix::fs::DirBuilderExt;
+    std::fs::DirBuilder::new()
+        .mode(0o700)
+        .create(&runs)
+        .unwrap();
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let mut run = spawn_split_paper_run(
+        &hosts,
+        &residue,
+        &["--set", "simulation.duration_s=20"],
+        &out,
+        &err_path,
+        Some(&runs),
+    );
+    let listed = listed_run(&runs, &mut run, &err_path);
+    let procs = listed["processes"].as_array().unwrap();
+    let orchestrator = procs[0]["pid"].as_u64().unwrap() as u32;
+    for p in procs {
+        let remote = matches!(p["agent"].as_u64(), Some(4 | 5));
+        if remote {
+            // On h1: its pid there (no pid namespace here, so it is this machine's too: the
+            // agent process its daemon started), nothing read from this machine's /proc.
+            assert_eq!(p["host"], "h1", "{p}");
+            for k in ["alive", "cpu_percent", "cpu_percent_since_start"] {
+                assert!(p[k].is_null(), "{k} of a remote process: {p}");
+            }
+            let pid = p["pid"].as_u64().unwrap();
+            let index = p["agent"].as_u64().unwrap() - 1;
+            let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+            assert!(
+                String::from_utf8_lossy(&cmdline).contains(&format!("--agent\u{0}{index}\u{0}")),
+                "pid {pid} is agent {}'s process on h1",
+                index + 1
+            );
+        } else {
+            assert_eq!(p["host"], "local", "{p}");
+            assert_eq!(p["alive"], true, "{p}");
+        }
+    }
+    // The table: a HOST column, `-` for what cannot be read here.
+    let o = formation_tests::formation_in(&runs, &["ps"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("HOST"), "{text}");
+    let row = text
+        .lines()
+        .find(|l| l.split_whitespace().take(2).eq(["agent", "4"]))
+        .unwrap_or_else(|| panic!("agent 4's row: {text}"));
+    let cols: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!((cols[2], &cols[4..]), ("h1", &["-", "-", "-"][..]), "{row}");
+    // `inspect` in the launcher's namespace (its /dev/shm): agent 4's host and pid there.
+    let inspect = |agent: &str| {
+        let o = Command::new("nsenter")
+            .args([
+                "--target",
+                &orchestrator.to_string(),
+                "--mount",
+                "--net",
+                "--",
+            ])
+            .arg(bin("formation"))
+            .args(["inspect", "--agent", agent, "--json"])
+            .env("FORMATION_RUNS_DIR", &runs)
+            .env_remove("CARGO")
+            .output()
+            .expect("nsenter runs");
+        assert!(
+            o.status.success(),
+            "inspect --agent {agent}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).expect("inspect prints JSON")
+    };
+    let four = inspect("4");
+    let listed_four = procs.iter().find(|p| p["agent"] == 4).unwrap();
+    assert_eq!(
+        (&four["host"], &four["pid"]),
+        (&listed_four["host"], &listed_four["pid"])
+    );
+    assert_eq!(four["agent"], 4);
+    let one = inspect("1");
+    assert_eq!(one["host"], "local", "{one}");
+    let st = run.wait().unwrap();
+    assert_eq!(
+        st.code(),
+        Some(0),
+        "{}",
+        std::fs::read_to_string(&err_path).unwrap_or_default()
+    );
+    assert_no_residue(
+        "the launcher",
+        &std::fs::read_to_string(&residue).unwrap_or_default(),
+    );
+    let left = hosts.stop_daemons();
+    assert_no_residue("host h1", &left[0]);
     let _ = std::fs::remove_dir_all(&dir);
 }

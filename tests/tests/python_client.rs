@@ -14,6 +14,7 @@
 use formation::record::table::Trajectory;
 use formation_config::protocol::wire::{AgentTelemetry, VehicleState};
 use formation_tests::run::RunningRun;
+use formation_tests::wire::{assert_state_is_row, from_raw, rows_by_agent_and_step};
 use formation_tests::{formation_in, python_or_skip, temp_dir, workspace_root};
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -47,23 +48,6 @@ fn run_id(runs: &Path, run: &RunningRun) -> String {
         assert!(start.elapsed() < TIMEOUT, "never listed: {}", run.stderr());
         std::thread::sleep(Duration::from_millis(20));
     }
-}
-
-/// The wire struct `T` whose bytes the observer printed in hex (`"raw"`).
-fn decode<T: Copy>(v: &Value) -> T {
-    let hex = v["raw"].as_str().expect("raw bytes");
-    let bytes: Vec<u8> = (0..hex.len())
-        .step_by(2)
-        .map(|i| u8::from_str_radix(&hex[i..i + 2], 16).expect("hex"))
-        .collect();
-    assert_eq!(
-        bytes.len(),
-        size_of::<T>(),
-        "the Python struct has the Rust size"
-    );
-    // SAFETY: the length is checked; T is a #[repr(C)] wire struct of u32, u64 and f64 fields (and
-    // nested such structs), for which every bit pattern is a valid value.
-    unsafe { std::ptr::read_unaligned(bytes.as_ptr().cast::<T>()) }
 }
 
 fn f(v: &Value) -> f64 {
@@ -140,16 +124,7 @@ fn a_python_observer_reads_exactly_the_recorded_values_and_the_run_stays_byte_id
     // Every sample equals the recorded row of its step, float for float (trajectory.csv has every
     // 10th step at the default 100 Hz; telemetry comes every 20th).
     let tr = Trajectory::read(&run.out.join("trajectory.csv")).unwrap();
-    let rows: std::collections::HashMap<(usize, u64), &[f64]> = tr
-        .rows()
-        .iter()
-        .map(|r| {
-            (
-                (tr.value(r, "agent") as usize, tr.value(r, "step") as u64),
-                r.as_slice(),
-            )
-        })
-        .collect();
+    let rows = rows_by_agent_and_step(&tr);
     let row = |agent: usize, step: u64| {
         *rows
             .get(&(agent, step))
@@ -158,30 +133,16 @@ fn a_python_observer_reads_exactly_the_recorded_values_and_the_run_stays_byte_id
     let (mut states, mut samples) = (0, 0);
     for v in &observed {
         if v.get("state").is_some() {
-            let s: VehicleState = decode(v);
+            let s: VehicleState = from_raw(v);
             let agent = s.agent as usize + 1;
             let Some(&r) = rows.get(&(agent, s.step)) else {
                 continue; // a step between two rows
             };
-            for (values, cols) in [
-                (s.position, ["px", "py", "pz"]),
-                (s.velocity, ["vx", "vy", "vz"]),
-                (s.attitude, ["phi", "theta", "psi"]),
-                (s.rate, ["p", "q", "r"]),
-            ] {
-                for (k, col) in cols.iter().enumerate() {
-                    assert_eq!(
-                        values[k],
-                        tr.value(r, col),
-                        "{col} of agent {agent} at {}",
-                        s.step
-                    );
-                }
-            }
+            assert_state_is_row(&tr, r, &s);
             states += 1;
         }
         if v.get("telemetry").is_some() {
-            let s: AgentTelemetry = decode(v);
+            let s: AgentTelemetry = from_raw(v);
             assert_eq!(s.agent, 1, "agent 2's telemetry");
             let r = row(2, s.step);
             let c = &s.controller;

@@ -40,11 +40,7 @@ fn sdk_python(test: &str) -> Option<PathBuf> {
             py.display(),
             String::from_utf8_lossy(&o.stderr).trim()
         );
-        if std::env::var("FORMATION_REQUIRE_PYTHON").as_deref() == Ok("1") {
-            panic!("{test}: FORMATION_REQUIRE_PYTHON=1 but {why}");
-        }
-        eprintln!("{test}: skipped: {why}");
-        return None;
+        return formation_tests::skip_python_test(test, &why);
     }
     Some(py)
 }

@@ -9,6 +9,8 @@ crashes and link changes into it, and load a run's outputs, from Python.
     tr = fc.load_trajectory("out/paper-proposed")                     # plain lists; .to_pandas()
 
 Install: `pip install ./clients/python` (its only dependency is the PyPI binding iceoryx2 0.10.0).
+From another machine, over the network: `formation_client.net` (`pip install './clients/python[net]'`,
+the PyPI Zenoh binding) reads a run started with `formation run --zenoh-listen ENDPOINT`.
 `python -m formation_client --help` lists the commands.
 
 The ctypes structures (`formation_client.wire`) are generated from `formation schema --json`

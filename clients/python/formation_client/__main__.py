@@ -32,8 +32,18 @@ def _norm(v):
     return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
-def telemetry_json(run_id, s):
-    """A sample as `formation inspect --json` prints it (same keys, agent 1-based)."""
+def agent_process(record, agent):
+    """The process entry of agent `agent` (1-based) in a run's record, or None; its `host` is
+    "local" for the launching machine (and in records written without hosts)."""
+    for p in (record or {}).get("processes", []):
+        if p.get("role") == "agent" and p.get("agent") == agent:
+            return dict(p, host=p.get("host", "local"))
+    return None
+
+
+def telemetry_json(run_id, s, process=None):
+    """A sample as `formation inspect --json` prints it (same keys, agent 1-based; `host` and
+    `pid` of the agent's process from the run's record, None when it does not list it)."""
     d = to_dict(s)
     controller = d.pop("controller")
     d.update(controller)
@@ -41,6 +51,8 @@ def telemetry_json(run_id, s):
     d["rate_norm"] = _norm(d["rate"])
     d["agent"] = s.agent + 1
     d["run"] = run_id
+    d["host"] = process["host"] if process else None
+    d["pid"] = process["pid"] if process else None
     return d
 
 
@@ -210,7 +222,8 @@ def _print_samples(run, a):
                 return 0
             continue
         if a.json:
-            print(json.dumps(telemetry_json(run.id, s)), flush=True)
+            process = agent_process(run.record, s.agent + 1)
+            print(json.dumps(telemetry_json(run.id, s, process)), flush=True)
         else:
             print(f"agent {s.agent + 1} step {s.step} t = {s.t:.3f} s  formation error "
                   f"{s.formation_error_m:.4f} m  Gamma-hat {list(s.controller.gamma_hat)}",

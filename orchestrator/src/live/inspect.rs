@@ -1,6 +1,6 @@
 //! `formation inspect --agent I [--run ID] [--follow] [--json]`: one agent's live telemetry.
 
-use super::registry;
+use super::registry::{self, ProcessEntry};
 use crate::cli::EXIT_INVALID;
 use formation_config::node::ports::{subscriber, Input};
 use formation_config::protocol::services;
@@ -45,11 +45,21 @@ fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, String>
     Ok(last)
 }
 
-/// The sample as JSON (agent 1-based).
-pub fn to_json(run: &str, s: &AgentTelemetry) -> Value {
+/// The process of agent `agent` (1-based) in the run's record.
+pub fn agent_process(run: &registry::RunRecord, agent: usize) -> Option<&ProcessEntry> {
+    run.processes
+        .iter()
+        .find(|p| p.role == "agent" && p.agent == Some(agent))
+}
+
+/// The sample as JSON (agent 1-based), with the host and pid of the agent's process (`null` when
+/// the record does not list it).
+pub fn to_json(run: &str, process: Option<&ProcessEntry>, s: &AgentTelemetry) -> Value {
     let c = &s.controller;
     json!({
-        "run": run, "agent": s.agent + 1, "step": s.step, "t": s.t,
+        "run": run, "agent": s.agent + 1,
+        "host": process.map(|p| p.host.as_str()), "pid": process.map(|p| p.pid),
+        "step": s.step, "t": s.t,
         "formation_error_m": s.formation_error_m,
         "e_p": c.e_p, "e_v": c.e_v, "tau_s": c.tau_s,
         "attitude": s.attitude, "attitude_norm": norm(s.attitude),
@@ -81,13 +91,22 @@ pub fn redraw_in_place(stdout_is_terminal: bool, no_color: Option<&std::ffi::OsS
 /// Clears the terminal and moves the cursor home.
 const CLEAR_SCREEN: &str = "\x1b[H\x1b[2J";
 
+/// `host b  pid 4242`: where the agent's process runs (`-` when the record does not list it).
+pub fn process_text(process: Option<&ProcessEntry>) -> String {
+    match process {
+        Some(p) => format!("host {}  pid {}", p.host, p.pid),
+        None => "host -  pid -".to_string(),
+    }
+}
+
 /// The sample as a readable block.
-pub fn to_text(run: &str, n: usize, s: &AgentTelemetry) -> String {
+pub fn to_text(run: &str, n: usize, process: Option<&ProcessEntry>, s: &AgentTelemetry) -> String {
     let c = &s.controller;
     let mut o = String::new();
     o += &format!(
-        "run {run}  agent {}/{n}  step {}  t = {:.3} s  controller step {:.1} us\n",
+        "run {run}  agent {}/{n}  {}  step {}  t = {:.3} s  controller step {:.1} us\n",
         s.agent + 1,
+        process_text(process),
         s.step,
         s.t,
         s.loop_latency_us
@@ -172,14 +191,21 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
         if let Some(s) = newest(&sub)? {
             if last_step != Some(s.step) {
                 last_step = Some(s.step);
+                // The agent's process as the record lists it now (a replaced or moved agent has
+                // a new pid or host).
+                let now = registry::reload(&run.id);
+                let process = agent_process(now.as_ref().unwrap_or(run), args.agent);
                 let text = if args.json {
-                    format!("{}\n", to_json(&run.id, &s))
+                    format!("{}\n", to_json(&run.id, process, &s))
                 } else if args.follow && in_place {
-                    format!("{CLEAR_SCREEN}{}", to_text(&run.id, run.n_agents, &s))
+                    format!(
+                        "{CLEAR_SCREEN}{}",
+                        to_text(&run.id, run.n_agents, process, &s)
+                    )
                 } else if args.follow {
-                    format!("{}\n", to_text(&run.id, run.n_agents, &s))
+                    format!("{}\n", to_text(&run.id, run.n_agents, process, &s))
                 } else {
-                    to_text(&run.id, run.n_agents, &s)
+                    to_text(&run.id, run.n_agents, process, &s)
                 };
                 if out
                     .write_all(text.as_bytes())
@@ -231,7 +257,38 @@ mod tests {
 
     #[test]
     fn the_text_block_has_no_escape_sequence() {
-        let text = to_text("r", 5, &AgentTelemetry::default());
+        let text = to_text("r", 5, None, &AgentTelemetry::default());
         assert!(!text.contains('\x1b'), "{text}");
+    }
+
+    #[test]
+    fn an_agent_on_another_host_is_shown_with_that_host_and_its_pid_there() {
+        let p = ProcessEntry {
+            role: "agent".into(),
+            agent: Some(4),
+            pid: 4242,
+            host: "b".into(),
+        };
+        let s = AgentTelemetry {
+            agent: 3,
+            ..Default::default()
+        };
+        let first = to_text("r", 5, Some(&p), &s);
+        assert!(
+            first
+                .lines()
+                .next()
+                .unwrap()
+                .contains("agent 4/5  host b  pid 4242"),
+            "{first}"
+        );
+        let j = to_json("r", Some(&p), &s);
+        assert_eq!(
+            (j["agent"].as_u64(), j["host"].as_str(), j["pid"].as_u64()),
+            (Some(4), Some("b"), Some(4242))
+        );
+        let unknown = to_json("r", None, &s);
+        assert!(unknown["host"].is_null() && unknown["pid"].is_null());
+        assert!(to_text("r", 5, None, &s).contains("host -  pid -"));
     }
 }

@@ -24,6 +24,14 @@ pub const RECORD_FORMAT: &str = "formation-run-record/1";
 /// Largest record read (a record of N = 64 agents is ~8 KiB).
 const MAX_RECORD_BYTES: u64 = 1 << 20;
 
+/// The host of a process on the launching machine (`formation_net::cluster::LAUNCHER`): what
+/// `--place IDS@local` names and what a record written without hosts means.
+pub const LOCAL_HOST: &str = "local";
+
+fn local_host() -> String {
+    LOCAL_HOST.to_string()
+}
+
 /// One process of a run.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct ProcessEntry {
@@ -31,8 +39,20 @@ pub struct ProcessEntry {
     pub role: String,
     /// Agent id, 1-based (agents only).
     pub agent: Option<usize>,
-    /// Process id.
+    /// Process id on its host (for a process on another host, the pid its daemon reported).
     pub pid: u32,
+    /// The host it runs on: [`LOCAL_HOST`] for the launching machine, else the name of the
+    /// `formation host` daemon that started it. Records written without the field are read as
+    /// [`LOCAL_HOST`].
+    #[serde(default = "local_host")]
+    pub host: String,
+}
+
+impl ProcessEntry {
+    /// True when it runs on the launching machine, where `/proc` tells its state and CPU time.
+    pub fn is_local(&self) -> bool {
+        self.host == LOCAL_HOST
+    }
 }
 
 /// The registry file of a run.
@@ -260,6 +280,18 @@ pub fn list() -> Result<Vec<RunRecord>, String> {
     Ok(runs)
 }
 
+/// The record of run `id` as it is now (its processes may have moved or been replaced since it
+/// was found), `None` once the run is over. Reads that one record only.
+pub fn reload(id: &str) -> Option<RunRecord> {
+    if !is_run_id(id) {
+        return None;
+    }
+    match classify(&runs_dir().join(format!("{id}.json"))) {
+        Entry::Live(r) => Some(*r),
+        _ => None,
+    }
+}
+
 /// The run `id`, or the only live run when `id` is `None`; a clear error otherwise.
 pub fn find(id: Option<&str>) -> Result<RunRecord, String> {
     let runs = list()?;
@@ -318,13 +350,16 @@ impl Registration {
         &self.path
     }
 
-    /// Keeps the record's pids those of the running children (`pids[k]`: child k, in the order
-    /// after the orchestrator): a replaced agent process is listed with its new pid at once.
-    pub fn follow_pids(&mut self, pids: impl Iterator<Item = u32>) {
+    /// Keeps the record's pids and hosts those of the running children (`(pid, host)` of child
+    /// k, in the order after the orchestrator; host `None`: this machine): a replaced agent
+    /// process is listed with its new pid and host at once.
+    pub fn follow_processes<'a>(&mut self, procs: impl Iterator<Item = (u32, Option<&'a str>)>) {
         let mut changed = false;
-        for (entry, pid) in self.rec.processes.iter_mut().skip(1).zip(pids) {
-            if entry.pid != pid {
+        for (entry, (pid, host)) in self.rec.processes.iter_mut().skip(1).zip(procs) {
+            let host = host.unwrap_or(LOCAL_HOST);
+            if entry.pid != pid || entry.host != host {
                 entry.pid = pid;
+                entry.host = host.to_string();
                 changed = true;
             }
         }
@@ -384,11 +419,62 @@ mod tests {
                 role: "orchestrator".into(),
                 agent: None,
                 pid,
+                host: LOCAL_HOST.into(),
             }],
             last_step: 0,
             steps_per_s: 0.0,
             owner_uid: files::current_uid(),
         }
+    }
+
+    #[test]
+    fn a_record_written_without_hosts_lists_every_process_on_this_machine() {
+        let mut v = serde_json::to_value(record("old1", 1, 0)).unwrap();
+        v["processes"][0].as_object_mut().unwrap().remove("host");
+        let back: RunRecord = serde_json::from_value(v).unwrap();
+        assert_eq!(back.processes[0].host, LOCAL_HOST);
+        assert!(back.processes[0].is_local());
+    }
+
+    #[test]
+    fn a_replaced_process_is_followed_to_its_new_pid_and_host() {
+        let d = temp("follow");
+        let mut rec = record("fol1", std::process::id(), 0);
+        rec.processes.push(ProcessEntry {
+            role: "agent".into(),
+            agent: Some(1),
+            pid: 4242,
+            host: "b".into(),
+        });
+        let path = d.join("fol1.json");
+        write_atomically(&path, &rec).unwrap();
+        let mut reg = Registration {
+            path: path.clone(),
+            rec,
+            last: Instant::now(),
+            last_step: 0,
+        };
+        // Agent 1 lost with host b, taken over on this machine as pid 77.
+        reg.follow_processes([(77, None)].into_iter());
+        let back: RunRecord =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert_eq!(back.processes[1].pid, 77);
+        assert_eq!(back.processes[1].host, LOCAL_HOST);
+        reg.follow_processes([(78, Some("c"))].into_iter());
+        let back: RunRecord =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert_eq!(
+            (back.processes[1].pid, back.processes[1].host.as_str()),
+            (78, "c")
+        );
+        drop(reg);
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[cfg(feature = "multihost")]
+    #[test]
+    fn the_local_host_is_the_name_placements_give_the_launching_machine() {
+        assert_eq!(LOCAL_HOST, formation_net::cluster::LAUNCHER);
     }
 
     #[test]

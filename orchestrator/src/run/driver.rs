@@ -313,7 +313,7 @@ pub fn drive(
         if !hellos.is_empty() {
             // A new agent process has its ports: `formation ps` lists it from now on.
             live.registration
-                .follow_pids(children.iter().map(|c| c.pid()));
+                .follow_processes(children.iter().map(|c| (c.pid(), c.host())));
         }
         if recorded >= steps {
             progress.finish(recorded);

@@ -8,6 +8,7 @@
 
 mod cleanup;
 mod driver;
+pub mod export;
 pub(crate) mod injections;
 pub(crate) mod placement;
 mod progress;
@@ -24,7 +25,7 @@ pub(crate) mod takeover;
 mod timing;
 
 use crate::cli;
-use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord};
+use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord, LOCAL_HOST};
 use crate::record::Recorder;
 use driver::Outcome;
 use formation_config::node::args::ChildArgs;
@@ -85,6 +86,9 @@ pub struct RunArgs {
     /// Other machines (`formation host` daemons) and the agents placed on them.
     #[command(flatten)]
     pub place: remote::PlaceArgs,
+    /// Readers of the run's telemetry on other machines, over Zenoh.
+    #[command(flatten)]
+    pub export: export::ExportArgs,
 }
 
 pub use spawn::self_exe;
@@ -197,8 +201,10 @@ pub fn main(args: RunArgs) -> ExitCode {
         wait: args.wait,
         spin_us: args.spin_us,
         rt_priority: args.rt_priority,
-        // The bridges take one observer slot of every service.
-        observers: args.observers + usize::from(remote.is_some()),
+        // The bridges and the export take one observer slot of every service each.
+        observers: args.observers
+            + usize::from(remote.is_some())
+            + usize::from(args.export.enabled()),
     };
     let out = args.common.out.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
@@ -217,6 +223,24 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
     let run_id = new_run_id();
     let prefix = names::run_prefix(&run_id);
+    // Its endpoints bound before anything of the run exists (exit 2 naming what is refused).
+    let export = match export::open(
+        &args.export,
+        args.place.auth(),
+        &prefix,
+        &export::Facts {
+            run_id: &run_id,
+            scenario: &scenario,
+            variant: variant.name(),
+            mode: mode.name(),
+        },
+    ) {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
     // Every host prepares the run (services, bridge) before any process starts anywhere.
     let remote = match remote
         .map(|r| {
@@ -282,6 +306,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         &prefix,
         &interrupted,
         remote,
+        export,
     );
     match cleanup::remove(&prefix, cleanup::OUTSIDE_GRACE) {
         Ok(cleanup::Cleaned::All) => {}
@@ -369,6 +394,7 @@ fn run(
     prefix: &str,
     interrupted: &AtomicBool,
     remote: Option<std::rc::Rc<remote::RemoteRun>>,
+    export: Option<export::Opened>,
 ) -> Result<(Outcome, crate::record::Summary), String> {
     if !mode.realtime {
         // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
@@ -402,6 +428,9 @@ fn run(
             names::Sizing::run(n, mode.realtime).with_observers(mode.observers),
         )?;
     }
+    // Reads the services as an outside observer from the first step on; stopped after the role
+    // processes, once it has put their last samples.
+    let export = export.map(export::Opened::start).transpose()?;
     let ports = driver::Ports::open(&node, n, !mode.realtime)?;
     let timing_dir = formation_config::node::timing::dir(&run_dir);
     if mode.realtime {
@@ -470,6 +499,7 @@ fn run(
         role: "orchestrator".into(),
         agent: None,
         pid: std::process::id(),
+        host: LOCAL_HOST.into(),
     }];
     for (k, c) in children.0.iter().enumerate() {
         processes.push(ProcessEntry {
@@ -480,6 +510,7 @@ fn run(
                 .into(),
             agent: k.checked_sub(1).filter(|&a| a >= 1),
             pid: c.pid(),
+            host: c.host().unwrap_or(LOCAL_HOST).into(),
         });
     }
     let registration = Registration::create(RunRecord {
@@ -549,6 +580,7 @@ fn run(
     recorder.add_events(live.injections.changes());
     drop(live);
     spawn::stop_all(&mut children.0, STOP_GRACE);
+    drop(export);
     drop(ports);
     drop(services);
     drop(node);

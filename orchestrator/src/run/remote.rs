@@ -48,6 +48,13 @@ pub struct PlaceArgs {
     pub link: LinkArgs,
 }
 
+impl PlaceArgs {
+    /// The `--auth` file, if given (also the readers admitted by `--zenoh-listen`).
+    pub fn auth(&self) -> Option<&Path> {
+        self.link.auth.as_deref()
+    }
+}
+
 /// The host of every agent (0-based index), [`LAUNCHER`] for this machine.
 pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<String>, String> {
     for h in hosts {

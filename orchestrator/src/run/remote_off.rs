@@ -15,6 +15,13 @@ pub const TAKEOVER_HOST: &str = "local";
 #[derive(clap::Args, Debug, Clone)]
 pub struct PlaceArgs {}
 
+impl PlaceArgs {
+    /// No `--auth` without the `multihost` feature.
+    pub fn auth(&self) -> Option<&Path> {
+        None
+    }
+}
+
 /// Never built.
 pub enum Remote {}
 

@@ -1,0 +1,619 @@
+//! A run's telemetry for outside readers over the network (`formation run --zenoh-listen
+//! ENDPOINT`): any Zenoh program (the PyPI binding `eclipse-zenoh`, Zenoh's own tools) on another
+//! machine reads the run without iceoryx2 and without a `formation` build.
+//!
+//! One thread with its own iceoryx2 node under the run's prefix reads the run as an outside
+//! observer (one of the `--observers` slots): it sleeps on the orchestrator's wake-up event (the
+//! plant raises it every `ACK_EVERY` steps) and then drains the step records, the reference, the
+//! runtime events and every agent's telemetry, and puts each sample on Zenoh:
+//!
+//! | key | payload | encoding schema |
+//! |---|---|---|
+//! | `formation/<run>/info` | queryable: JSON ([`info_json`]) | `application/json` |
+//! | `formation/<run>/state/<agent>` | `VehicleState` of quadrotor `<agent>` (1-based), every step | `formation.v2.VehicleState` |
+//! | `formation/<run>/steps` | the step record: N `StepEntry` back to back, every step | `formation.v2.StepEntry` |
+//! | `formation/<run>/reference` | `ReferenceFrame` of every step | `formation.v1.ReferenceFrame` |
+//! | `formation/<run>/events` | `RuntimeEvent` (crash, hang, link, loss, takeover, ...) | `formation.v1.RuntimeEvent` |
+//! | `formation/<run>/telemetry/<agent>` | `AgentTelemetry` of agent `<agent>` (1-based), latest | `formation.v1.AgentTelemetry` |
+//!
+//! Payloads are the `#[repr(C)]` bytes the iceoryx2 services carry (little endian, layout in the
+//! info); the encoding is `application/octet-stream` with the wire type name as its schema. The
+//! state of quadrotor i is the `state` part of its step record's plant truth: the very value the
+//! plant publishes on `formation/agent/{i}/state` (with its send stamp `sent_ns` 0).
+//!
+//! Nothing here can slow the run: the iceoryx2 subscribers overflow (the oldest sample of a full
+//! queue is replaced; the publishers never wait for this reader), the thread runs at background
+//! priority, and the Zenoh publishers use `CongestionControl::Drop`: a reader that is slow or far
+//! away loses samples, it never holds the lockstep back. Each sample carries its step, so a
+//! reader sees what it lost. A key no reader subscribes to (Zenoh's matching status) is not put
+//! at all: without readers the export only drains its queues.
+
+use crate::session::{Mode, Options};
+use formation_config::node::error::PortError;
+use formation_config::node::ipc;
+use formation_config::node::ports::{self, Input, Sub, Wake};
+use formation_config::protocol::layout::{every_type, TypeLayout, WireLayout};
+use formation_config::protocol::messages::{RuntimeEvent, StepEntry};
+use formation_config::protocol::services::{self, wire_type_name, Message};
+use formation_config::protocol::wire::{AgentTelemetry, ReferenceFrame, VehicleState};
+use serde_json::{json, Value};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{mpsc, Arc};
+use std::thread::JoinHandle;
+use std::time::Duration;
+use zenoh::bytes::Encoding;
+use zenoh::qos::CongestionControl;
+use zenoh::Wait;
+
+/// Longest the export thread sleeps without a wake-up (it then drains anyway and checks whether
+/// it must stop): a run that stands still (waiting for its processes) costs one wake-up per period.
+pub const IDLE_WAKE: Duration = Duration::from_millis(100);
+
+/// The `format` of the info reply.
+pub const INFO_FORMAT: &str = "formation-zenoh-info/1";
+
+/// What the export publishes under `formation/<run>/`: the key's topic, the iceoryx2 service it
+/// comes from, whether it exists once per agent (`/<agent>`, 1-based), the wire type and what it
+/// carries.
+#[derive(Debug, Clone, Copy)]
+pub struct Exported {
+    /// Topic: the key is `formation/<run>/<topic>` or `formation/<run>/<topic>/<agent>`.
+    pub topic: &'static str,
+    /// The iceoryx2 service the samples are read from (`{i}`: 0-based agent index).
+    pub service: &'static str,
+    /// One key per agent.
+    pub per_agent: bool,
+    /// Wire type name (the encoding's schema).
+    pub type_name: fn() -> &'static str,
+    /// Layout of the wire type.
+    pub layout: fn() -> TypeLayout,
+    /// Samples in one payload: `1`, or `0` for N (one per agent, back to back).
+    pub count: usize,
+    /// What it carries, in one line.
+    pub doc: &'static str,
+}
+
+fn entry<T: Message + WireLayout>(
+    topic: &'static str,
+    service: &'static str,
+    per_agent: bool,
+    count: usize,
+    doc: &'static str,
+) -> Exported {
+    Exported {
+        topic,
+        service,
+        per_agent,
+        type_name: wire_type_name::<T>,
+        layout: TypeLayout::of::<T>,
+        count,
+        doc,
+    }
+}
+
+/// Every key the export publishes (the info queryable aside).
+pub fn exported() -> [Exported; 5] {
+    [
+        entry::<VehicleState>(
+            "state",
+            services::VEHICLE_STATE.pattern,
+            true,
+            1,
+            "quadrotor <agent>'s state at every step (position, velocity, attitude, rate)",
+        ),
+        entry::<StepEntry>(
+            "steps",
+            services::STEPS.pattern,
+            false,
+            0,
+            "every step's plant truth and command of all N quadrotors (N StepEntry back to back)",
+        ),
+        entry::<ReferenceFrame>(
+            "reference",
+            services::REFERENCE.pattern,
+            false,
+            1,
+            "the leader's reference of every step (P_d, its derivatives, the formation shape)",
+        ),
+        entry::<RuntimeEvent>(
+            "events",
+            services::RUNTIME_EVENTS.pattern,
+            false,
+            1,
+            "runtime events: crash, hang, link, loss, an agent taken down or taking over",
+        ),
+        entry::<AgentTelemetry>(
+            "telemetry",
+            services::TELEMETRY.pattern,
+            true,
+            1,
+            "agent <agent>'s live telemetry (errors, estimates, constraint margins), latest samples",
+        ),
+    ]
+}
+
+/// The key of `topic` in run `run_id`; `agent` is the 1-based agent id of a per-agent key.
+pub fn key(run_id: &str, topic: &str, agent: Option<usize>) -> String {
+    match agent {
+        Some(a) => format!("formation/{run_id}/{topic}/{a}"),
+        None => format!("formation/{run_id}/{topic}"),
+    }
+}
+
+/// The info queryable's key of run `run_id`; `formation/*/info` asks every run reachable.
+pub fn info_key(run_id: &str) -> String {
+    key(run_id, "info", None)
+}
+
+/// The encoding of a payload of wire type `type_name`: `application/octet-stream;<type name>`.
+pub fn encoding(type_name: &str) -> Encoding {
+    Encoding::APPLICATION_OCTET_STREAM.with_schema(type_name)
+}
+
+/// What the info tells of the run besides its keys.
+#[derive(Debug, Clone)]
+pub struct RunFacts {
+    /// Run id.
+    pub run_id: String,
+    /// Scenario name.
+    pub scenario: String,
+    /// Controller variant.
+    pub variant: String,
+    /// `lockstep` or `realtime`.
+    pub mode: String,
+    /// Number of agents N.
+    pub n_agents: usize,
+    /// Step, s.
+    pub dt_s: f64,
+    /// Steps of the whole run.
+    pub steps: u64,
+}
+
+/// The JSON the info queryable answers: the run, every key with its type, and the layout (size,
+/// alignment, field offsets) of every wire type, nested ones included.
+pub fn info_json(f: &RunFacts) -> Value {
+    let keys: Vec<Value> = exported()
+        .iter()
+        .map(|e| {
+            let l = (e.layout)();
+            json!({
+                "topic": e.topic,
+                "key": if e.per_agent {
+                    key(&f.run_id, e.topic, None) + "/<agent>"
+                } else {
+                    key(&f.run_id, e.topic, None)
+                },
+                "per_agent": e.per_agent,
+                "agents": if e.per_agent { json!([1, f.n_agents]) } else { Value::Null },
+                "type_name": (e.type_name)(),
+                "type": l.name,
+                "size": l.size,
+                "samples_per_payload": if e.count == 0 { f.n_agents } else { e.count },
+                "iceoryx2_service": e.service,
+                "doc": e.doc,
+            })
+        })
+        .collect();
+    let types: Vec<Value> = every_type()
+        .iter()
+        .map(|t| {
+            json!({
+                "type": t.name, "size": t.size, "align": t.align,
+                "fields": t.fields.iter().map(|x| json!({
+                    "name": x.name, "offset": x.offset, "size": x.size, "ty": x.ty, "unit": x.unit,
+                })).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    json!({
+        "format": INFO_FORMAT,
+        "run_id": f.run_id,
+        "scenario": f.scenario,
+        "variant": f.variant,
+        "mode": f.mode,
+        "n_agents": f.n_agents,
+        "dt_s": f.dt_s,
+        "steps": f.steps,
+        "byte_order": "little",
+        "encoding": "application/octet-stream;<type_name>",
+        "keys": keys,
+        "types": types,
+    })
+}
+
+/// What an export is started with.
+#[derive(Debug, Clone)]
+pub struct ExportConfig {
+    /// The run.
+    pub facts: RunFacts,
+    /// iceoryx2 prefix of the run.
+    pub prefix: String,
+    /// Endpoints to listen on (`tcp/ADDR:PORT`); beyond loopback only with `auth`.
+    pub listen: Vec<String>,
+    /// `user:password` file (mode 0600): the readers admitted (every line), as for a daemon.
+    pub auth: Option<PathBuf>,
+}
+
+impl ExportConfig {
+    /// The Zenoh session options (checked: endpoints, the loopback rule, the credentials file).
+    pub fn options(&self) -> Options {
+        Options {
+            mode: Mode::Export,
+            listen: self.listen.clone(),
+            connect: Vec::new(),
+            auth: self.auth.clone(),
+            lease_ms: crate::session::DEFAULT_LEASE_MS,
+        }
+    }
+}
+
+/// Counters of an export.
+#[derive(Debug, Default)]
+pub struct Stats {
+    /// Zenoh puts made.
+    pub puts: AtomicU64,
+    /// Wake-ups of the export thread.
+    pub wakes: AtomicU64,
+    /// Info queries answered.
+    pub queries: AtomicU64,
+}
+
+/// A running export; stopped (after a last drain) and joined on drop.
+pub struct Export {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+    /// Its counters.
+    pub stats: Arc<Stats>,
+    _queryable: zenoh::query::Queryable<()>,
+    session: zenoh::Session,
+}
+
+impl Drop for Export {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        let _ = self.session.close().wait();
+    }
+}
+
+/// The export thread's ports.
+struct Readers {
+    wake: Wake,
+    steps: Sub<[StepEntry]>,
+    reference: Input<ReferenceFrame>,
+    events: Input<RuntimeEvent>,
+    telemetry: Vec<Input<AgentTelemetry>>,
+}
+
+impl Readers {
+    fn open(node: &ports::RunNode, n: usize) -> Result<Readers, String> {
+        let e = |e: PortError| format!("export: {e}");
+        Ok(Readers {
+            wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named()).map_err(e)?,
+            steps: ports::slice_subscriber(node, &services::STEPS.named()).map_err(e)?,
+            reference: ports::subscriber(node, &services::REFERENCE.named()).map_err(e)?,
+            events: ports::subscriber(node, &services::RUNTIME_EVENTS.named()).map_err(e)?,
+            telemetry: (0..n)
+                .map(|i| ports::subscriber(node, &services::TELEMETRY.at(i)).map_err(e))
+                .collect::<Result<_, _>>()?,
+        })
+    }
+}
+
+/// The bytes of a `#[repr(C)]` wire value.
+fn bytes_of<T: Message>(v: &T) -> &[u8] {
+    // SAFETY: T is a `#[repr(C)]`, `Copy` wire type without uninitialised padding (the wire
+    // contract: every padding is an explicit `_pad` field), so all its bytes are initialised.
+    unsafe { std::slice::from_raw_parts(v as *const T as *const u8, size_of::<T>()) }
+}
+
+/// A Zenoh publisher and whether any subscriber matches it now (kept by Zenoh's matching
+/// listener): without a reader nothing is copied or sent.
+struct Out {
+    publisher: zenoh::pubsub::Publisher<'static>,
+    matching: Arc<AtomicBool>,
+}
+
+impl Out {
+    fn declare(s: &zenoh::Session, key: String, type_name: &str) -> Result<Out, String> {
+        let publisher = s
+            .declare_publisher(key)
+            .encoding(encoding(type_name))
+            .congestion_control(CongestionControl::Drop)
+            .wait()
+            .map_err(|e| format!("export: cannot declare a publisher: {e}"))?;
+        let matching = Arc::new(AtomicBool::new(false));
+        let flag = matching.clone();
+        publisher
+            .matching_listener()
+            .callback(move |m| flag.store(m.matching(), Ordering::Relaxed))
+            .background()
+            .wait()
+            .map_err(|e| format!("export: cannot watch for readers: {e}"))?;
+        Ok(Out {
+            publisher,
+            matching,
+        })
+    }
+
+    /// Whether a reader subscribes to it.
+    fn wanted(&self) -> bool {
+        self.matching.load(Ordering::Relaxed)
+    }
+
+    fn put(&self, bytes: &[u8], stats: &Stats) {
+        // Drop congestion control: a full link drops the sample here, it never waits.
+        if self.wanted() && self.publisher.put(bytes.to_vec()).wait().is_ok() {
+            stats.puts.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// The Zenoh publishers of one run.
+struct Writers {
+    states: Vec<Out>,
+    steps: Out,
+    reference: Out,
+    events: Out,
+    telemetry: Vec<Out>,
+}
+
+impl Writers {
+    fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, String> {
+        let p = |topic: &str, agent: Option<usize>, type_name: &str| {
+            Out::declare(s, key(run_id, topic, agent), type_name)
+        };
+        Ok(Writers {
+            states: (1..=n)
+                .map(|a| p("state", Some(a), wire_type_name::<VehicleState>()))
+                .collect::<Result<_, _>>()?,
+            steps: p("steps", None, wire_type_name::<StepEntry>())?,
+            reference: p("reference", None, wire_type_name::<ReferenceFrame>())?,
+            events: p("events", None, wire_type_name::<RuntimeEvent>())?,
+            telemetry: (1..=n)
+                .map(|a| p("telemetry", Some(a), wire_type_name::<AgentTelemetry>()))
+                .collect::<Result<_, _>>()?,
+        })
+    }
+}
+
+/// Drains every reader and puts what it held; the number of samples read.
+fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
+    let mut n = 0;
+    let e = |e: PortError| format!("export: {e}");
+    while let Some(s) = r
+        .steps
+        .receive()
+        .map_err(|e| format!("export: {}: {e:?}", services::STEPS.pattern))?
+    {
+        let entries: &[StepEntry] = s.payload();
+        for (entry, p) in entries.iter().zip(&w.states) {
+            p.put(bytes_of(&entry.truth.state), stats);
+        }
+        // SAFETY: a slice of `#[repr(C)]` wire values, read as the bytes they lie in.
+        let all = unsafe {
+            std::slice::from_raw_parts(entries.as_ptr() as *const u8, size_of_val(entries))
+        };
+        w.steps.put(all, stats);
+        n += 1;
+    }
+    while let Some(s) = r.reference.receive().map_err(e)? {
+        w.reference.put(bytes_of(s.payload()), stats);
+        n += 1;
+    }
+    while let Some(s) = r.events.receive().map_err(e)? {
+        w.events.put(bytes_of(s.payload()), stats);
+        n += 1;
+    }
+    for (t, p) in r.telemetry.iter().zip(&w.telemetry) {
+        while let Some(s) = t.receive().map_err(e)? {
+            p.put(bytes_of(s.payload()), stats);
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
+/// An export whose Zenoh session is open (its endpoints bound, the info answered) and whose
+/// thread is not started yet: the run's services do not exist yet.
+pub struct Listening {
+    cfg: ExportConfig,
+    session: zenoh::Session,
+    queryable: zenoh::query::Queryable<()>,
+    writers: Writers,
+    stats: Arc<Stats>,
+}
+
+impl Listening {
+    /// Opens the Zenoh session listening on `cfg.listen` (a refused endpoint, a missing or
+    /// unsafe credentials file, a port in use: an error naming it), declares the info queryable
+    /// and the publishers.
+    pub fn open(cfg: ExportConfig) -> Result<Listening, String> {
+        let session = cfg.options().open().map_err(|e| e.to_string())?;
+        let info = serde_json::to_vec(&info_json(&cfg.facts)).expect("JSON of plain values");
+        let stats = Arc::new(Stats::default());
+        let answered = stats.clone();
+        let queryable = session
+            .declare_queryable(info_key(&cfg.facts.run_id))
+            .callback(move |q| {
+                let _ = q
+                    .reply(q.key_expr().clone(), info.clone())
+                    .encoding(Encoding::APPLICATION_JSON)
+                    .wait();
+                answered.queries.fetch_add(1, Ordering::Relaxed);
+            })
+            .wait()
+            .map_err(|e| format!("export: cannot declare the info queryable: {e}"))?;
+        let writers = Writers::declare(&session, &cfg.facts.run_id, cfg.facts.n_agents)?;
+        Ok(Listening {
+            cfg,
+            session,
+            queryable,
+            writers,
+            stats,
+        })
+    }
+
+    /// Starts the export thread once the run's services exist; returns when its iceoryx2 ports
+    /// are open, so no sample of the run's first step is missed.
+    pub fn start(self) -> Result<Export, String> {
+        let Listening {
+            cfg,
+            session,
+            queryable,
+            writers,
+            stats,
+        } = self;
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
+        let thread = {
+            let (stop, stats) = (stop.clone(), stats.clone());
+            std::thread::Builder::new()
+                .name("export".into())
+                .spawn(move || run(cfg, writers, stop, stats, ready_tx))
+                .map_err(|e| format!("export: cannot start a thread: {e}"))?
+        };
+        let mut export = Export {
+            stop,
+            thread: Some(thread),
+            stats,
+            _queryable: queryable,
+            session,
+        };
+        match ready_rx.recv() {
+            Ok(Ok(())) => Ok(export),
+            Ok(Err(e)) => Err(e),
+            Err(_) => {
+                // The thread ended without a word: its panic, if any, is joined here.
+                export.thread.take().map(|t| t.join());
+                Err("export: the thread ended before it was ready".into())
+            }
+        }
+    }
+}
+
+fn run(
+    cfg: ExportConfig,
+    writers: Writers,
+    stop: Arc<AtomicBool>,
+    stats: Arc<Stats>,
+    ready: mpsc::Sender<Result<(), String>>,
+) {
+    // Background priority: the role processes and the recorder go first; a starved export only
+    // loses samples (its queues overflow), it never holds them back.
+    formation_config::node::sched::background_thread();
+    let node = match ipc::node(&cfg.prefix, "fm-export") {
+        Ok(n) => n,
+        Err(e) => {
+            let _ = ready.send(Err(format!("export: {e}")));
+            return;
+        }
+    };
+    let readers = match Readers::open(&node, cfg.facts.n_agents) {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = ready.send(Err(e));
+            return;
+        }
+    };
+    let _ = ready.send(Ok(()));
+    loop {
+        // Read before draining: samples published up to the stop are still put.
+        let stopping = stop.load(Ordering::SeqCst);
+        if let Err(e) = drain(&readers, &writers, &stats) {
+            tracing::warn!("{e}");
+        }
+        if stopping {
+            break;
+        }
+        stats.wakes.fetch_add(1, Ordering::Relaxed);
+        if let Err(e) = readers.wake.wait(IDLE_WAKE) {
+            tracing::warn!("export: {e}");
+            std::thread::sleep(IDLE_WAKE);
+        }
+    }
+    drop(readers);
+    drop(node);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts() -> RunFacts {
+        RunFacts {
+            run_id: "1a2b".into(),
+            scenario: "paper".into(),
+            variant: "proposed".into(),
+            mode: "lockstep".into(),
+            n_agents: 5,
+            dt_s: 0.001,
+            steps: 30000,
+        }
+    }
+
+    #[test]
+    fn keys_name_the_run_the_topic_and_the_one_based_agent() {
+        assert_eq!(key("1a2b", "state", Some(1)), "formation/1a2b/state/1");
+        assert_eq!(key("1a2b", "reference", None), "formation/1a2b/reference");
+        assert_eq!(info_key("1a2b"), "formation/1a2b/info");
+    }
+
+    #[test]
+    fn the_encoding_carries_the_versioned_wire_type_name() {
+        assert_eq!(
+            encoding(wire_type_name::<VehicleState>()).to_string(),
+            "application/octet-stream;formation.v2.VehicleState"
+        );
+    }
+
+    #[test]
+    fn the_info_gives_every_key_its_type_size_and_the_field_offsets_a_decoder_needs() {
+        let v = info_json(&facts());
+        assert_eq!(v["format"], INFO_FORMAT);
+        assert_eq!(
+            (v["n_agents"].as_u64(), v["dt_s"].as_f64()),
+            (Some(5), Some(0.001))
+        );
+        let keys = v["keys"].as_array().unwrap();
+        let state = keys.iter().find(|k| k["topic"] == "state").unwrap();
+        assert_eq!(state["key"], "formation/1a2b/state/<agent>");
+        assert_eq!(state["type_name"], "formation.v2.VehicleState");
+        assert_eq!(state["size"], size_of::<VehicleState>());
+        let steps = keys.iter().find(|k| k["topic"] == "steps").unwrap();
+        assert_eq!(steps["samples_per_payload"], 5);
+        assert_eq!(steps["size"], size_of::<StepEntry>());
+        // Every key's type has its layout in the info, with the offset of each field.
+        let types = v["types"].as_array().unwrap();
+        for k in keys {
+            let t = types.iter().find(|t| t["type"] == k["type"]).unwrap();
+            assert_eq!(t["size"], k["size"]);
+        }
+        let vs = types.iter().find(|t| t["type"] == "VehicleState").unwrap();
+        let pos = vs["fields"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|f| f["name"] == "position")
+            .unwrap();
+        assert_eq!(pos["offset"], std::mem::offset_of!(VehicleState, position));
+    }
+
+    #[test]
+    fn a_state_payload_is_the_plant_truth_state_bytes() {
+        let mut e = StepEntry::default();
+        e.truth.state.position = [1.0, -2.0, 3.5];
+        e.truth.state.step = 42;
+        let b = bytes_of(&e.truth.state);
+        assert_eq!(b.len(), size_of::<VehicleState>());
+        let at = std::mem::offset_of!(VehicleState, position);
+        assert_eq!(
+            f64::from_le_bytes(b[at + 8..at + 16].try_into().unwrap()),
+            -2.0
+        );
+        assert_eq!(u64::from_le_bytes(b[0..8].try_into().unwrap()), 42);
+    }
+}

@@ -1,0 +1,163 @@
+//! `formation run --zenoh-listen ENDPOINT`: the run's telemetry for readers on other machines over
+//! Zenoh (crate `formation-net`, [`formation_net::export`]; docs/multi-host.md, "Outside clients
+//! over the network"). Without the `multihost` feature the flag is refused with exit 2.
+
+/// Options of `formation run` for outside readers over the network.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ExportArgs {
+    /// Publish the run's telemetry over Zenoh for readers on other machines (Python
+    /// `formation_client.net`, any `eclipse-zenoh` program): listen on this endpoint, e.g.
+    /// `tcp/127.0.0.1:7448` (repeatable; default: no export). Beyond loopback only with
+    /// `--auth FILE`, whose users are the readers admitted. Keys: docs/multi-host.md.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub zenoh_listen: Vec<String>,
+}
+
+impl ExportArgs {
+    /// Whether the run exports anything (it then takes one outside-observer slot).
+    pub fn enabled(&self) -> bool {
+        !self.zenoh_listen.is_empty()
+    }
+}
+
+/// What the export tells readers of the run.
+#[derive(Debug, Clone)]
+pub struct Facts<'a> {
+    /// Run id.
+    pub run_id: &'a str,
+    /// The run's scenario.
+    pub scenario: &'a formation_config::Scenario,
+    /// Controller variant.
+    pub variant: &'a str,
+    /// `lockstep` or `realtime`.
+    pub mode: &'a str,
+}
+
+#[cfg(feature = "multihost")]
+mod on {
+    use super::{ExportArgs, Facts};
+    use formation_net::export::{Export, ExportConfig, Listening, RunFacts};
+    use std::path::Path;
+
+    /// The export with its endpoints bound, before the run's services exist.
+    pub struct Opened(Listening);
+
+    /// The running export: stopped (after a last drain of the run's services) when dropped.
+    pub struct Running(#[allow(dead_code)] Export);
+
+    /// Binds the endpoints of `--zenoh-listen` (`None` without it); an endpoint refused, a
+    /// missing or unsafe `--auth` file or a port in use is an error naming it (exit 2).
+    pub fn open(
+        args: &ExportArgs,
+        auth: Option<&Path>,
+        prefix: &str,
+        f: &Facts,
+    ) -> Result<Option<Opened>, String> {
+        if !args.enabled() {
+            return Ok(None);
+        }
+        let cfg = ExportConfig {
+            facts: RunFacts {
+                run_id: f.run_id.to_string(),
+                scenario: f.scenario.name.clone(),
+                variant: f.variant.to_string(),
+                mode: f.mode.to_string(),
+                n_agents: f.scenario.n_agents(),
+                dt_s: f.scenario.simulation.dt_s,
+                steps: f.scenario.n_steps(),
+            },
+            prefix: prefix.to_string(),
+            listen: args.zenoh_listen.clone(),
+            auth: auth.map(Path::to_path_buf),
+        };
+        Listening::open(cfg)
+            .map(|l| Some(Opened(l)))
+            .map_err(|e| format!("--zenoh-listen: {e}"))
+    }
+
+    impl Opened {
+        /// Starts reading the run's services (they must exist).
+        pub fn start(self) -> Result<Running, String> {
+            self.0.start().map(Running)
+        }
+    }
+}
+
+#[cfg(not(feature = "multihost"))]
+mod on {
+    use super::{ExportArgs, Facts};
+    use std::path::Path;
+
+    /// Never built without the `multihost` feature.
+    pub enum Opened {}
+
+    /// Never built without the `multihost` feature.
+    pub enum Running {}
+
+    /// `--zenoh-listen` is refused: this build has no Zenoh.
+    pub fn open(
+        args: &ExportArgs,
+        _: Option<&Path>,
+        _: &str,
+        _: &Facts,
+    ) -> Result<Option<Opened>, String> {
+        if args.enabled() {
+            return Err(super::NO_ZENOH.into());
+        }
+        Ok(None)
+    }
+
+    impl Opened {
+        /// Unreachable.
+        pub fn start(self) -> Result<Running, String> {
+            match self {}
+        }
+    }
+}
+
+/// The refusal of `--zenoh-listen` by a build without the `multihost` feature.
+#[cfg_attr(feature = "multihost", allow(dead_code))]
+pub const NO_ZENOH: &str = "--zenoh-listen: this formation was built without the `multihost` \
+     feature (Zenoh); build it with default features to export a run over the network";
+
+pub use on::{open, Opened, Running};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn facts_of(s: &formation_config::Scenario) -> Facts<'_> {
+        Facts {
+            run_id: "t1",
+            scenario: s,
+            variant: "proposed",
+            mode: "lockstep",
+        }
+    }
+
+    #[test]
+    fn without_the_flag_nothing_is_opened() {
+        let s = formation_config::Scenario::paper();
+        let none = ExportArgs {
+            zenoh_listen: vec![],
+        };
+        assert!(!none.enabled());
+        assert!(open(&none, None, "fmt1_", &facts_of(&s)).unwrap().is_none());
+    }
+
+    #[test]
+    fn listening_beyond_loopback_without_auth_is_refused_naming_the_flag() {
+        let s = formation_config::Scenario::paper();
+        let wide = ExportArgs {
+            zenoh_listen: vec!["tcp/0.0.0.0:7448".into()],
+        };
+        let e = open(&wide, None, "fmt1_", &facts_of(&s))
+            .err()
+            .expect("refused");
+        assert!(e.starts_with("--zenoh-listen"), "{e}");
+        #[cfg(feature = "multihost")]
+        assert!(e.contains("requires authentication"), "{e}");
+        #[cfg(not(feature = "multihost"))]
+        assert_eq!(e, NO_ZENOH);
+    }
+}
