@@ -430,17 +430,54 @@ impl Visitor for Opener<'_> {
     }
 }
 
+/// Frames a receiving thread holds before Zenoh's receiving thread blocks (a full FIFO blocks it).
+pub const FRAME_QUEUE: usize = 4096;
+
+/// The publisher of a stream of frames to `key`: `CongestionControl::Block` (nothing is dropped),
+/// `Priority::RealTime`, `express` (no batching delay: the frame is the batch), remote subscribers
+/// only. The bridges and the bare Zenoh cases of `formation bench` ([`crate::bench`]) send with it.
+pub fn frame_publisher(
+    session: &zenoh::Session,
+    key: String,
+) -> Result<zenoh::pubsub::Publisher<'static>, String> {
+    session
+        .declare_publisher(key)
+        .congestion_control(CongestionControl::Block)
+        .priority(Priority::RealTime)
+        .express(true)
+        .allowed_destination(Locality::Remote)
+        .wait()
+        .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))
+}
+
+/// A subscriber of frames sent to `key` with [`frame_publisher`]: one FIFO of [`FRAME_QUEUE`]
+/// frames, so they stay in order; remote publishers only.
+pub fn frame_subscriber(
+    session: &zenoh::Session,
+    key: String,
+) -> Result<
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    String,
+> {
+    session
+        .declare_subscriber(key)
+        .with(zenoh::handlers::FifoChannel::new(FRAME_QUEUE))
+        .allowed_origin(Locality::Remote)
+        .wait()
+        .map_err(|e| format!("bridge: cannot subscribe: {e}"))
+}
+
 const KIND_SAMPLE: u8 = 0;
 const KIND_EVENT: u8 = 1;
 const KIND_FROM: u8 = 2;
 
-fn put_from(frame: &mut Vec<u8>, host: &str) {
+pub(crate) fn put_from(frame: &mut Vec<u8>, host: &str) {
     frame.push(KIND_FROM);
     frame.extend_from_slice(&(host.len() as u16).to_le_bytes());
     frame.extend_from_slice(host.as_bytes());
 }
 
-fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
+pub(crate) fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
     frame.push(KIND_SAMPLE);
     frame.extend_from_slice(&(name.len() as u16).to_le_bytes());
     frame.extend_from_slice(name.as_bytes());
@@ -450,7 +487,7 @@ fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
     frame.extend_from_slice(bytes);
 }
 
-fn put_event(frame: &mut Vec<u8>, name: &str) {
+pub(crate) fn put_event(frame: &mut Vec<u8>, name: &str) {
     frame.push(KIND_EVENT);
     frame.extend_from_slice(&(name.len() as u16).to_le_bytes());
     frame.extend_from_slice(name.as_bytes());
@@ -624,12 +661,7 @@ fn run_in(
         let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
         let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
         let (keep, ins) = (o.keep, o.ins);
-        let sub = session
-            .declare_subscriber(proto::run_to(&cfg.run_id, &cfg.me))
-            .with(zenoh::handlers::FifoChannel::new(4096))
-            .allowed_origin(Locality::Remote)
-            .wait()
-            .map_err(|e| format!("bridge: cannot subscribe: {e}"))?;
+        let sub = frame_subscriber(&session, proto::run_to(&cfg.run_id, &cfg.me))?;
         Ok((node, keep, ins, sub))
     };
     let (node, _keep, mut ins, sub) = match setup() {
@@ -765,16 +797,7 @@ fn run_out(
             Opener::visit_all(&node, &cfg, &hosts, true, std::mem::take(&mut old)).and_then(|o| {
                 let mut pubs = Vec::new();
                 for h in &hosts {
-                    pubs.push(
-                        session
-                            .declare_publisher(proto::run_to(&cfg.run_id, h))
-                            .congestion_control(CongestionControl::Block)
-                            .priority(Priority::RealTime)
-                            .express(true)
-                            .allowed_destination(Locality::Remote)
-                            .wait()
-                            .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))?,
-                    );
+                    pubs.push(frame_publisher(&session, proto::run_to(&cfg.run_id, h))?);
                 }
                 Ok((o.topics, o.events, pubs))
             });

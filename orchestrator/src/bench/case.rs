@@ -128,6 +128,7 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Stri
             let peers = spawn(ctx, idx, case, Some(port))?;
             measure(ctx, case, &mut link, peers)
         }
+        Transport::Zenoh => Err("zenoh is measured by its own cases (bench::zenoh)".into()),
     }
 }
 
