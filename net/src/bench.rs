@@ -7,9 +7,9 @@
 //!   ([`crate::bridge::frame_publisher`]: `CongestionControl::Block`, `express`,
 //!   `Priority::RealTime`).
 //! * [`StepPattern`]: what crosses between the launcher and one host in one lockstep step of a
-//!   placement, as bridge records (service name, wire type name, size): the plant's states of
-//!   that host's agents and their wake-ups out, their commands and the plant's wake-up back, and
-//!   the neighbour shares that cross in either direction. [`Records::frame`] builds the one frame
+//!   placement, as bridge records (service name, wire type name, size): the leader's reference
+//!   and the plant's states of that host's agents with their wake-ups out, their commands and the
+//!   plant's wake-up back, and the neighbour shares that cross in either direction. [`Records::frame`] builds the one frame
 //!   a direction of a step takes at best, in the bridges' format ([`crate::bridge::parse_frame`]
 //!   reads it).
 
@@ -18,8 +18,8 @@ use crate::cluster::LAUNCHER;
 use crate::plan::{agent_index, Placement};
 use crate::session::{self, Mode, Options};
 use formation_config::protocol::services::{
-    wire_type_name, Message, Named, Topic, CONTROL_COMMAND, NEIGHBOUR_STATE, VEHICLE_STATE,
-    WAKE_AGENT, WAKE_PLANT,
+    wire_type_name, Message, Named, Topic, CONTROL_COMMAND, NEIGHBOUR_STATE, REFERENCE,
+    VEHICLE_STATE, WAKE_AGENT, WAKE_PLANT,
 };
 use formation_config::Scenario;
 use std::time::Duration;
@@ -177,7 +177,8 @@ impl PerStep<'_> {
 
 impl StepPattern {
     /// The records of one lockstep step between the launcher and `host` for `placement`: the
-    /// states, shares and commands its bridges forward ([`Placement::route`]), each agent's
+    /// leader's reference (one a step, published ahead of the plant), the states, shares and
+    /// commands its bridges forward ([`Placement::route`]), each agent's
     /// wake-up with its state (the plant wakes the agent it sent a state to) and the plant's
     /// wake-up with the commands (an agent wakes the plant after its command). A neighbour's
     /// wake-up after a share crosses only at step 0 or when that neighbour's delay is under one
@@ -196,6 +197,7 @@ impl StepPattern {
             },
         };
         let n = placement.agent_hosts.len();
+        p.add(REFERENCE.named())?;
         for i in 0..n {
             p.add(VEHICLE_STATE.at(i))?;
         }
@@ -308,6 +310,7 @@ mod tests {
         assert_eq!(
             names(&p.out),
             [
+                "formation/reference",
                 "formation/agent/3/state",
                 "formation/agent/4/state",
                 "formation/agent/2/share"
@@ -327,7 +330,7 @@ mod tests {
         );
         assert_eq!(p.back.events, ["formation/wake/plant"]);
         let state = size_of::<formation_config::protocol::wire::VehicleState>();
-        assert_eq!(p.out.samples[0].2, state);
+        assert_eq!(p.out.samples[1].2, state);
         assert!(StepPattern::of(&paper_split(), LAUNCHER).is_err());
     }
 

@@ -6,9 +6,10 @@
 //! * ping-pong: one message of the `--payload` sizes (default: the state down, the command up)
 //!   each way per sample.
 //! * fan-out: per step one frame launcher -> host with what a lockstep step of the paper's split
-//!   placement sends there (the remote agents' states and wake-ups, the share across the cut
-//!   edge), answered by one frame host -> launcher (their commands, the share back, the plant's
-//!   wake-up), in the bridges' frame format, each read back and checked as a bridge reads it.
+//!   placement sends there (the leader's reference, the remote agents' states and wake-ups, the
+//!   share across the cut edge), answered by one frame host -> launcher (their commands, the share
+//!   back, the plant's wake-up), in the bridges' frame format, each read back and checked as a
+//!   bridge reads it.
 
 use super::case::Ctx;
 use super::link::{self, Link, Msg, Sizes, Wait, MIN_PAYLOAD};
