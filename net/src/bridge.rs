@@ -6,9 +6,10 @@
 //!
 //! * **out** sleeps on a WaitSet of the local listeners of the forwarded events (and wakes every
 //!   [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry). After a wake-up it
-//!   drains the listeners *first*, then every forwarded subscriber, and sends one frame per
-//!   destination host with the samples before the events: a sample published before a
-//!   notification is therefore always delivered before that notification is re-raised.
+//!   drains the listeners *first*, then every forwarded subscriber, again until a pass finds
+//!   nothing (at most [`DRAIN_PASSES`]), and sends one frame per destination host with each
+//!   pass's samples before its events: a sample published before a notification is therefore
+//!   always delivered before that notification is re-raised.
 //! * **in** receives this host's frames (one Zenoh subscriber, so frames stay in order) and
 //!   publishes each sample into the local service, then notifies each event. On a host other
 //!   than the launcher it first creates every service of the run (limits as the orchestrator's).
@@ -52,6 +53,12 @@ use zenoh::Wait;
 
 /// How long the out thread sleeps at most without a wake-up (samples that come without one).
 pub const IDLE_WAKE: Duration = Duration::from_millis(50);
+
+/// Drain passes (listeners, then subscribers) whose records go into one frame per destination at
+/// most: after a wake-up the out thread drains again until a pass finds nothing, so the commands
+/// of two agents of a host finishing a step moments apart cross in one frame; bounded so that a
+/// steady stream still goes out.
+pub const DRAIN_PASSES: usize = 4;
 
 /// What a bridge is for.
 #[derive(Debug, Clone)]
@@ -833,35 +840,44 @@ fn run_out(
             if let Ok(r) = replan.try_recv() {
                 break Some(r);
             }
-            // Events first: any sample published before a notification we saw is in its queue now.
-            let mut any = false;
-            for (k, e) in events.iter().enumerate() {
-                let mut got = false;
-                let _ = e.listener.try_wait(|_| got = true);
-                fired[k] = got;
-                any |= got;
-            }
-            for t in topics.iter_mut() {
-                let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
-                let r = (t.drain)(&mut |bytes| {
-                    for &d in dests {
-                        put_sample(&mut frames[d], name, type_name, bytes);
-                    }
-                });
-                match r {
-                    Ok(n) => {
-                        any |= n > 0;
-                        stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
-                    }
-                    Err(e) => tracing::warn!("bridge: {name}: {e}"),
+            // Pass after pass until one finds nothing (at most DRAIN_PASSES), into the same
+            // frames: what comes in while the bridge drains goes out with it.
+            let mut more = false;
+            for _ in 0..DRAIN_PASSES {
+                more = false;
+                // Events first: any sample published before a notification we saw is in its
+                // queue now; each pass appends its samples, then its events.
+                for (k, e) in events.iter().enumerate() {
+                    let mut got = false;
+                    let _ = e.listener.try_wait(|_| got = true);
+                    fired[k] = got;
+                    more |= got;
                 }
-            }
-            for (k, e) in events.iter().enumerate() {
-                if fired[k] {
-                    for &d in &e.dests {
-                        put_event(&mut frames[d], &e.name);
+                for t in topics.iter_mut() {
+                    let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
+                    let r = (t.drain)(&mut |bytes| {
+                        for &d in dests {
+                            put_sample(&mut frames[d], name, type_name, bytes);
+                        }
+                    });
+                    match r {
+                        Ok(n) => {
+                            more |= n > 0;
+                            stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
+                        }
+                        Err(e) => tracing::warn!("bridge: {name}: {e}"),
                     }
-                    stats.events_out.fetch_add(1, Ordering::Relaxed);
+                }
+                for (k, e) in events.iter().enumerate() {
+                    if fired[k] {
+                        for &d in &e.dests {
+                            put_event(&mut frames[d], &e.name);
+                        }
+                        stats.events_out.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                if !more {
+                    break;
                 }
             }
             for (d, f) in frames.iter_mut().enumerate() {
@@ -872,7 +888,7 @@ fn run_out(
                     stats.frames_out.fetch_add(1, Ordering::Relaxed);
                 }
             }
-            if any {
+            if more {
                 continue;
             }
             if guards.is_empty() {
