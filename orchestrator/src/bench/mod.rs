@@ -340,7 +340,7 @@ fn run_round(
 #[cfg(feature = "multihost")]
 fn run_zenoh(ctx: &case::Ctx, first: usize, seconds: f64, rows: &mut Vec<report::Row>) -> usize {
     let mut failures = 0;
-    for (k, pattern) in [zenoh::Pattern::PingPong, zenoh::Pattern::FanOut]
+    for (k, pattern) in [plan::Pattern::PingPong, plan::Pattern::FanOut]
         .into_iter()
         .enumerate()
     {

@@ -11,16 +11,16 @@
 //!   back, the plant's wake-up), in the bridges' frame format, each read back and checked as a
 //!   bridge reads it.
 
-use super::case::Ctx;
+use super::case::{measure_with, Ctx};
 use super::link::{self, Link, Msg, Sizes, Wait, MIN_PAYLOAD};
+use super::plan::Pattern;
 use super::procs::Peers;
 use super::report::Row;
 use super::PeerArgs;
 use formation_net::bench::{self as zb, Records, Side, StepPattern};
 use formation_net::cluster::LAUNCHER;
-use std::cell::{Cell, RefCell};
 use std::io;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Bytes before a frame's records: the bench header ([`Msg`], padded).
 const HEADER: usize = MIN_PAYLOAD;
@@ -34,29 +34,11 @@ const EXIT_GRACE: Duration = Duration::from_secs(5);
 
 use super::versus::ZENOH as TRANSPORT;
 
-/// What a bare Zenoh case sends.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Pattern {
-    /// One message each way per sample.
-    PingPong,
-    /// One frame of a split lockstep step each way per sample.
-    FanOut,
-}
-
-impl Pattern {
-    /// Name in the report and on the peer's command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            Pattern::PingPong => "ping-pong",
-            Pattern::FanOut => "fan-out",
-        }
-    }
-
-    fn parse(s: &str) -> Option<Pattern> {
-        [Pattern::PingPong, Pattern::FanOut]
-            .into_iter()
-            .find(|p| p.name() == s)
-    }
+/// The pattern named `s` (`ping-pong`, `fan-out`).
+fn parse_pattern(s: &str) -> Option<Pattern> {
+    [Pattern::PingPong, Pattern::FanOut]
+        .into_iter()
+        .find(|p| p.name() == s)
 }
 
 /// What one end sends after the header.
@@ -197,20 +179,7 @@ pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern) -> Result<Row, String> {
         from: u32::MAX,
         hello: false,
     };
-    let peers = RefCell::new(peers);
-    let last_check = Cell::new(Instant::now());
-    let alive = || {
-        if last_check.get().elapsed() < Duration::from_millis(20) {
-            return true;
-        }
-        last_check.set(Instant::now());
-        peers.borrow_mut().all_alive()
-    };
-    let hist = link::run_plant(&mut l, 1, Wait::Block, ctx.budget, &alive)?;
-    peers
-        .into_inner()
-        .finish(EXIT_GRACE)
-        .map_err(|e| format!("peer: {e}"))?;
+    let hist = measure_with(ctx, (1, Wait::Block), &mut l, peers, EXIT_GRACE)?;
     Ok(Row::of(
         (TRANSPORT, pattern.name(), "block"),
         n,
@@ -228,7 +197,7 @@ pub fn peer(a: &PeerArgs) -> Result<(), String> {
     let pattern = a
         .pattern
         .as_deref()
-        .and_then(Pattern::parse)
+        .and_then(parse_pattern)
         .ok_or("--pattern ping-pong or fan-out is required for zenoh")?;
     let (body, expect) = match pattern {
         Pattern::PingPong => (Body::Filler(a.payload), None),
