@@ -164,11 +164,7 @@ impl PerStep<'_> {
         {
             self.pattern.out.samples.push(record.clone());
         }
-        if route(self.host)?
-            .out_to
-            .iter()
-            .any(|h| *h == self.placement.launcher)
-        {
+        if route(self.host)?.out_to.contains(&self.placement.launcher) {
             self.pattern.back.samples.push(record);
         }
         Ok(())
