@@ -6,9 +6,10 @@
 //!
 //! * **out** sleeps on a WaitSet of the local listeners of the forwarded events (and wakes every
 //!   [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry). After a wake-up it
-//!   drains the listeners *first*, then every forwarded subscriber, and sends one frame per
-//!   destination host with the samples before the events: a sample published before a
-//!   notification is therefore always delivered before that notification is re-raised.
+//!   drains the listeners *first*, then every forwarded subscriber, again until a pass finds
+//!   nothing (at most [`DRAIN_PASSES`]), and sends one frame per destination host with each
+//!   pass's samples before its events: a sample published before a notification is therefore
+//!   always delivered before that notification is re-raised.
 //! * **in** receives this host's frames (one Zenoh subscriber, so frames stay in order) and
 //!   publishes each sample into the local service, then notifies each event. On a host other
 //!   than the launcher it first creates every service of the run (limits as the orchestrator's).
@@ -52,6 +53,12 @@ use zenoh::Wait;
 
 /// How long the out thread sleeps at most without a wake-up (samples that come without one).
 pub const IDLE_WAKE: Duration = Duration::from_millis(50);
+
+/// Drain passes (listeners, then subscribers) whose records go into one frame per destination at
+/// most: after a wake-up the out thread drains again until a pass finds nothing, so the commands
+/// of two agents of a host finishing a step moments apart cross in one frame; bounded so that a
+/// steady stream still goes out.
+pub const DRAIN_PASSES: usize = 4;
 
 /// What a bridge is for.
 #[derive(Debug, Clone)]
@@ -430,17 +437,54 @@ impl Visitor for Opener<'_> {
     }
 }
 
+/// Frames a receiving thread holds before Zenoh's receiving thread blocks (a full FIFO blocks it).
+pub const FRAME_QUEUE: usize = 4096;
+
+/// The publisher of a stream of frames to `key`: `CongestionControl::Block` (nothing is dropped),
+/// `Priority::RealTime`, `express` (no batching delay: the frame is the batch), remote subscribers
+/// only. The bridges and the bare Zenoh cases of `formation bench` ([`crate::bench`]) send with it.
+pub fn frame_publisher(
+    session: &zenoh::Session,
+    key: String,
+) -> Result<zenoh::pubsub::Publisher<'static>, String> {
+    session
+        .declare_publisher(key)
+        .congestion_control(CongestionControl::Block)
+        .priority(Priority::RealTime)
+        .express(true)
+        .allowed_destination(Locality::Remote)
+        .wait()
+        .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))
+}
+
+/// A subscriber of frames sent to `key` with [`frame_publisher`]: one FIFO of [`FRAME_QUEUE`]
+/// frames, so they stay in order; remote publishers only.
+pub fn frame_subscriber(
+    session: &zenoh::Session,
+    key: String,
+) -> Result<
+    zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    String,
+> {
+    session
+        .declare_subscriber(key)
+        .with(zenoh::handlers::FifoChannel::new(FRAME_QUEUE))
+        .allowed_origin(Locality::Remote)
+        .wait()
+        .map_err(|e| format!("bridge: cannot subscribe: {e}"))
+}
+
 const KIND_SAMPLE: u8 = 0;
 const KIND_EVENT: u8 = 1;
 const KIND_FROM: u8 = 2;
 
-fn put_from(frame: &mut Vec<u8>, host: &str) {
+pub(crate) fn put_from(frame: &mut Vec<u8>, host: &str) {
     frame.push(KIND_FROM);
     frame.extend_from_slice(&(host.len() as u16).to_le_bytes());
     frame.extend_from_slice(host.as_bytes());
 }
 
-fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
+pub(crate) fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
     frame.push(KIND_SAMPLE);
     frame.extend_from_slice(&(name.len() as u16).to_le_bytes());
     frame.extend_from_slice(name.as_bytes());
@@ -450,7 +494,7 @@ fn put_sample(frame: &mut Vec<u8>, name: &str, type_name: &str, bytes: &[u8]) {
     frame.extend_from_slice(bytes);
 }
 
-fn put_event(frame: &mut Vec<u8>, name: &str) {
+pub(crate) fn put_event(frame: &mut Vec<u8>, name: &str) {
     frame.push(KIND_EVENT);
     frame.extend_from_slice(&(name.len() as u16).to_le_bytes());
     frame.extend_from_slice(name.as_bytes());
@@ -624,12 +668,7 @@ fn run_in(
         let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
         let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
         let (keep, ins) = (o.keep, o.ins);
-        let sub = session
-            .declare_subscriber(proto::run_to(&cfg.run_id, &cfg.me))
-            .with(zenoh::handlers::FifoChannel::new(4096))
-            .allowed_origin(Locality::Remote)
-            .wait()
-            .map_err(|e| format!("bridge: cannot subscribe: {e}"))?;
+        let sub = frame_subscriber(&session, proto::run_to(&cfg.run_id, &cfg.me))?;
         Ok((node, keep, ins, sub))
     };
     let (node, _keep, mut ins, sub) = match setup() {
@@ -765,16 +804,7 @@ fn run_out(
             Opener::visit_all(&node, &cfg, &hosts, true, std::mem::take(&mut old)).and_then(|o| {
                 let mut pubs = Vec::new();
                 for h in &hosts {
-                    pubs.push(
-                        session
-                            .declare_publisher(proto::run_to(&cfg.run_id, h))
-                            .congestion_control(CongestionControl::Block)
-                            .priority(Priority::RealTime)
-                            .express(true)
-                            .allowed_destination(Locality::Remote)
-                            .wait()
-                            .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))?,
-                    );
+                    pubs.push(frame_publisher(&session, proto::run_to(&cfg.run_id, h))?);
                 }
                 Ok((o.topics, o.events, pubs))
             });
@@ -810,35 +840,44 @@ fn run_out(
             if let Ok(r) = replan.try_recv() {
                 break Some(r);
             }
-            // Events first: any sample published before a notification we saw is in its queue now.
-            let mut any = false;
-            for (k, e) in events.iter().enumerate() {
-                let mut got = false;
-                let _ = e.listener.try_wait(|_| got = true);
-                fired[k] = got;
-                any |= got;
-            }
-            for t in topics.iter_mut() {
-                let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
-                let r = (t.drain)(&mut |bytes| {
-                    for &d in dests {
-                        put_sample(&mut frames[d], name, type_name, bytes);
-                    }
-                });
-                match r {
-                    Ok(n) => {
-                        any |= n > 0;
-                        stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
-                    }
-                    Err(e) => tracing::warn!("bridge: {name}: {e}"),
+            // Pass after pass until one finds nothing (at most DRAIN_PASSES), into the same
+            // frames: what comes in while the bridge drains goes out with it.
+            let mut more = false;
+            for _ in 0..DRAIN_PASSES {
+                more = false;
+                // Events first: any sample published before a notification we saw is in its
+                // queue now; each pass appends its samples, then its events.
+                for (k, e) in events.iter().enumerate() {
+                    let mut got = false;
+                    let _ = e.listener.try_wait(|_| got = true);
+                    fired[k] = got;
+                    more |= got;
                 }
-            }
-            for (k, e) in events.iter().enumerate() {
-                if fired[k] {
-                    for &d in &e.dests {
-                        put_event(&mut frames[d], &e.name);
+                for t in topics.iter_mut() {
+                    let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
+                    let r = (t.drain)(&mut |bytes| {
+                        for &d in dests {
+                            put_sample(&mut frames[d], name, type_name, bytes);
+                        }
+                    });
+                    match r {
+                        Ok(n) => {
+                            more |= n > 0;
+                            stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
+                        }
+                        Err(e) => tracing::warn!("bridge: {name}: {e}"),
                     }
-                    stats.events_out.fetch_add(1, Ordering::Relaxed);
+                }
+                for (k, e) in events.iter().enumerate() {
+                    if fired[k] {
+                        for &d in &e.dests {
+                            put_event(&mut frames[d], &e.name);
+                        }
+                        stats.events_out.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                if !more {
+                    break;
                 }
             }
             for (d, f) in frames.iter_mut().enumerate() {
@@ -849,7 +888,7 @@ fn run_out(
                     stats.frames_out.fetch_add(1, Ordering::Relaxed);
                 }
             }
-            if any {
+            if more {
                 continue;
             }
             if guards.is_empty() {

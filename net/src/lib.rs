@@ -8,6 +8,7 @@
 //! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
 //!   bytes with their wire type name.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
+//! * [`bench`]: bare Zenoh links and the frames of a split lockstep step, for `formation bench`.
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
@@ -18,6 +19,7 @@
 //! peers do not relay for each other). Multicast scouting is off everywhere.
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod bridge;
 pub mod clock;
 pub mod cluster;

@@ -128,6 +128,7 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Stri
             let peers = spawn(ctx, idx, case, Some(port))?;
             measure(ctx, case, &mut link, peers)
         }
+        Transport::Zenoh => Err("zenoh is measured by its own cases (bench::zenoh)".into()),
     }
 }
 
@@ -142,6 +143,19 @@ fn measure(
     link: &mut dyn Link,
     peers: Peers,
 ) -> Result<Histogram<u64>, String> {
+    let grace = EXIT_GRACE + EXIT_GRACE_PER_PEER * case.n as u32;
+    measure_with(ctx, (case.n, case.wait), link, peers, grace)
+}
+
+/// Runs the plant loop on `link` waiting for `replies` per step with `wait`, while `peers` run
+/// (checked at most every 20 ms), then gives them `grace` to exit.
+pub fn measure_with(
+    ctx: &Ctx,
+    (replies, wait): (usize, Wait),
+    link: &mut dyn Link,
+    peers: Peers,
+    grace: Duration,
+) -> Result<Histogram<u64>, String> {
     let peers = RefCell::new(peers);
     let last_check = Cell::new(Instant::now());
     let alive = || {
@@ -152,10 +166,10 @@ fn measure(
         last_check.set(Instant::now());
         peers.borrow_mut().all_alive()
     };
-    let hist = link::run_plant(link, case.n, case.wait, ctx.budget, &alive)?;
+    let hist = link::run_plant(link, replies, wait, ctx.budget, &alive)?;
     peers
         .into_inner()
-        .finish(EXIT_GRACE + EXIT_GRACE_PER_PEER * case.n as u32)
+        .finish(grace)
         .map_err(|e| format!("peers: {e}"))?;
     Ok(hist)
 }

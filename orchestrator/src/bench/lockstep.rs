@@ -8,6 +8,7 @@ use super::report::Row;
 use crate::run::step_timing::WARMUP_STEPS;
 use serde::Serialize;
 use serde_json::Value;
+use std::ffi::OsString;
 use std::path::Path;
 use std::process::{Command, Stdio};
 
@@ -23,12 +24,10 @@ const BENCH_STALL_TIMEOUT_MS: u64 = 60_000;
 /// `scratch`, and returns its row. `n = 5` runs the paper scenario; other `n` a generated path
 /// scenario (`formation scenario --n N`).
 pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
-    let exe = std::env::current_exe().map_err(|e| format!("cannot locate formation: {e}"))?;
     let out = scratch.join(format!("lockstep-n{n}"));
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let mut cmd = Command::new(exe);
-    cmd.arg("run");
+    let mut args: Vec<OsString> = Vec::new();
     if n != 5 {
         let scenario = crate::scenario_gen::generate(&crate::scenario_gen::GenOptions::new(
             n,
@@ -37,13 +36,32 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
         let path = out.join("scenario-in.toml");
         let text = toml::to_string(&scenario).map_err(|e| format!("scenario: {e}"))?;
         std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
-        cmd.arg(&path);
+        args.push(path.into());
     }
-    let dt = formation_config::Scenario::paper().simulation.dt_s;
     let steps = WARMUP_STEPS as f64 + seconds * EXPECTED_AGENT_STEPS_PER_S / n as f64;
+    let (summary, _) = run_formation(args, steps, &out)?;
+    let row = row(n, &summary["timing"])
+        .ok_or_else(|| format!("{} has no lockstep step timing", out.display()))?;
+    let _ = std::fs::remove_dir_all(&out);
+    Ok(row)
+}
+
+/// Runs `formation run ARGS` in lockstep for about `steps` steps (whole seconds of simulated
+/// time at the paper's time step) with its outputs in `out`; returns its summary.json and its
+/// stderr.
+pub fn run_formation(
+    args: Vec<OsString>,
+    steps: f64,
+    out: &Path,
+) -> Result<(Value, String), String> {
+    let exe = std::env::current_exe().map_err(|e| format!("cannot locate formation: {e}"))?;
+    let dt = formation_config::Scenario::paper().simulation.dt_s;
     let duration_s = (steps * dt).ceil();
-    cmd.arg("--out")
-        .arg(&out)
+    let output = Command::new(exe)
+        .arg("run")
+        .args(args)
+        .arg("--out")
+        .arg(out)
         .arg("--set")
         .arg(format!("simulation.duration_s={duration_s}"))
         // A benchmark on a loaded machine is slow, not hung: the run's stall detector (2 s
@@ -52,12 +70,11 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
         .arg(BENCH_STALL_TIMEOUT_MS.to_string())
         .stdin(Stdio::null())
         .stdout(Stdio::null())
-        .stderr(Stdio::piped());
-    let output = cmd
+        .stderr(Stdio::piped())
         .output()
         .map_err(|e| format!("cannot start formation run: {e}"))?;
+    let err = String::from_utf8_lossy(&output.stderr).into_owned();
     if !output.status.success() {
-        let err = String::from_utf8_lossy(&output.stderr);
         let last = err.lines().last().unwrap_or("").trim();
         return Err(format!("formation run failed ({}): {last}", output.status));
     }
@@ -65,20 +82,23 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
     let text =
         std::fs::read_to_string(&summary).map_err(|e| format!("{}: {e}", summary.display()))?;
     let v: Value = serde_json::from_str(&text).map_err(|e| format!("summary.json: {e}"))?;
-    let row = row(n, &v["timing"])
-        .ok_or_else(|| format!("{} has no lockstep step timing", summary.display()))?;
-    let _ = std::fs::remove_dir_all(&out);
-    Ok(row)
+    Ok((v, err))
 }
 
 /// The row of a lockstep run from the `timing` object of its summary.json.
 fn row(n: usize, timing: &Value) -> Option<Row> {
+    // `formation run` in lockstep: blocking waits, pinned (`--pin auto`), SCHED_BATCH.
+    row_as(("iox2-event", "block/pinned/batch"), n, timing)
+}
+
+/// The row of a lockstep run named (transport, wait) from the `timing` object of its
+/// summary.json.
+pub fn row_as((transport, wait): (&str, &str), n: usize, timing: &Value) -> Option<Row> {
     let s = &timing["step_us"];
     Some(Row {
-        transport: "iox2-event".into(),
+        transport: transport.into(),
         pattern: "lockstep".into(),
-        // `formation run` in lockstep: blocking waits, pinned (`--pin auto`), SCHED_BATCH.
-        wait: "block/pinned/batch".into(),
+        wait: wait.into(),
         n,
         payload_bytes: Sizes::lockstep_wire().down,
         payload_up_bytes: Sizes::lockstep_wire().up,

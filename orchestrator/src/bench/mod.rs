@@ -12,6 +12,9 @@
 //! * [`link`]: message header, waiting strategies, the plant and agent loops.
 //! * [`iox`], [`sock`]: the transports. [`procs`]: child processes and CPU pinning.
 //! * [`report`]: percentiles, table, JSON.
+//! * `zenoh`, `split` (cargo feature `multihost`; only with `--transports zenoh`): bare Zenoh
+//!   ping-pong and the fan-out of a split lockstep step, and the split lockstep run itself (a
+//!   `formation host` daemon on loopback); [`versus`]: the split step against that fan-out.
 
 mod case;
 mod iox;
@@ -22,6 +25,11 @@ mod plan;
 mod procs;
 mod report;
 mod sock;
+#[cfg(feature = "multihost")]
+mod split;
+mod versus;
+#[cfg(feature = "multihost")]
+mod zenoh;
 
 pub use peer::{main as peer_main, PeerArgs};
 
@@ -38,6 +46,14 @@ pub const MAX_N: usize = 200;
 
 /// Largest `--rounds`.
 pub const MAX_ROUNDS: usize = 20;
+
+/// Why `--transports zenoh` is refused by a build without Zenoh.
+#[cfg(not(feature = "multihost"))]
+const ZENOH_NEEDS_MULTIHOST: &str =
+    "transport 'zenoh' needs the cargo feature `multihost` (this formation was built without it)";
+
+/// Cases a round of `--transports zenoh` runs besides the split lockstep: ping-pong, fan-out.
+const ZENOH_CASES: usize = 2;
 
 /// Arguments of `formation bench`.
 #[derive(clap::Args, Debug)]
@@ -63,7 +79,12 @@ pub struct BenchArgs {
     /// Spin budget of the spin-then-block strategy, µs.
     #[arg(long, default_value_t = 50, value_parser = crate::cli::whole_number::<u64>, allow_negative_numbers = true)]
     pub spin_us: u64,
-    /// Only these transports (comma-separated: iox2-event, iox2-waitset, iox2-poll, uds-dgram, udp).
+    /// Only these transports (comma-separated: iox2-event, iox2-waitset, iox2-poll, uds-dgram,
+    /// udp, zenoh). `zenoh` is measured only when named: bare Zenoh ping-pong and the fan-out of
+    /// a lockstep step of the paper scenario split over two hosts (agents 4, 5 on the second),
+    /// each round alternated with that split run in lockstep (a `formation host` daemon started
+    /// on a free loopback port, with its own /dev/shm), set against each other (N = 5 whatever
+    /// `--n`; `--payload` sizes the ping-pong only).
     #[arg(long)]
     pub transports: Option<String>,
     /// Skip the lockstep case (a real `formation run` in lockstep, timed per step and set against
@@ -131,6 +152,10 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<Vec<PlanInput>, String> 
         Some(s) => parse_transports(s)?,
         None => Vec::new(),
     };
+    #[cfg(not(feature = "multihost"))]
+    if only.contains(&Transport::Zenoh) {
+        return Err(ZENOH_NEEDS_MULTIHOST.into());
+    }
     let mut ns: Vec<usize> = Vec::new();
     for &n in &a.n {
         if !ns.contains(&n) {
@@ -193,6 +218,9 @@ pub fn main(args: BenchArgs) -> ExitCode {
         }
     };
     let (cases, skipped) = plan_all(&inputs);
+    let zenoh = inputs
+        .first()
+        .is_some_and(|i| i.only.contains(&Transport::Zenoh));
     let sizes = args
         .payload
         .map_or_else(Sizes::lockstep_wire, |p| Sizes { down: p, up: p });
@@ -204,12 +232,18 @@ pub fn main(args: BenchArgs) -> ExitCode {
         warmup,
         min_warmup_samples: 20,
     };
+    let zenoh_cases = if zenoh { ZENOH_CASES } else { 0 };
     eprintln!(
-        "formation bench: iceoryx2 prefix {prefix}, {} cases x {:.2} s (+{:.2} s warm-up), messages {} B",
-        cases.len(),
+        "formation bench: iceoryx2 prefix {prefix}, {} cases x {:.2} s (+{:.2} s warm-up), messages {} B{}",
+        cases.len() + zenoh_cases,
         args.seconds,
         warmup.as_secs_f64(),
-        sizes.label()
+        sizes.label(),
+        if zenoh {
+            ", and the split lockstep run"
+        } else {
+            ""
+        }
     );
     let node = match fipc::node(&prefix, "bench-plant") {
         Ok(n) => n,
@@ -236,14 +270,11 @@ pub fn main(args: BenchArgs) -> ExitCode {
             eprintln!("round {round} of {}", args.rounds);
         }
         let mut rows = Vec::new();
-        failures += run_round(
-            &ctx,
-            &cases,
-            (round - 1) * cases.len(),
-            &inputs,
-            &args,
-            &mut rows,
-        );
+        let first = (round - 1) * (cases.len() + zenoh_cases);
+        failures += run_round(&ctx, &cases, first, &inputs, &args, &mut rows);
+        if zenoh && !procs::aborted() {
+            failures += run_zenoh(&ctx, first + cases.len(), args.seconds, &mut rows);
+        }
         rounds.push(rows);
     }
     drop(node);
@@ -256,13 +287,17 @@ pub fn main(args: BenchArgs) -> ExitCode {
         return ExitCode::from(130);
     }
     let rows = lockstep::median_rows(&rounds);
-    let comparisons = lockstep::across_rounds_per_n(&rounds);
+    let comparisons = lockstep::across_rounds_per_n(&versus::without_zenoh(&rounds));
+    let split = versus::split_vs_fan_out(&rounds);
     if args.json {
-        println!("{}", report::json(&rows, &comparisons, rounds.len()));
+        println!(
+            "{}",
+            report::json(&rows, &comparisons, rounds.len(), split.as_ref())
+        );
     } else {
         print!(
             "{}",
-            report::table(&rows, &comparisons, rounds.len(), &skipped)
+            report::table(&rows, &comparisons, rounds.len(), split.as_ref(), &skipped)
         );
     }
     if failures > 0 {
@@ -298,6 +333,66 @@ fn run_round(
         }
     }
     failures
+}
+
+/// The Zenoh cases of one round, case numbers from `first`: ping-pong, then the split step's
+/// fan-out and the split lockstep run, one after the other; returns the number that failed.
+#[cfg(feature = "multihost")]
+fn run_zenoh(ctx: &case::Ctx, first: usize, seconds: f64, rows: &mut Vec<report::Row>) -> usize {
+    let mut failures = 0;
+    for (k, pattern) in [plan::Pattern::PingPong, plan::Pattern::FanOut]
+        .into_iter()
+        .enumerate()
+    {
+        if procs::aborted() {
+            return failures;
+        }
+        let what = format!("zenoh {} block", pattern.name());
+        match zenoh::run(ctx, first + k, pattern) {
+            Ok(row) => {
+                eprintln!(
+                    "  {what}: p50 {:.1} µs, p99 {:.1} µs ({} samples)",
+                    row.p50_us, row.p99_us, row.samples
+                );
+                rows.push(row);
+            }
+            Err(e) if procs::aborted() => eprintln!("  {what}: interrupted ({e})"),
+            Err(e) => {
+                eprintln!("  {what}: FAILED: {e}");
+                failures += 1;
+            }
+        }
+    }
+    if procs::aborted() {
+        return failures;
+    }
+    let what = format!("zenoh lockstep split {}", split::place_arg());
+    let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
+    match split::run(seconds, &scratch) {
+        Ok(s) => {
+            eprintln!(
+                "  {what}: p50 {:.1} µs, mean {:.1} µs per step ({} steps; iceoryx2 prefix {})",
+                s.row.p50_us,
+                s.row.mean_us,
+                s.row.samples,
+                s.prefix.as_deref().unwrap_or("?")
+            );
+            rows.push(s.row);
+        }
+        Err(e) if procs::aborted() => eprintln!("  {what}: interrupted ({e})"),
+        Err(e) => {
+            eprintln!("  {what}: FAILED: {e}");
+            failures += 1;
+        }
+    }
+    let _ = std::fs::remove_dir_all(&scratch);
+    failures
+}
+
+/// Without Zenoh nothing runs (`--transports zenoh` is refused by [`validate`]).
+#[cfg(not(feature = "multihost"))]
+fn run_zenoh(_: &case::Ctx, _: usize, _: f64, _: &mut Vec<report::Row>) -> usize {
+    0
 }
 
 /// Runs `cases` (with their index in the round's list); returns the number that failed.

@@ -13,7 +13,7 @@ use std::time::Duration;
 /// Arguments of the hidden `formation bench-peer` (started by `formation bench` only).
 #[derive(clap::Args, Debug)]
 pub struct PeerArgs {
-    /// Transport name (`iox2-event`, `iox2-waitset`, `iox2-poll`, `uds-dgram`, `udp`).
+    /// Transport name (`iox2-event`, `iox2-waitset`, `iox2-poll`, `uds-dgram`, `udp`, `zenoh`).
     #[arg(long)]
     pub transport: String,
     /// iceoryx2 prefix of the run (also names the Unix sockets).
@@ -43,6 +43,12 @@ pub struct PeerArgs {
     /// UDP port of the plant on 127.0.0.1.
     #[arg(long)]
     pub plant_port: Option<u16>,
+    /// Zenoh: the endpoint this peer listens on (`tcp/127.0.0.1:PORT`).
+    #[arg(long)]
+    pub endpoint: Option<String>,
+    /// Zenoh: `ping-pong` or `fan-out` (the frames of a split lockstep step).
+    #[arg(long)]
+    pub pattern: Option<String>,
 }
 
 /// Entry point of `formation bench-peer`: exit 0 after STOP, 1 on failure, 2 on bad arguments.
@@ -126,5 +132,9 @@ fn run(a: &PeerArgs, transport: Transport, wait: Wait) -> Result<(), String> {
                 SockLink::agent(s, plant, a.index, a.payload, wait).map_err(|e| e.to_string())?;
             link::run_agent(&mut l, wait)
         }
+        #[cfg(feature = "multihost")]
+        Transport::Zenoh => super::zenoh::peer(a),
+        #[cfg(not(feature = "multihost"))]
+        Transport::Zenoh => Err(super::ZENOH_NEEDS_MULTIHOST.into()),
     }
 }

@@ -17,16 +17,20 @@ pub enum Transport {
     Uds,
     /// UDP on 127.0.0.1.
     Udp,
+    /// Zenoh over TCP loopback, with the sessions and frames of a run across hosts (measured by
+    /// `bench::zenoh` and `bench::split`, never planned here; only when named in `--transports`).
+    Zenoh,
 }
 
 impl Transport {
     /// Every transport, in report order.
-    pub const ALL: [Transport; 5] = [
+    pub const ALL: [Transport; 6] = [
         Transport::IoxEvent,
         Transport::IoxWaitSet,
         Transport::IoxPoll,
         Transport::Uds,
         Transport::Udp,
+        Transport::Zenoh,
     ];
 
     /// Name used in the report and on the peer command line.
@@ -37,6 +41,7 @@ impl Transport {
             Transport::IoxPoll => "iox2-poll",
             Transport::Uds => "uds-dgram",
             Transport::Udp => "udp",
+            Transport::Zenoh => "zenoh",
         }
     }
 

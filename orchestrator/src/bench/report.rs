@@ -2,6 +2,7 @@
 
 use super::link::Sizes;
 use super::plan::{Case, Pattern};
+use super::versus::{realtime_factor, SplitComparison};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
@@ -41,11 +42,30 @@ fn us(ns: f64) -> f64 {
 impl Row {
     /// Summarises the histogram (values in ns) of `case`.
     pub fn new(case: &Case, sizes: Sizes, h: &Histogram<u64>) -> Row {
+        Row::of(
+            (
+                case.transport.name(),
+                case.pattern.name(),
+                &case.wait_label(),
+            ),
+            case.n,
+            sizes,
+            h,
+        )
+    }
+
+    /// Summarises the histogram (values in ns) of a case named (transport, pattern, wait).
+    pub fn of(
+        (transport, pattern, wait): (&str, &str, &str),
+        n: usize,
+        sizes: Sizes,
+        h: &Histogram<u64>,
+    ) -> Row {
         Row {
-            transport: case.transport.name().to_string(),
-            pattern: case.pattern.name().to_string(),
-            wait: case.wait_label(),
-            n: case.n,
+            transport: transport.to_string(),
+            pattern: pattern.to_string(),
+            wait: wait.to_string(),
+            n,
             payload_bytes: sizes.down,
             payload_up_bytes: sizes.up,
             p50_us: us(h.value_at_quantile(0.5) as f64),
@@ -72,20 +92,24 @@ fn fastest_per_n(all: &[super::lockstep::Comparison]) -> Vec<&super::lockstep::C
 
 /// `{"results": [...]}`, plus, when both were measured, `lockstep_vs_fan_out` (against the
 /// fastest blocking fan-out, of the first N), `lockstep_vs_fan_out_by_n` (the same for every N)
-/// and `lockstep_vs_fan_out_cases` (against each fan-out of each N).
-pub fn json(rows: &[Row], all: &[super::lockstep::Comparison], rounds: usize) -> String {
+/// and `lockstep_vs_fan_out_cases` (against each fan-out of each N), and
+/// `zenoh_split_vs_fan_out` (the split lockstep against the bare Zenoh fan-out).
+pub fn json(
+    rows: &[Row],
+    all: &[super::lockstep::Comparison],
+    rounds: usize,
+    split: Option<&SplitComparison>,
+) -> String {
     let mut v = serde_json::json!({ "results": rows, "rounds": rounds });
     if let Some(fastest) = all.first() {
         v["lockstep_vs_fan_out"] = serde_json::json!(fastest);
         v["lockstep_vs_fan_out_by_n"] = serde_json::json!(fastest_per_n(all));
         v["lockstep_vs_fan_out_cases"] = serde_json::json!(all);
     }
+    if let Some(c) = split {
+        v["zenoh_split_vs_fan_out"] = serde_json::json!(c);
+    }
     v.to_string()
-}
-
-/// Real-time factor of a lockstep step of `step_us` at the paper's time step.
-fn realtime_factor(step_us: f64) -> f64 {
-    1e6 * formation_config::Scenario::paper().simulation.dt_s / step_us
 }
 
 /// A fixed-width table, with a note on what a sample is.
@@ -93,6 +117,7 @@ pub fn table(
     rows: &[Row],
     all: &[super::lockstep::Comparison],
     rounds: usize,
+    split: Option<&SplitComparison>,
     skipped: &[(String, String)],
 ) -> String {
     let mut s = format!(
@@ -141,6 +166,13 @@ pub fn table(
          (publish to n agents, wait for all n replies); lockstep: wall time per step of `formation \
          run` in steady state (plant + leader + n agents with the control laws).\n",
     );
+    if rows.iter().any(|r| r.transport == "zenoh") {
+        s.push_str(
+            "zenoh fan-out: one frame each way per step holding what a lockstep step of the split \
+             placement sends between the two hosts (n = the run's agents, payload = the frames); \
+             zenoh lockstep: that split run (`wait` names the placement).\n",
+        );
+    }
     if rounds > 1 {
         s.push_str(&format!(
             "{rounds} rounds: each row is the case's round with the median p50.\n"
@@ -205,6 +237,9 @@ pub fn table(
              round (range over the rounds), real time = simulated / wall time of a lockstep step \
              (1 ms steps).\n",
         );
+    }
+    if let Some(c) = split {
+        s.push_str(&super::versus::text(c));
     }
     for (what, why) in skipped {
         s.push_str(&format!("skipped {what}: {why}\n"));
