@@ -404,14 +404,25 @@ impl Agent {
         // advance them while it was down.
         let mut self_back = false;
         for m in 0..self.startup.len() {
-            let rejoin = self.p.rejoin_reference.and_then(|gains| {
+            let mut rejoin = None;
+            if let Some(gains) = self.p.rejoin_reference {
                 let (j, seen) = match m {
-                    0 => (self.p.id, k),
-                    _ => (self.p.neighbours[m - 1].0, self.usable_step(m - 1, kd)?),
+                    0 => (self.p.id, Some(k)),
+                    _ => (self.p.neighbours[m - 1].0, self.usable_step(m - 1, kd)),
                 };
-                let back = self.timeline.latest_return(j, self.rearmed[m], seen)?;
-                Some((gains, back, seen))
-            });
+                let back = seen.and_then(|s| self.timeline.latest_return(j, self.rearmed[m], s));
+                if let (Some(back), Some(seen)) = (back, seen) {
+                    self.rearmed[m] = back;
+                    self_back |= m == 0;
+                    let members = self.p.rejoin_members;
+                    let rearm = if m == 0 {
+                        members.itself()
+                    } else {
+                        members.neighbours()
+                    };
+                    rejoin = rearm.then_some((gains, seen));
+                }
+            }
             let resume = self_back && (!self.startup_set || self.startup[m].is_some());
             if rejoin.is_none() && !resume && self.startup_set && self.startup[m].is_none() {
                 continue; // off, or over: nothing to look up
@@ -431,10 +442,8 @@ impl Agent {
                 jerk: g.position.startup_blend_jerk_m_s3,
                 rate: g.position.startup_blend_rate_1_s,
             });
-            if let Some((gains, back, seen)) = rejoin {
+            if let Some((gains, seen)) = rejoin {
                 let (p, v) = state_at(m, seen);
-                self.rearmed[m] = back;
-                self_back |= m == 0;
                 self.startup[m] = Blend::resumed(p, v, t_kd, &s, gains);
             } else if resume {
                 let (p, v) = state_at(m, kd);

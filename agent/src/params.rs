@@ -1,6 +1,7 @@
 //! Parameters of one agent, taken from the scenario once at construction.
 
 use crate::startup::BlendGains;
+use formation_config::scenario::events::RejoinMembers;
 use formation_config::scenario::graph::Topology;
 use formation_config::scenario::{Controller, DelaySpec, Scenario};
 use formation_config::Variant;
@@ -51,6 +52,8 @@ pub struct AgentParams {
     /// The gains of the reference generator re-armed for a member that comes back
     /// (`runtime.rejoin_reference`, docs/failures.md); `None`: off.
     pub rejoin_reference: Option<BlendGains>,
+    /// In whose controllers it is re-armed (`runtime.rejoin_reference_for`).
+    pub rejoin_members: RejoinMembers,
 }
 
 impl AgentParams {
@@ -81,6 +84,7 @@ impl AgentParams {
                 jerk: f64::INFINITY, // unused: a re-armed generator starts with its limit up
                 rate: s.runtime.rejoin_reference_rate_1_s,
             }),
+            rejoin_members: s.runtime.rejoin_reference_for,
         }
     }
 

@@ -183,6 +183,34 @@ pub enum Fallback {
     Hover,
 }
 
+/// Whose view of a returning member `runtime.rejoin_reference` re-arms the reference generator in
+/// (docs/failures.md, bumpless re-entry).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum RejoinMembers {
+    /// Only its neighbours' controllers: they see the returning member's reference start where the
+    /// failsafe left it (zero consensus error with it), while its own controller tracks its slot
+    /// at once (the failsafe kept it near it).
+    #[default]
+    Neighbours,
+    /// Only the returning controller's own reference.
+    Itself,
+    /// Both: its own reference and its neighbours' view of it.
+    All,
+}
+
+impl RejoinMembers {
+    /// Whether the returning controller re-arms its own reference.
+    pub fn itself(self) -> bool {
+        matches!(self, RejoinMembers::Itself | RejoinMembers::All)
+    }
+
+    /// Whether a neighbour re-arms the reference of a member that came back.
+    pub fn neighbours(self) -> bool {
+        matches!(self, RejoinMembers::Neighbours | RejoinMembers::All)
+    }
+}
+
 /// `[runtime]`: supervision, checkpoints and the fallbacks of a run. Every field has a default, so
 /// scenarios without the section behave as before (no restarts).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -208,13 +236,16 @@ pub struct Runtime {
     /// the vehicle's current attitude and rate before its first command (adaptive estimates and
     /// RBFNN weights are kept). Default true.
     pub rejoin_resync: bool,
-    /// A controller that comes back re-arms the reference generator of D19 for its quadrotor, and
-    /// each of its neighbours for it: the reference starts at the quadrotor's state where the
+    /// A controller that comes back has the reference generator of D19 re-armed for its quadrotor
+    /// (in the controllers `rejoin_reference_for` names): the reference starts at the quadrotor's state where the
     /// failsafe left it and reaches its slot within `rejoin_reference_accel_m_s2`, so the
     /// returning controller and its neighbours start from zero consensus errors instead of the
     /// failsafe's tracking error (docs/failures.md, bumpless re-entry; docs/deviations.md D21).
-    /// Default false: measured better in some crash-time samples and worse in others.
+    /// Default true (measured in docs/failures.md); without events nothing of it runs.
     pub rejoin_reference: bool,
+    /// In whose controllers the generator is re-armed: `neighbours`, `itself` or `all`. Default
+    /// `neighbours` (measured in docs/failures.md).
+    pub rejoin_reference_for: RejoinMembers,
     /// a_R: largest acceleration of the re-armed reference, m/s² (the generator's a_S; its limit
     /// is up at once: the quadrotor is flying). Default 1.0 (D19's a_S).
     pub rejoin_reference_accel_m_s2: f64,
@@ -241,7 +272,8 @@ impl Default for Runtime {
             hold_s: 0.2,
             fallback: Fallback::Slot,
             rejoin_resync: true,
-            rejoin_reference: false,
+            rejoin_reference: true,
+            rejoin_reference_for: RejoinMembers::Neighbours,
             rejoin_reference_accel_m_s2: 1.0,
             rejoin_reference_rate_1_s: 0.5,
             fallback_attitude_gain: 16.0,
