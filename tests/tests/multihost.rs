@@ -455,7 +455,10 @@ fn a_twenty_ring_round_robin_over_three_hosts_with_a_remote_crash_is_byte_identi
         .lines()
         .find(|l| l.contains("formation run: agent 3 taken over at step"))
         .unwrap_or_else(|| panic!("agent 3 is taken over: {err}"));
-    assert!(takeover.contains("(warm,"), "agent 3 restarts warm: {takeover}");
+    assert!(
+        takeover.contains("(warm,"),
+        "agent 3 restarts warm: {takeover}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
