@@ -1,9 +1,11 @@
 //! One formation across several "hosts" (docs/multi-host.md): Linux network namespaces, each with
-//! its own /dev/shm and /tmp (a mount namespace with fresh tmpfs), joined by a veth pair, so no
-//! shared memory can cross; a `formation host` daemon in the second namespace, the orchestrator
-//! (plant, leader, the launcher's agents) in the first. The proof is the lockstep contract:
-//! `trajectory.csv` byte-identical to `formation sim` for the split placement, with and without a
-//! crash event, and nothing left in any namespace's /dev/shm.
+//! its own /dev/shm and /tmp (a mount namespace with fresh tmpfs), the first joined to each other
+//! one by its own veth pair (a star, as the Zenoh topology), so no shared memory can cross; a
+//! `formation host` daemon in every namespace but the first, the orchestrator (plant, leader, the
+//! launcher's agents) in the first. The proof is the lockstep contract: `trajectory.csv`
+//! byte-identical to `formation sim` for the paper split over two hosts, with and without a crash
+//! event, and for the 20-ring over three hosts with a crash, and nothing left in any namespace's
+//! /dev/shm.
 //!
 //! Needs root (namespaces, veth): skipped with a message otherwise, and required (a failure)
 //! when `FORMATION_REQUIRE_NETNS=1` (set by `.ci/run`, which runs as root).
