@@ -13,10 +13,12 @@
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
 //!
-//! The topology (docs/multi-host.md): every host daemon listens (loopback only unless
-//! authenticated); the launching orchestrator opens a Zenoh *router* session that connects to each
-//! daemon, so traffic between two remote hosts is relayed by the launching machine (Zenoh >= 1.9
-//! peers do not relay for each other). Multicast scouting is off everywhere.
+//! The topology (docs/multi-host.md): every host daemon is a Zenoh *router* that listens (loopback
+//! only unless authenticated); the launching orchestrator opens a Zenoh *router* session that
+//! connects to each daemon, so traffic between two remote hosts is routed through the launching
+//! machine (a router does not relay between the peers of its region, and Zenoh >= 1.9 peers do not
+//! relay for each other, so the daemons are routers, not peers). Multicast scouting is off
+//! everywhere.
 #![warn(missing_docs)]
 
 pub mod bench;

@@ -266,6 +266,41 @@ mod tests {
     }
 
     #[test]
+    fn a_twenty_ring_round_robin_over_three_hosts_routes_shares_between_the_daemons_without_a_loop()
+    {
+        let n = 20;
+        let names = ["a", "b", "c"];
+        let p = Placement {
+            agent_hosts: (0..n).map(|i| names[i % 3].to_string()).collect(),
+            launcher: "a".into(),
+            neighbours: Placement::neighbours_of(n, (1..=n).map(|i| (i, i % n + 1))),
+        };
+        let mut all = All::default();
+        services::visit(&Sizing::run(n, false), &mut all).unwrap();
+        for (name, s, r, scope, i) in &all.0 {
+            for me in names {
+                p.route(me, name, s, r, *scope, *i).unwrap();
+            }
+        }
+        let route = |me: &str, name: &str| {
+            let (n, s, r, scope, i) = all.0.iter().find(|x| x.0 == name).unwrap();
+            p.route(me, n, s, r, *scope, *i).unwrap()
+        };
+        // Agent 2 (b) shares with agents 1 (a) and 3 (c), and wakes agent 3 on c.
+        assert_eq!(route("b", "formation/agent/1/share").out_to, ["a", "c"]);
+        assert!(route("c", "formation/agent/1/share").inbound);
+        assert!(route("a", "formation/agent/1/share").inbound);
+        assert_eq!(route("b", "formation/wake/agent/2").out_to, ["c"]);
+        assert!(route("c", "formation/wake/agent/2").inbound);
+        // Agent 20 (b) closes the ring between agents 19 and 1, both on a.
+        assert_eq!(route("b", "formation/agent/19/share").out_to, ["a"]);
+        // The plant's state of agent 3 goes a -> c only; its command c -> a only.
+        assert_eq!(route("a", "formation/agent/2/state").out_to, ["c"]);
+        assert!(route("b", "formation/agent/2/state").is_idle());
+        assert_eq!(route("c", "formation/agent/2/command").out_to, ["a"]);
+    }
+
+    #[test]
     fn a_lost_hosts_agents_move_to_the_launcher_and_nothing_else_moves() {
         let p = Placement {
             agent_hosts: ["a", "b", "c", "b", "c"].map(String::from).to_vec(),

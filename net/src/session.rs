@@ -25,7 +25,11 @@ pub const DEFAULT_LEASE_MS: u64 = 3000;
 /// Role of a session in the topology.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
-    /// A host daemon (and its bridge): a peer that listens.
+    /// A host daemon (and its bridge): a router that listens. Not a peer: a Zenoh 1.10 router
+    /// keeps the peers connected to it in one region that it takes to be a full mesh and never
+    /// relays data from one of them to another, so two daemons that cannot reach each other
+    /// directly would exchange nothing. Routers route over their links (link state), so traffic
+    /// between two daemons goes through the orchestrator's router.
     Daemon,
     /// The launching orchestrator: a router that connects to every daemon and relays between them.
     Orchestrator,
@@ -110,8 +114,8 @@ impl Options {
                 .map_err(|e| OptionError(format!("zenoh config {k} = {v}: {e}")))
         };
         let mode = match self.mode {
-            Mode::Daemon | Mode::Export => "peer",
-            Mode::Orchestrator => "router",
+            Mode::Export => "peer",
+            Mode::Daemon | Mode::Orchestrator => "router",
             Mode::Client => "client",
         };
         set(&mut c, "mode", format!("\"{mode}\""))?;

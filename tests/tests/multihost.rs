@@ -1,9 +1,11 @@
 //! One formation across several "hosts" (docs/multi-host.md): Linux network namespaces, each with
-//! its own /dev/shm and /tmp (a mount namespace with fresh tmpfs), joined by a veth pair, so no
-//! shared memory can cross; a `formation host` daemon in the second namespace, the orchestrator
-//! (plant, leader, the launcher's agents) in the first. The proof is the lockstep contract:
-//! `trajectory.csv` byte-identical to `formation sim` for the split placement, with and without a
-//! crash event, and nothing left in any namespace's /dev/shm.
+//! its own /dev/shm and /tmp (a mount namespace with fresh tmpfs), the first joined to each other
+//! one by its own veth pair (a star, as the Zenoh topology), so no shared memory can cross; a
+//! `formation host` daemon in every namespace but the first, the orchestrator (plant, leader, the
+//! launcher's agents) in the first. The proof is the lockstep contract: `trajectory.csv`
+//! byte-identical to `formation sim` for the paper split over two hosts, with and without a crash
+//! event, and for the 20-ring over three hosts with a crash, and nothing left in any namespace's
+//! /dev/shm.
 //!
 //! Needs root (namespaces, veth): skipped with a message otherwise, and required (a failure)
 //! when `FORMATION_REQUIRE_NETNS=1` (set by `.ci/run`, which runs as root).
@@ -330,29 +332,43 @@ fn assert_no_residue(what: &str, residue: &str) {
     );
 }
 
-fn split_run_matches_sim(tag: &str, scenario: &str, duration: &str, place: &str) {
+/// Runs `formation run ARGS PLACE` over `count` hosts (a daemon on every host but the launcher)
+/// and asserts the lockstep contract: exit 0, every remote host named, nothing left in any
+/// namespace's /dev/shm or /tmp/iceoryx2, `trajectory.csv` byte-identical to `formation sim
+/// ARGS`. Returns the run's stderr.
+fn spread_run_matches_sim(tag: &str, count: usize, args: &[&str], place: &[&str]) -> String {
     let dir = work_dir(tag);
-    let mut hosts = Hosts::new(2, &dir);
-    hosts.start_daemon(1, &dir, &[]);
-    let set = format!("simulation.duration_s={duration}");
+    let mut hosts = Hosts::new(count, &dir);
+    for h in 1..count {
+        hosts.start_daemon(h, &dir, &[]);
+    }
     let out = dir.join("run");
-    let (code, err, residue) = run_in(
-        &hosts,
-        &dir,
-        &[scenario, "--set", &set, "--hosts", "h1", "--place", place],
-        &out,
-        true,
-    );
-    assert_eq!(code, 0, "formation run over two hosts failed:\n{err}");
-    assert!(
-        err.contains("on h1"),
-        "the run names the remote host: {err}"
-    );
+    let run_args: Vec<&str> = args.iter().chain(place).copied().collect();
+    let (code, err, residue) = run_in(&hosts, &dir, &run_args, &out, true);
+    assert_eq!(code, 0, "formation run over {count} hosts failed:\n{err}");
+    for h in 1..count {
+        assert!(
+            err.contains(&format!("on h{h}")),
+            "the run names the remote host h{h}: {err}"
+        );
+    }
     assert_no_residue("the launcher", &residue);
-    let left = hosts.stop_daemons();
-    assert_no_residue("host h1", &left[0]);
-    formation_tests::assert_trajectory_is_sims(&out, &[scenario, "--set", &set], &dir.join("sim"));
+    for (h, left) in hosts.stop_daemons().iter().enumerate() {
+        assert_no_residue(&format!("host h{}", h + 1), left);
+    }
+    formation_tests::assert_trajectory_is_sims(&out, args, &dir.join("sim"));
     let _ = std::fs::remove_dir_all(&dir);
+    err
+}
+
+fn split_run_matches_sim(tag: &str, scenario: &str, duration: &str, place: &str) {
+    let set = format!("simulation.duration_s={duration}");
+    spread_run_matches_sim(
+        tag,
+        2,
+        &[scenario, "--set", &set],
+        &["--hosts", "h1", "--place", place],
+    );
 }
 
 #[test]
@@ -374,6 +390,78 @@ fn a_crash_of_a_remote_agent_is_taken_over_warm_on_its_host_byte_identical_to_si
     // crash-warm.toml crashes agent 3 at t = 20 s for 0.5 s; agent 3 is on the second host.
     let scenario = formation_tests::workspace_root().join("config/scenarios/crash-warm.toml");
     split_run_matches_sim("crash", scenario.to_str().unwrap(), "21", "3,4@h1");
+}
+
+/// Agents of the generated ring over three hosts, round-robin (agent i on `local`, `h1`, `h2` for
+/// i mod 3 = 1, 2, 0): every agent's two ring neighbours are on the two other hosts, so shares
+/// cross h1 <-> h2 (through the launcher, the hub of the star) as well as to and from it.
+const RING_AGENTS: usize = 20;
+/// Simulated time of the three-host run, s: three checkpoints and a crash with its warm takeover,
+/// a few seconds of wall time even on a loaded 2-core machine.
+const RING_DURATION_S: &str = "3";
+
+#[test]
+fn a_twenty_ring_round_robin_over_three_hosts_with_a_remote_crash_is_byte_identical_to_sim() {
+    if !available(
+        "a_twenty_ring_round_robin_over_three_hosts_with_a_remote_crash_is_byte_identical_to_sim",
+    ) {
+        return;
+    }
+    let dir = work_dir("ring3-files");
+    let ring = dir.join("ring-20.toml");
+    let n = RING_AGENTS.to_string();
+    let o = formation_tests::formation(&[
+        "scenario",
+        "--n",
+        &n,
+        "--graph",
+        "ring",
+        "--out",
+        ring.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", formation_tests::stderr_of(&o));
+    // Agent 3 (on h2, between agent 2 on h1 and agent 4 here) crashes at t = 2 s and is taken
+    // over warm on h2 0.5 s later from its checkpoint of t = 2 s.
+    let events = dir.join("crash.toml");
+    std::fs::write(
+        &events,
+        "[[events]]\nat_s = 2.0\nkind = \"crash\"\nagent = 3\ndown_s = 0.5\n",
+    )
+    .unwrap();
+    let set = format!("simulation.duration_s={RING_DURATION_S}");
+    let args = [
+        ring.to_str().unwrap(),
+        "--set",
+        &set,
+        "--events",
+        events.to_str().unwrap(),
+        "--restart-state",
+        "warm",
+    ];
+    let err = spread_run_matches_sim("ring3", 3, &args, &["--hosts", "h1,h2"]);
+    let ids = |first: usize| {
+        (first..=RING_AGENTS)
+            .step_by(3)
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    for (h, first) in [("h1", 2), ("h2", 3)] {
+        assert!(
+            err.contains(&format!("{} on {h}", ids(first))),
+            "agents {} placed on {h}: {err}",
+            ids(first)
+        );
+    }
+    let takeover = err
+        .lines()
+        .find(|l| l.contains("formation run: agent 3 taken over at step"))
+        .unwrap_or_else(|| panic!("agent 3 is taken over: {err}"));
+    assert!(
+        takeover.contains("(warm,"),
+        "agent 3 restarts warm: {takeover}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
