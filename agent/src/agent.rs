@@ -398,10 +398,11 @@ impl Agent {
         // Start-up reference generators (D19): every member's from its first shared state, the same
         // on all agents, advanced on the delayed time axis with the member's delayed slot. A member
         // that came back from a down window gets a fresh one from its state then (re-entry,
-        // `runtime.rejoin_reference`): itself at its first step back, a neighbour at its first
-        // usable share from then on; and a controller that comes back resumes the generators of
-        // its neighbours still running (or, cold, unknown to it) from their states then: it did not
-        // advance them while it was down.
+        // `runtime.rejoin_reference`, in the controllers `rejoin_reference_for` names): itself at
+        // its first step back, a neighbour at its first usable share from then on; and a
+        // controller that comes back resumes the generators still running (its neighbours', and
+        // its own when it does not re-arm it; cold, all it knows of) from their states then: it
+        // did not advance them while it was down.
         let mut self_back = false;
         for m in 0..self.startup.len() {
             let mut rejoin = None;

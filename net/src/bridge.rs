@@ -295,13 +295,7 @@ impl Visitor for Opener<'_> {
             let drain: Drain = Box::new(move |f| {
                 let mut n = 0;
                 while let Some(sample) = sub.receive().map_err(|e| e.to_string())? {
-                    let p: &T = sample.payload();
-                    // SAFETY: T is a `#[repr(C)]`, `Copy` wire type; its bytes are read as they lie
-                    // in the sample (the wire contract has no uninitialised padding).
-                    let bytes = unsafe {
-                        std::slice::from_raw_parts(p as *const T as *const u8, size_of::<T>())
-                    };
-                    f(bytes);
+                    f(wire_bytes(sample.payload()));
                     n += 1;
                 }
                 Ok(n)
@@ -472,6 +466,19 @@ pub fn frame_subscriber(
         .allowed_origin(Locality::Remote)
         .wait()
         .map_err(|e| format!("bridge: cannot subscribe: {e}"))
+}
+
+/// The bytes of a `#[repr(C)]` wire value as they lie in memory: what crosses between hosts and
+/// what the export puts on Zenoh.
+pub(crate) fn wire_bytes<T: Message>(v: &T) -> &[u8] {
+    wire_slice_bytes(std::slice::from_ref(v))
+}
+
+/// The bytes of consecutive `#[repr(C)]` wire values (a slice service's payload).
+pub(crate) fn wire_slice_bytes<T: Message>(v: &[T]) -> &[u8] {
+    // SAFETY: T is a `#[repr(C)]`, `Copy` wire type without uninitialised padding (the wire
+    // contract: every padding is an explicit `_pad` field), so all its bytes are initialised.
+    unsafe { std::slice::from_raw_parts(v.as_ptr() as *const u8, size_of_val(v)) }
 }
 
 const KIND_SAMPLE: u8 = 0;

@@ -28,6 +28,7 @@
 //! reader sees what it lost. A key no reader subscribes to (Zenoh's matching status) is not put
 //! at all: without readers the export only drains its queues.
 
+use crate::bridge::{wire_bytes, wire_slice_bytes};
 use crate::session::{Mode, Options};
 use formation_config::node::error::PortError;
 use formation_config::node::ipc;
@@ -303,13 +304,6 @@ impl Readers {
     }
 }
 
-/// The bytes of a `#[repr(C)]` wire value.
-fn bytes_of<T: Message>(v: &T) -> &[u8] {
-    // SAFETY: T is a `#[repr(C)]`, `Copy` wire type without uninitialised padding (the wire
-    // contract: every padding is an explicit `_pad` field), so all its bytes are initialised.
-    unsafe { std::slice::from_raw_parts(v as *const T as *const u8, size_of::<T>()) }
-}
-
 /// A Zenoh publisher and whether any subscriber matches it now (kept by Zenoh's matching
 /// listener): without a reader nothing is copied or sent.
 struct Out {
@@ -362,20 +356,23 @@ struct Writers {
 }
 
 impl Writers {
+    /// One publisher per key of [`exported`], in its order.
     fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, String> {
-        let p = |topic: &str, agent: Option<usize>, type_name: &str| {
-            Out::declare(s, key(run_id, topic, agent), type_name)
+        let [state, steps, reference, events, telemetry] = exported();
+        let one = |e: &Exported, agent: Option<usize>| {
+            Out::declare(s, key(run_id, e.topic, agent), (e.type_name)())
+        };
+        let each = |e: &Exported| {
+            (1..=n)
+                .map(|a| one(e, Some(a)))
+                .collect::<Result<Vec<Out>, String>>()
         };
         Ok(Writers {
-            states: (1..=n)
-                .map(|a| p("state", Some(a), wire_type_name::<VehicleState>()))
-                .collect::<Result<_, _>>()?,
-            steps: p("steps", None, wire_type_name::<StepEntry>())?,
-            reference: p("reference", None, wire_type_name::<ReferenceFrame>())?,
-            events: p("events", None, wire_type_name::<RuntimeEvent>())?,
-            telemetry: (1..=n)
-                .map(|a| p("telemetry", Some(a), wire_type_name::<AgentTelemetry>()))
-                .collect::<Result<_, _>>()?,
+            states: each(&state)?,
+            steps: one(&steps, None)?,
+            reference: one(&reference, None)?,
+            events: one(&events, None)?,
+            telemetry: each(&telemetry)?,
         })
     }
 }
@@ -391,26 +388,22 @@ fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
     {
         let entries: &[StepEntry] = s.payload();
         for (entry, p) in entries.iter().zip(&w.states) {
-            p.put(bytes_of(&entry.truth.state), stats);
+            p.put(wire_bytes(&entry.truth.state), stats);
         }
-        // SAFETY: a slice of `#[repr(C)]` wire values, read as the bytes they lie in.
-        let all = unsafe {
-            std::slice::from_raw_parts(entries.as_ptr() as *const u8, size_of_val(entries))
-        };
-        w.steps.put(all, stats);
+        w.steps.put(wire_slice_bytes(entries), stats);
         n += 1;
     }
     while let Some(s) = r.reference.receive().map_err(e)? {
-        w.reference.put(bytes_of(s.payload()), stats);
+        w.reference.put(wire_bytes(s.payload()), stats);
         n += 1;
     }
     while let Some(s) = r.events.receive().map_err(e)? {
-        w.events.put(bytes_of(s.payload()), stats);
+        w.events.put(wire_bytes(s.payload()), stats);
         n += 1;
     }
     for (t, p) in r.telemetry.iter().zip(&w.telemetry) {
         while let Some(s) = t.receive().map_err(e)? {
-            p.put(bytes_of(s.payload()), stats);
+            p.put(wire_bytes(s.payload()), stats);
             n += 1;
         }
     }
@@ -607,7 +600,7 @@ mod tests {
         let mut e = StepEntry::default();
         e.truth.state.position = [1.0, -2.0, 3.5];
         e.truth.state.step = 42;
-        let b = bytes_of(&e.truth.state);
+        let b = wire_bytes(&e.truth.state);
         assert_eq!(b.len(), size_of::<VehicleState>());
         let at = std::mem::offset_of!(VehicleState, position);
         assert_eq!(

@@ -237,10 +237,10 @@ pub struct Runtime {
     /// RBFNN weights are kept). Default true.
     pub rejoin_resync: bool,
     /// A controller that comes back has the reference generator of D19 re-armed for its quadrotor
-    /// (in the controllers `rejoin_reference_for` names): the reference starts at the quadrotor's state where the
-    /// failsafe left it and reaches its slot within `rejoin_reference_accel_m_s2`, so the
-    /// returning controller and its neighbours start from zero consensus errors instead of the
-    /// failsafe's tracking error (docs/failures.md, bumpless re-entry; docs/deviations.md D21).
+    /// in the controllers `rejoin_reference_for` names: the reference starts at the quadrotor's
+    /// state where the failsafe left it and reaches its slot within `rejoin_reference_accel_m_s2`,
+    /// so those controllers start from zero consensus errors with it instead of the failsafe's
+    /// tracking error (docs/failures.md, bumpless re-entry; docs/deviations.md D21).
     /// Default true (measured in docs/failures.md); without events nothing of it runs.
     pub rejoin_reference: bool,
     /// In whose controllers the generator is re-armed: `neighbours`, `itself` or `all`. Default

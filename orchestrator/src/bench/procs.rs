@@ -55,6 +55,21 @@ pub struct Peers {
     children: Vec<Child>,
 }
 
+/// Makes the child of `cmd` die (SIGKILL) with the bench process `parent` (this process's pid),
+/// also when the bench died between the fork and this call (then the child exits at once).
+pub fn die_with_bench(cmd: &mut Command, parent: i32) {
+    // SAFETY: only async-signal-safe calls (prctl, getppid, _exit) between fork and exec.
+    unsafe {
+        cmd.pre_exec(move || {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
+            if libc::getppid() != parent {
+                libc::_exit(1);
+            }
+            Ok(())
+        });
+    }
+}
+
 impl Peers {
     /// Spawns one `formation bench-peer` per argument list.
     pub fn spawn(arg_lists: Vec<Vec<String>>) -> io::Result<Peers> {
@@ -70,13 +85,10 @@ impl Peers {
                 .stdin(Stdio::null())
                 .stdout(Stdio::null())
                 .stderr(Stdio::inherit());
-            // SAFETY: only async-signal-safe calls (prctl, getppid, signal, _exit) between fork and exec.
+            die_with_bench(&mut cmd, parent);
+            // SAFETY: signal(2) is async-signal-safe.
             unsafe {
-                cmd.pre_exec(move || {
-                    libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-                    if libc::getppid() != parent {
-                        libc::_exit(1);
-                    }
+                cmd.pre_exec(|| {
                     libc::signal(libc::SIGINT, libc::SIG_IGN);
                     Ok(())
                 });

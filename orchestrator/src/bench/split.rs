@@ -20,7 +20,6 @@ use formation_net::bench::{SPLIT_AGENTS, SPLIT_HOST};
 use std::ffi::OsString;
 use std::io::Read;
 use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
-use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -93,17 +92,7 @@ impl Daemon {
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(file);
-        let parent = std::process::id() as i32;
-        // SAFETY: only async-signal-safe calls (prctl, getppid, _exit) between fork and exec.
-        unsafe {
-            cmd.pre_exec(move || {
-                libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL);
-                if libc::getppid() != parent {
-                    libc::_exit(1);
-                }
-                Ok(())
-            });
-        }
+        super::procs::die_with_bench(&mut cmd, std::process::id() as i32);
         let child = cmd
             .spawn()
             .map_err(|e| format!("cannot start `unshare` for the host daemon: {e}"))?;
