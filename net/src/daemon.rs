@@ -436,7 +436,7 @@ impl Daemon {
                 prefix: r.prefix.clone(),
                 me: self.o.name.clone(),
                 placement,
-                sizing: Sizing::run(n, r.realtime).with_observers(r.observers),
+                sizing: Sizing::for_scenario(&scenario, r.realtime, r.observers),
                 create: true,
                 clock_offsets_ns: r.clock_offsets_ns.clone(),
             },

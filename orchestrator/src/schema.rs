@@ -244,11 +244,16 @@ impl Visitor for Collect {
     }
 }
 
-/// The schema of a lockstep run of `n >= 1` agents with the default numbers of clients and
-/// observers.
+/// Largest degree of the graph [`schema`] sizes the neighbour shares for: a path, the paper's
+/// graph and `formation scenario`'s default.
+const SCHEMA_GRAPH_DEGREE: usize = 2;
+
+/// The schema of a lockstep run of `n >= 1` agents on a path graph with the default numbers of
+/// clients and observers (a run sizes the neighbour shares by its own graph's largest degree).
 pub fn schema(n: usize) -> Schema {
     let mut c = Collect(Vec::new());
-    let sizing = Sizing::run(n, false);
+    let sizing =
+        Sizing::run(n, false).with_neighbours(SCHEMA_GRAPH_DEGREE.min(n.saturating_sub(1)));
     let Ok(()) = services::visit(&sizing, &mut c);
     let types = every_type().iter().map(|t| wire_type(t, &c.0)).collect();
     Schema {
@@ -375,8 +380,10 @@ pub fn markdown(schema: &Schema) -> String {
          sample. Senders are publishers or notifiers, receivers subscribers or listeners. Limits are\n",
     );
     out.push_str(&format!(
-        "those the orchestrator creates a lockstep run of N = {} agents with (`formation schema --n N`\n\
-         prints them for another N; a realtime run has a deeper `formation/plant/steps` buffer).\n\n\
+        "those the orchestrator creates a lockstep run of N = {} agents on a path with (`formation schema\n\
+         --n N` prints them for another N; a realtime run has a deeper `formation/plant/steps` buffer;\n\
+         an agent's `share` has 2 d + 1 subscribers, d the largest degree of the run's graph: one per\n\
+         neighbour, as many for neighbours taking over, one for a host bridge).\n\n\
          Every service has room for {} outside observers (`formation run --observers K`, default {}):\n\
          K receivers (subscribers or listeners) and K nodes more than the run and its clients\n\
          (`formation inspect`, `formation inject`) need, so a program the run does not know about can\n\
@@ -508,9 +515,11 @@ mod tests {
                 .limits
         };
         let k = services::DEFAULT_OBSERVERS;
-        assert_eq!(share(9).receivers, 9 + k);
+        // On a path of 9 the share has two neighbours' slots, twice, and the bridge's; on a path
+        // of 2 one neighbour's. Every service admits every node of the run.
+        assert_eq!(share(9).receivers, 2 * 2 + 1 + k);
         assert_eq!(share(9).nodes, 9 + 4 + services::MAX_CLIENTS + k);
-        assert_eq!(share(2).receivers, 2 + k);
+        assert_eq!(share(2).receivers, 2 + 1 + k);
     }
 
     #[test]

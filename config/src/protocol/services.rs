@@ -133,6 +133,10 @@ pub struct Sizing {
     pub observers: usize,
     /// Realtime mode: the plant does not wait for the recorder (deeper step-record buffer).
     pub realtime: bool,
+    /// Most neighbours of one agent (the communication graph's largest degree d_max): it sizes
+    /// the neighbour-share services ([`Sizing::share_subscribers`]). [`Sizing::run`] assumes any
+    /// graph (N - 1); a run sets its graph's ([`Sizing::with_neighbours`]).
+    pub neighbours: usize,
 }
 
 impl Sizing {
@@ -143,7 +147,43 @@ impl Sizing {
             clients: MAX_CLIENTS,
             observers: DEFAULT_OBSERVERS,
             realtime,
+            neighbours: n.saturating_sub(1),
         }
+    }
+
+    /// What every service of a run of `scenario` is sized for: its N, room for `observers`
+    /// outside observers, its graph's largest degree for the neighbour shares, and in realtime
+    /// mode (the plant does not wait for the recorder) a deeper step-record buffer. Every host
+    /// of a run creates or opens its services with this one value.
+    pub fn for_scenario(
+        scenario: &crate::scenario::Scenario,
+        realtime: bool,
+        observers: usize,
+    ) -> Sizing {
+        let n = scenario.n_agents();
+        Sizing::run(n, realtime)
+            .with_observers(observers)
+            .with_neighbours(scenario.graph.max_degree(n))
+    }
+
+    /// The same run for a graph whose agents have at most `d_max` neighbours
+    /// (`Graph::max_degree`).
+    pub fn with_neighbours(self, d_max: usize) -> Sizing {
+        Sizing {
+            neighbours: d_max,
+            ..self
+        }
+    }
+
+    /// Subscribers of one agent's neighbour share ([`NEIGHBOUR_STATE`]), observers aside: each
+    /// neighbour's, the same again for neighbours restarted while the subscriber of the process
+    /// they replace is not yet cleaned up, and one for the host bridge of a multi-host run.
+    /// A publisher walks every subscriber slot of its service on each send (iceoryx2 0.10
+    /// `Sender::deliver_offset`, twice more to reclaim returned chunks), so the share is sized
+    /// by the graph and not by N: 2 d_max + 1 slots (5 on a ring) rather than N (docs/runtime.md,
+    /// "Cost of a step at scale").
+    pub fn share_subscribers(&self) -> usize {
+        2 * self.neighbours + 1
     }
 
     /// The same run with room for `k` outside observers.
@@ -434,7 +474,7 @@ pub static NEIGHBOUR_STATE: Topic<NeighbourState> = Topic {
     subscribers: &[Neighbours],
     history: 0,
     doc: "agent i's shared position and velocity, stamped with its step",
-    limits: |s| s.limits(1, s.n.max(1), LOCKSTEP_BUFFER),
+    limits: |s| s.limits(1, s.share_subscribers(), LOCKSTEP_BUFFER),
     _message: PhantomData,
 };
 
@@ -616,6 +656,30 @@ mod tests {
         // event exactly one listener.
         assert_eq!(VEHICLE_STATE.limits(&own).receivers, 1);
         assert_eq!(WAKE_AGENT.limits(&own).receivers, 1);
+    }
+
+    #[test]
+    fn a_share_has_slots_for_its_graph_neighbours_twice_and_the_bridge_not_for_every_agent() {
+        // The paper's path: agents 2..4 have two neighbours.
+        let paper = crate::scenario::Scenario::paper();
+        let s = Sizing::for_scenario(&paper, false, 0);
+        assert_eq!(s.neighbours, 2);
+        assert_eq!(NEIGHBOUR_STATE.limits(&s).receivers, 2 * 2 + 1);
+        // A 128-agent ring: five slots (plus observers) where N would have given 128.
+        let ring = Sizing::run(128, false).with_observers(0).with_neighbours(2);
+        assert_eq!(NEIGHBOUR_STATE.limits(&ring).receivers, 5);
+        // Without a graph, any graph: every other agent may be a neighbour.
+        let any = Sizing::run(128, false).with_observers(0);
+        assert!(NEIGHBOUR_STATE.limits(&any).receivers > 127);
+        // Only the shares depend on the graph.
+        let (mut a, mut b) = (Names::default(), Names::default());
+        visit(&ring, &mut a).unwrap();
+        visit(&any, &mut b).unwrap();
+        for ((name, la), (_, lb)) in a.0.iter().zip(&b.0) {
+            if !name.ends_with("/share") {
+                assert_eq!(la, lb, "{name}");
+            }
+        }
     }
 
     #[test]

@@ -252,6 +252,24 @@ pub struct Graph {
     pub leader_broadcast: LeaderBroadcast,
 }
 
+impl Graph {
+    /// The largest number of neighbours any agent has (its degree in the undirected graph; 0 for
+    /// a graph without edges). It sizes the neighbour-share services: agent i's share has one
+    /// subscriber per neighbour ([`crate::protocol::services::Sizing::with_neighbours`]). Edges
+    /// are counted as listed (a validated graph lists each once; see `validate`).
+    pub fn max_degree(&self, n: usize) -> usize {
+        let mut degree = vec![0usize; n];
+        for e in &self.edges {
+            for end in [e.a, e.b] {
+                if let Some(d) = end.checked_sub(1).and_then(|i| degree.get_mut(i)) {
+                    *d += 1;
+                }
+            }
+        }
+        degree.into_iter().max().unwrap_or(0)
+    }
+}
+
 /// Information structure of the leader's data (D17).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -67,9 +67,10 @@ pub struct RunArgs {
     )]
     pub rt_priority: u32,
     /// CPU placement of plant and agents: `auto` (lockstep: plant on the first CPU this process
-    /// may use, agent i on the CPU i + 1 places further, round-robin; realtime: not pinned),
-    /// `off`, or a CPU list such as `0,1` or `0-3` (plant on the first). Leader and orchestrator
-    /// are never pinned. See docs/runtime.md, "Cost of a step".
+    /// may use with 4/5 of an even share of the agents, spread over the order, the other agents
+    /// round-robin over the other CPUs; realtime: not pinned), `off`, or a CPU list such as `0,1`
+    /// or `0-3` (plant on the first, agent i on the CPU i + 1 places further, round-robin).
+    /// Leader and orchestrator are never pinned. See docs/runtime.md, "Cost of a step".
     #[arg(long, default_value = "auto", value_name = "auto|off|CPUS")]
     pub pin: String,
     /// Outside observers the run makes room for: K spare subscribers / listeners on every service
@@ -421,12 +422,10 @@ fn run(
         eprintln!("warning: {e}");
     }
     let node = ipc::node(prefix, "fm-orchestrator").map_err(|e| e.to_string())?;
-    let services = services::RunServices::create(&node, n, mode.realtime, mode.observers)?;
+    let sizing = names::Sizing::for_scenario(scenario, mode.realtime, mode.observers);
+    let services = services::RunServices::create(&node, sizing)?;
     if let Some(r) = &remote {
-        r.start_bridge(
-            prefix,
-            names::Sizing::run(n, mode.realtime).with_observers(mode.observers),
-        )?;
+        r.start_bridge(prefix, sizing)?;
     }
     // Reads the services as an outside observer from the first step on; stopped after the role
     // processes, once it has put their last samples.

@@ -3,9 +3,11 @@
 //! On a machine with fewer CPUs than processes the kernel places a woken agent next to the plant
 //! that woke it (a Unix-socket wake-up is a "sync" wake-up), so on 2 vCPUs three of five agents
 //! queued behind the plant while the other CPU idled for half of every step (seen with
-//! `perf sched timehist`). Pinning spreads them: the plant gets the first CPU of the list and
-//! agent i the CPU `i + 1` places further, round-robin, so the agents the plant wakes first run
-//! at once on the other CPUs while it finishes its step (docs/runtime.md, "Cost of a step").
+//! `perf sched timehist`). Pinning spreads them: the plant gets the first CPU, the first agent it
+//! wakes another one, so the agents the plant wakes first run at once on the other CPUs while it
+//! finishes its step (docs/runtime.md, "Cost of a step"). The automatic layout gives the plant's
+//! CPU fewer agents than the others ([`PLANT_CPU_SHARE`]): with many agents per CPU a step is
+//! over when the busiest CPU is.
 //! Leader and orchestrator are not pinned: they have slack and run wherever there is room.
 //! With at least N + 1 CPUs every process of the step gets a CPU of its own.
 
@@ -80,12 +82,25 @@ impl PinRequest {
     }
 }
 
+/// Share of the agents the plant's CPU takes in the automatic layout, against an even share
+/// (N / CPUs), as a fraction `PLANT_CPU_SHARE.0 / PLANT_CPU_SHARE.1` = 4/5. The plant's own work
+/// per step (N state publishes and wake-ups, N command receives, N RK4s, the step record) costs
+/// about what N / 5 agents do: 1.0 ms against 39 µs per agent at N = 128 (CPU per step from
+/// `/proc/<pid>/task/*/schedstat`, docs/runtime.md, "Cost of a step at scale"). When the agents
+/// must share CPUs, a step ends when the busiest CPU is done, so the plant's CPU gets fewer
+/// agents. On 2 CPUs and N = 5 this is the alternating layout (agents 2 and 4 with the plant).
+pub const PLANT_CPU_SHARE: (usize, usize) = (4, 5);
+
 /// Where each role process runs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Placement {
     cpus: Vec<usize>,
     /// Rotation of the layout (concurrent runs start on different CPUs).
     offset: usize,
+    /// The automatic layout: the plant's CPU takes [`PLANT_CPU_SHARE`] of an even share of the
+    /// agents, the others go round-robin over the other CPUs. Otherwise (an explicit list) agent
+    /// i takes the CPU `i + 1` places after the plant's in the list.
+    weighted: bool,
 }
 
 impl Placement {
@@ -104,10 +119,12 @@ impl Placement {
             PinRequest::Auto => Some(Placement {
                 cpus: allowed.to_vec(),
                 offset: others % allowed.len(),
+                weighted: true,
             }),
             PinRequest::Cpus(c) => Some(Placement {
                 cpus: c.clone(),
                 offset: 0,
+                weighted: false,
             }),
         }
     }
@@ -119,7 +136,21 @@ impl Placement {
 
     /// CPU of agent `i` (0-based).
     pub fn agent(&self, i: usize) -> usize {
-        self.cpus[(self.offset + i + 1) % self.cpus.len()]
+        let c = self.cpus.len();
+        if !self.weighted || c < 2 {
+            return self.cpus[(self.offset + i + 1) % c];
+        }
+        // Agent at position p = i + 1 joins the plant when floor(q p) steps up between p and
+        // p + 1, q = (4/5) / c: evenly spread, q of all agents, never agent 1 (it starts at once
+        // on another CPU). The j-th of the others takes the (j mod (c - 1))-th other CPU.
+        let (num, den) = (PLANT_CPU_SHARE.0, PLANT_CPU_SHARE.1 * c);
+        let p = i + 1;
+        let with_plant_before = num * p / den;
+        if num * (p + 1) / den > with_plant_before {
+            return self.plant();
+        }
+        let j = i - with_plant_before;
+        self.cpus[(self.offset + 1 + j % (c - 1)) % c]
     }
 
     /// One line for the log and the console, e.g. `plant cpu 0, agents 1 0 1 0 1`.
@@ -140,6 +171,26 @@ mod tests {
         let agents: Vec<usize> = (0..5).map(|i| p.agent(i)).collect();
         assert_eq!(agents, [1, 0, 1, 0, 1]);
         assert_eq!(p.describe(5), "plant cpu 0, agents 1 0 1 0 1");
+    }
+
+    #[test]
+    fn on_two_cpus_the_plants_cpu_takes_two_fifths_of_many_agents() {
+        let p = Placement::resolve(&PinRequest::Auto, false, &[0, 1], 0).unwrap();
+        for n in [20usize, 50, 100, 128] {
+            let with_plant = (0..n).filter(|&i| p.agent(i) == p.plant()).count();
+            // 4/5 of an even share: 2/5 of the agents (rounded down), spread over the order.
+            assert_eq!(with_plant, (2 * (n + 1)) / 5, "N = {n}");
+            assert_ne!(p.agent(0), p.plant(), "the first agent woken runs at once");
+            let first_half = (0..n / 2).filter(|&i| p.agent(i) == p.plant()).count();
+            assert!(
+                first_half.abs_diff(with_plant / 2) <= 1,
+                "N = {n}: evenly spread"
+            );
+        }
+        // An explicit list keeps its order: agent i on the CPU i + 1 places after the plant's.
+        let listed = Placement::resolve(&PinRequest::Cpus(vec![0, 1]), false, &[0, 1], 0).unwrap();
+        let agents: Vec<usize> = (0..6).map(|i| listed.agent(i)).collect();
+        assert_eq!(agents, [1, 0, 1, 0, 1, 0]);
     }
 
     #[test]

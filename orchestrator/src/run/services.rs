@@ -69,20 +69,12 @@ impl Visitor for Creator<'_> {
 }
 
 impl RunServices {
-    /// Creates every service of a run with `n` agents and room for `observers` outside
-    /// observers. In realtime mode the plant does not wait for the recorder, so the step records
-    /// get a deeper buffer.
-    pub fn create(
-        node: &RunNode,
-        n: usize,
-        realtime: bool,
-        observers: usize,
-    ) -> Result<RunServices, PortError> {
+    /// Creates every service of a run sized by `sizing` (`Sizing::for_scenario`).
+    pub fn create(node: &RunNode, sizing: Sizing) -> Result<RunServices, PortError> {
         let mut creator = Creator {
             node,
             keep: Vec::new(),
         };
-        let sizing = Sizing::run(n, realtime).with_observers(observers);
         services::visit(&sizing, &mut creator)?;
         Ok(RunServices {
             _keep: creator.keep,
