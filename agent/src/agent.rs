@@ -264,7 +264,12 @@ impl Agent {
 
     /// The step k - tau_i(t_k)/dt whose information the control of step k uses.
     pub fn delayed_step(&self, step: u64) -> u64 {
-        let d = delay_steps(self.delay_at(step), self.p.dt).min(self.own.capacity() as u64 - 2);
+        self.delayed_step_by(step, self.delay_at(step))
+    }
+
+    /// [`Agent::delayed_step`] for tau_i(t_k) = `tau` already computed ([`Agent::delay_at`]).
+    fn delayed_step_by(&self, step: u64, tau: f64) -> u64 {
+        let d = delay_steps(tau, self.p.dt).min(self.own.capacity() as u64 - 2);
         step.saturating_sub(d)
     }
 
@@ -385,7 +390,7 @@ impl Agent {
     pub fn step(&mut self, own: &VehicleState) -> ControlCommand {
         let k = own.step;
         let tau = self.delay_at(k);
-        let kd = self.delayed_step(k);
+        let kd = self.delayed_step_by(k, tau);
         let g = &self.p.gains;
         let (p_d, v_d) = self
             .own

@@ -155,7 +155,7 @@ impl AttitudeLoop {
         let phi = -self.delta_hat + j.component_mul(&inner2);
         // (43), plus the known probe of D16 (zero when identification is off).
         let unit_probe = self.identifier.unit_probe(step);
-        let torque = phi.component_div(&self.gamma_hat) + self.identifier.probe(step);
+        let torque = phi.component_div(&self.gamma_hat) + self.identifier.probe_of(unit_probe);
         let lo = Vector3::from(p.torque_min);
         let hi = Vector3::from(p.torque_max);
         let expected = self.gamma_hat.component_mul(&torque) + self.delta_hat;

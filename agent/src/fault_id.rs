@@ -120,7 +120,13 @@ impl FaultIdentifier {
 
     /// The probe a s_k added to U_iAC at step k, N m.
     pub fn probe(&self, step: u64) -> Vector3<f64> {
-        self.amplitude * self.unit_probe(step)
+        self.probe_of(self.unit_probe(step))
+    }
+
+    /// The probe a s for the unit probe `s` of [`FaultIdentifier::unit_probe`] (computed once per
+    /// step), N m.
+    pub fn probe_of(&self, s: f64) -> Vector3<f64> {
+        self.amplitude * s
     }
 
     /// Closes the pending sample with the rate `w` now measured (Omega_{k+1}), then holds the command `u`

@@ -77,28 +77,32 @@ impl Rbfnn {
     /// Evaluates Psi_i at the delayed (P, V) and returns F-hat_iP = W-hat^T Psi (eq. (11)).
     pub fn evaluate(&mut self, p: [f64; 3], v: [f64; 3]) -> [f64; 3] {
         let mut out = [0.0; 3];
-        let (n_p, n_v) = (self.l / self.n_v, self.n_v);
-        for k in 0..3 {
+        let (n_p, n_v, l) = (self.l / self.n_v, self.n_v, self.l);
+        // The centres form a grid, so exp(-(dx² + dy²)/mu²) = exp(-dx²/mu²) exp(-dy²/mu²): n_p + n_v
+        // exponentials per axis instead of l. Scratch for the velocity factors, shared by the axes.
+        let mut gy = [0.0; MAX_NEURONS];
+        for (k, out_k) in out.iter_mut().enumerate() {
             let x = p[k] * self.inv_pos_span;
             let y = v[k] * self.inv_vel_span;
-            // The centres form a grid, so exp(-(dx² + dy²)/mu²) = exp(-dx²/mu²) exp(-dy²/mu²).
-            let mut gx = [0.0; MAX_NEURONS];
-            let mut gy = [0.0; MAX_NEURONS];
-            for (a, g) in gx.iter_mut().enumerate().take(n_p) {
-                let dx = x - self.centres[a * n_v];
-                *g = (-dx * dx * self.inv_spread_sq).exp();
-            }
-            for (b, g) in gy.iter_mut().enumerate().take(n_v) {
-                let dy = y - self.vel_centres[b];
+            for (g, c) in gy[..n_v].iter_mut().zip(&self.vel_centres[..n_v]) {
+                let dy = y - c;
                 *g = (-dy * dy * self.inv_spread_sq).exp();
             }
+            // Neuron j = a n_v + b (position centre a, velocity centre b), in increasing j: the sum
+            // runs in the order of the definition.
             let mut acc = 0.0;
-            for j in 0..self.l {
-                let psi = gx[j / n_v] * gy[j % n_v];
-                self.psi[k][j] = psi;
-                acc += self.weights[k][j] * psi;
+            let psi_rows = self.psi[k][..l].chunks_exact_mut(n_v);
+            let w_rows = self.weights[k][..l].chunks_exact(n_v);
+            let centres = self.centres[..l].iter().step_by(n_v);
+            for ((psi_row, w_row), c) in psi_rows.zip(w_rows).zip(centres).take(n_p) {
+                let dx = x - c;
+                let gx = (-dx * dx * self.inv_spread_sq).exp();
+                for ((psi, w), g) in psi_row.iter_mut().zip(w_row).zip(&gy[..n_v]) {
+                    *psi = gx * g;
+                    acc += w * *psi;
+                }
             }
-            out[k] = acc;
+            *out_k = acc;
         }
         out
     }
@@ -106,10 +110,10 @@ impl Rbfnn {
     /// One Euler step of the update law (15): W-hat' = kappa (Psi (K_P e_P + K_V e_V) - K_W W-hat),
     /// with the Psi of the last [`Rbfnn::evaluate`].
     pub fn update(&mut self, drive: [f64; 3], kappa: f64, leakage: f64, dt: f64) {
-        for k in 0..3 {
-            for j in 0..self.l {
-                let w = self.weights[k][j];
-                self.weights[k][j] = w + dt * kappa * (self.psi[k][j] * drive[k] - leakage * w);
+        let l = self.l;
+        for ((w_row, psi_row), d) in self.weights.iter_mut().zip(&self.psi).zip(drive) {
+            for (w, psi) in w_row[..l].iter_mut().zip(&psi_row[..l]) {
+                *w = *w + dt * kappa * (psi * d - leakage * *w);
             }
         }
     }

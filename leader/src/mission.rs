@@ -89,7 +89,11 @@ impl Mission {
 
     /// Virtual leader P_d(t) with derivatives, per axis.
     pub fn leader(&self, t: f64) -> [Jet; 3] {
-        let tg = self.target(t);
+        self.leader_on(t, &self.target(t))
+    }
+
+    /// [`Mission::leader`] with T_g(t) given (the frame computes it once for both).
+    fn leader_on(&self, t: f64, tg: &[Jet; 2]) -> [Jet; 3] {
         let s = rise(self.convergence_rate, t);
         let one_minus_s = s.scale(-1.0).add(Jet::constant(1.0));
         let x = s.mul(tg[0]).add(one_minus_s.scale(self.start_xy[0]));
@@ -105,10 +109,20 @@ impl Mission {
 
     /// Ring radius A_t of agent `i`'s ring (0-based) with derivatives.
     pub fn radius(&self, i: usize, t: f64) -> Jet {
+        self.radius_on(i, self.radius_down(t))
+    }
+
+    /// The agent-independent part of [`Mission::radius`]: 1 - smooth_step(k, T1, t), which goes
+    /// from 1 (cover) to 0 (enclose).
+    fn radius_down(&self, t: f64) -> Jet {
         // atan(k (T1 - t))/pi + 1/2 = 1 - smooth_step(k, T1, t)
-        let down = smooth_step(self.radius_sharpness, self.t1, t)
+        smooth_step(self.radius_sharpness, self.t1, t)
             .scale(-1.0)
-            .add(Jet::constant(1.0));
+            .add(Jet::constant(1.0))
+    }
+
+    /// [`Mission::radius`] of agent `i` from [`Mission::radius_down`] at the same time.
+    fn radius_on(&self, i: usize, down: Jet) -> Jet {
         down.scale(self.cover_radius[i] - self.enclose_radius[i])
             .add(Jet::constant(self.enclose_radius[i]))
     }
@@ -126,8 +140,15 @@ impl Mission {
 
     /// Lambda_i(t) of agent `i` (0-based), per axis (z is 0).
     pub fn lambda(&self, i: usize, t: f64) -> [Jet; 2] {
-        let a = self.radius(i, t);
-        let angle = self.spin_angle(t).add(Jet::constant(self.phases[i]));
+        self.lambda_on(i, self.radius_down(t), self.spin_angle(t))
+    }
+
+    /// [`Mission::lambda`] from the agent-independent parts at the same time, [`Mission::radius_down`]
+    /// and [`Mission::spin_angle`]: a frame computes them once for all agents (the same values,
+    /// bit for bit, as computing them per agent).
+    fn lambda_on(&self, i: usize, down: Jet, spin: Jet) -> [Jet; 2] {
+        let a = self.radius_on(i, down);
+        let angle = spin.add(Jet::constant(self.phases[i]));
         let (s, c) = angle.sin_cos();
         [a.mul(c), a.mul(s)]
     }
@@ -140,15 +161,16 @@ impl Mission {
         out.n_agents = self.n as u32;
         let tg = self.target(t);
         out.target = [tg[0].v, tg[1].v, 0.0];
-        let pd = self.leader(t);
+        let pd = self.leader_on(t, &tg);
         for k in 0..3 {
             out.p_d[k] = pd[k].v;
             out.v_d[k] = pd[k].d;
             out.a_d[k] = pd[k].dd;
         }
         let mut mean = [Jet::default(); 2];
+        let (down, spin) = (self.radius_down(t), self.spin_angle(t));
         for i in 0..self.n {
-            let l = self.lambda(i, t);
+            let l = self.lambda_on(i, down, spin);
             for k in 0..2 {
                 out.offset[i][k] = l[k].v;
                 out.offset_vel[i][k] = l[k].d;

@@ -1,7 +1,8 @@
 //! Eq. (1)-(2) of one quadrotor and a fixed-step RK4 with the inputs held over the step.
 
 use crate::kinematics::AttitudeTrig;
-use crate::perturbations::{disturbance, model_perturbation, uncertainty};
+use crate::memo::{Direct, Math};
+use crate::perturbations::{disturbance_with, model_perturbation_with, uncertainty};
 use formation_config::scenario::AgentSpec;
 use nalgebra::Vector3;
 
@@ -80,9 +81,14 @@ pub struct TimeTerms {
 impl TimeTerms {
     /// The terms of agent `spec` at time `t`.
     pub fn at(spec: &AgentSpec, t: f64) -> TimeTerms {
+        TimeTerms::at_with(spec, t, &mut Direct)
+    }
+
+    /// [`TimeTerms::at`] with exp, sin and cos from `f` (a plant's [`crate::memo::Memo`]).
+    pub fn at_with(spec: &AgentSpec, t: f64, f: &mut impl Math) -> TimeTerms {
         TimeTerms {
-            model: model_perturbation(&spec.model_perturbation, t),
-            disturbance: disturbance(&spec.disturbance, t),
+            model: model_perturbation_with(&spec.model_perturbation, t, f),
+            disturbance: disturbance_with(&spec.disturbance, t, f),
         }
     }
 }
@@ -144,30 +150,28 @@ pub fn rk4(
     h: f64,
 ) -> RigidState {
     let t0 = TimeTerms::at(spec, t);
+    let tm = TimeTerms::at(spec, t + 0.5 * h);
     let t1 = TimeTerms::at(spec, t + h);
     let f_p0 = uncertainty(&spec.uncertainty, &x.p, &x.v);
-    rk4_with(body, spec, x, u, t, h, &t0, &t1, &f_p0)
+    rk4_with(body, spec, x, u, h, [&t0, &tm, &t1], &f_p0)
 }
 
-/// RK4 with the time-only terms at the ends of the step given (the plant reuses the end of one step
-/// as the start of the next), and F_iP (61) at the start state (the plant computes it once for the
-/// step's truth and the first stage).
-#[allow(clippy::too_many_arguments)]
+/// RK4 with the time-only terms at the start, the middle and the end of the step given (the plant
+/// reuses the end of one step as the start of the next, and computes them through its memo), and
+/// F_iP (61) at the start state (the plant computes it once for the step's truth and the first
+/// stage).
 pub fn rk4_with(
     body: &Body,
     spec: &AgentSpec,
     x: &RigidState,
     u: &HeldInput,
-    t: f64,
     h: f64,
-    t0: &TimeTerms,
-    t1: &TimeTerms,
+    [t0, tm, t1]: [&TimeTerms; 3],
     f_p0: &Vector3<f64>,
 ) -> RigidState {
-    let tm = TimeTerms::at(spec, t + 0.5 * h);
     let k1 = derivative_given(body, x, u, t0, f_p0);
-    let k2 = derivative_with(body, spec, &x.axpy(0.5 * h, &k1), u, &tm);
-    let k3 = derivative_with(body, spec, &x.axpy(0.5 * h, &k2), u, &tm);
+    let k2 = derivative_with(body, spec, &x.axpy(0.5 * h, &k1), u, tm);
+    let k3 = derivative_with(body, spec, &x.axpy(0.5 * h, &k2), u, tm);
     let k4 = derivative_with(body, spec, &x.axpy(h, &k3), u, t1);
     RigidState {
         p: x.p + (k1.p + (k2.p + k3.p) * 2.0 + k4.p) * (h / 6.0),

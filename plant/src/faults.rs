@@ -1,6 +1,7 @@
 //! Actuator faults (4): U_iAF = Gamma_i(t) U_iAC + delta_i(t), with the profiles of (63)-(64), and the
 //! input saturation (3).
 
+use crate::memo::{Direct, Math};
 use formation_config::scenario::FaultSpec;
 use nalgebra::Vector3;
 
@@ -23,29 +24,34 @@ impl FaultModel {
 
     /// Gamma_i(t) (diagonal) and delta_i(t) at step `step`, time `t`.
     pub fn at(&self, step: u64, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        self.at_with(step, t, &mut Direct)
+    }
+
+    /// [`FaultModel::at`] with exp and sin from `m` (a plant's [`crate::memo::Memo`]).
+    pub fn at_with(&self, step: u64, t: f64, m: &mut impl Math) -> (Vector3<f64>, Vector3<f64>) {
         if let Some((from, g, d)) = self.override_from {
             if step >= from {
                 return (g, d);
             }
         }
         let f = &self.spec;
-        let decay = (-f.gamma_decay_rate * t).exp();
-        let ramp = 1.0 - (-f.delta_ramp_rate * t).exp();
+        let decay = m.exp(-f.gamma_decay_rate * t);
+        let ramp = 1.0 - m.exp(-f.delta_ramp_rate * t);
         let mut gamma = Vector3::zeros();
         let mut delta = Vector3::zeros();
         for k in 0..3 {
             gamma[k] = f.gamma_final[k] + f.gamma_initial_excess[k] * decay;
             let grow = if f.delta_osc_grow[k] > 0.0 {
-                1.0 - (-f.delta_osc_grow[k] * t).exp()
+                1.0 - m.exp(-f.delta_osc_grow[k] * t)
             } else {
                 1.0
             };
-            delta[k] = f.delta_ramp_nm[k] * ramp * (-f.delta_ramp_decay[k] * t).exp()
+            delta[k] = f.delta_ramp_nm[k] * ramp * m.exp(-f.delta_ramp_decay[k] * t)
                 + f.delta_osc_amplitude_nm[k]
-                    * (f.delta_osc_rate_rad_s[k] * t + f.delta_osc_phase_rad[k]).sin()
+                    * m.sin(f.delta_osc_rate_rad_s[k] * t + f.delta_osc_phase_rad[k])
                     * grow
-                    * (-f.delta_osc_decay[k] * t).exp()
-                + f.delta_bias_nm[k] * (-f.delta_bias_decay[k] * t).exp();
+                    * m.exp(-f.delta_osc_decay[k] * t)
+                + f.delta_bias_nm[k] * m.exp(-f.delta_bias_decay[k] * t);
         }
         (gamma, delta)
     }

@@ -10,6 +10,7 @@ pub mod dynamics;
 pub mod fallback;
 pub mod faults;
 pub mod kinematics;
+pub mod memo;
 pub mod perturbations;
 pub mod plant;
 

@@ -3,6 +3,7 @@
 use crate::dynamics::{rk4_with, Body, HeldInput, RigidState, TimeTerms};
 use crate::fallback::{Airframe, Failsafe, Target};
 use crate::faults::{actuate, FaultModel};
+use crate::memo::Memo;
 use crate::perturbations::uncertainty;
 use formation_config::protocol::wire::{
     ControlCommand, FaultInjection, PlantTruth, ReferenceFrame, VehicleState,
@@ -52,6 +53,9 @@ pub struct Plant {
     airframe: Airframe,
     /// The safety distance the failsafe keeps from the other quadrotors, m.
     safety_m: f64,
+    /// exp, sin and cos of the time profiles (faults, disturbance, model perturbation) by
+    /// argument: what the quadrotors share in a step is evaluated once (`memo`).
+    memo: Memo,
 }
 
 impl Plant {
@@ -113,6 +117,7 @@ impl Plant {
                 thrust_max: v.thrust_max_n,
             },
             safety_m: s.metrics.safety_distance_m,
+            memo: Memo::default(),
             body,
         }
     }
@@ -254,7 +259,7 @@ impl Plant {
         let t = self.time();
         let step = self.step;
         let veh = &mut self.vehicles[i];
-        let (gamma, delta) = veh.faults.at(step, t);
+        let (gamma, delta) = veh.faults.at_with(step, t, &mut self.memo);
         veh.gamma = gamma;
         veh.delta = delta;
         let u_ac = Vector3::from(cmd.torque_nm);
@@ -301,17 +306,17 @@ impl Plant {
         if veh.advanced {
             return;
         }
-        let terms_next = TimeTerms::at(&veh.spec, t_next);
+        let h = t_next - t;
+        let terms_mid = TimeTerms::at_with(&veh.spec, t + 0.5 * h, &mut self.memo);
+        let terms_next = TimeTerms::at_with(&veh.spec, t_next, &mut self.memo);
         veh.p_step = veh.state.p;
         veh.state = rk4_with(
             &self.body,
             &veh.spec,
             &veh.state,
             &veh.input,
-            t,
-            t_next - t,
-            &veh.terms_now,
-            &terms_next,
+            h,
+            [&veh.terms_now, &terms_mid, &terms_next],
             &veh.f_p_now,
         );
         veh.f_p_now = uncertainty(&veh.spec.uncertainty, &veh.state.p, &veh.state.v);

@@ -229,8 +229,44 @@ struct Derived {
     rate_norm: f64,
 }
 
-/// The exponent field of an IEEE 754 double: all ones for +-inf and NaN, and only for them.
-const F64_EXPONENT_BITS: u64 = 0x7ff0_0000_0000_0000;
+/// 0.0 when every value of `vals` is finite, NaN otherwise: x - x is exactly 0 for a finite x and
+/// NaN for +-inf and NaN, and NaN survives every sum.
+#[inline(always)]
+#[allow(clippy::eq_op)] // v - v is the probe: 0 for a finite v, NaN otherwise
+fn nan_unless_finite<const N: usize>(vals: &[f64; N]) -> f64 {
+    let mut z = 0.0;
+    for v in vals {
+        z += v - v;
+    }
+    z
+}
+
+/// The outputs checked for finiteness, as a list of (name, values); expands `$found` with the list
+/// as an array of `(&'static str, &[f64])` once some value is not finite, and to `None` otherwise.
+/// One list feeds both parts, so the check and the name it reports cannot drift apart.
+macro_rules! first_non_finite {
+    ($(($name:literal, $vals:expr)),* $(,)?) => {{
+        // Branch-free check first: four independent sums (no long chain of dependent additions),
+        // each NaN iff one of its values is not finite. The group indices are constants, so the
+        // array below lives in registers.
+        let mut acc = [0.0f64; 4];
+        let mut g = 0usize;
+        $(
+            acc[g % 4] += nan_unless_finite($vals);
+            g += 1;
+        )*
+        let _ = g;
+        if ((acc[0] + acc[1]) + (acc[2] + acc[3])).is_nan() {
+            let groups: &[(&'static str, &[f64])] = &[$(($name, &$vals[..])),*];
+            groups
+                .iter()
+                .find(|(_, vals)| vals.iter().any(|v| !v.is_finite()))
+                .map(|(name, _)| *name)
+        } else {
+            None
+        }
+    }};
+}
 
 /// The first output of agent `i` at this step that is not a finite number, if any: every value
 /// `trajectory.csv` writes for it (state, reference, errors, commands, constraint bounds, barrier
@@ -252,7 +288,7 @@ fn non_finite_output(
     let (blf1, blf2) = (one(tm.blf1), one(tm.blf2));
     let (d_norm, d_hat) = (one(norm(tr.disturbance)), one(tm.d_hat));
     let (nn_norm, tau, model_dev) = (one(tm.nn_weight_norm), one(tm.tau_s), one(tm.model_hat_dev));
-    let groups: [(&'static str, &[f64]); 40] = [
+    first_non_finite![
         ("position", &st.position),
         ("velocity", &st.velocity),
         ("attitude", &st.attitude),
@@ -293,23 +329,7 @@ fn non_finite_output(
         ("auxiliary state E_i1", &tm.e1),
         ("auxiliary state E_i2", &tm.e2),
         ("estimate Delta F-hat_i", &model_dev),
-    ];
-    // A value is not finite iff its exponent bits are all ones: one branch-free OR over the
-    // values (no chain of dependent floating-point additions) says whether any is; only then is
-    // the first one looked for.
-    let mut any_not_finite = false;
-    for (_, vals) in &groups {
-        for v in *vals {
-            any_not_finite |= v.to_bits() & F64_EXPONENT_BITS == F64_EXPONENT_BITS;
-        }
-    }
-    if !any_not_finite {
-        return None;
-    }
-    groups
-        .iter()
-        .find(|(_, vals)| vals.iter().any(|v| !v.is_finite()))
-        .map(|(name, _)| *name)
+    ]
 }
 
 /// The first quantity of one agent that left its bounds (tilt, formation error), if any.
