@@ -2,24 +2,32 @@
 //! a receiver on another ([`crate::plan`]), as the same `#[repr(C)]` bytes with their wire type name,
 //! and re-raises the wake-up events on the receiving host so the lockstep pacing is unchanged.
 //!
-//! Two threads, each with its own iceoryx2 node under the run's prefix:
+//! Two sides, each with its own iceoryx2 node under the run's prefix:
 //!
-//! * **out** sleeps on a WaitSet of the local listeners of the forwarded events (and wakes every
-//!   [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry). After a wake-up it
-//!   drains the listeners *first*, then every forwarded subscriber, again until a pass finds
-//!   nothing (at most [`DRAIN_PASSES`]), and sends one frame per destination host with each
-//!   pass's samples before its events: a sample published before a notification is therefore
-//!   always delivered before that notification is re-raised.
-//! * **in** receives this host's frames (one Zenoh subscriber, so frames stay in order) and
-//!   publishes each sample into the local service, then notifies each event. On a host other
-//!   than the launcher it first creates every service of the run (limits as the orchestrator's).
+//! * **out**, a thread, sleeps on a WaitSet of the local listeners of the forwarded events (and
+//!   wakes every [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry, and to
+//!   look for a stop or a re-plan). After a wake-up it drains the listeners *first*, then every
+//!   forwarded subscriber, again until a pass finds nothing (at most [`DRAIN_PASSES`]), and sends
+//!   one frame per destination host with each pass's samples before its events: a sample
+//!   published before a notification is therefore always delivered before that notification is
+//!   re-raised.
+//! * **in** has no thread of its own: this host's frames are handled in Zenoh's subscriber
+//!   callback ([`frame_callback_subscriber`]), in Zenoh's receiving thread, which publishes each
+//!   sample into the local service, then notifies each event, as the frame lists them. A frame
+//!   wakes no thread of the bridge on its way to a role process: handing it to one would add
+//!   that thread's wake-up to every crossing (~50 µs across the cores of a 2-vCPU VM,
+//!   docs/multi-host.md). The callback reaches the ports through a mutex
+//!   (the ports of iceoryx2's `ipc` flavour are `!Send`; see the `Send` of `Inbound` for why they
+//!   may move between threads); frames of one sending host come over one link, in order. On a
+//!   host other than the launcher the bridge first creates every service of the run (limits as
+//!   the orchestrator's).
 //!
 //! Frame (little endian), records back to back: `u8 kind` (0 sample, 1 event, 2 sending host),
 //! `u16` name length, name; for a sample also `u8` type-name length, type name, `u32` size, bytes.
 //! Every frame starts with the sending host's record. The receiver checks the type name and size
 //! against its own service before it publishes.
 //!
-//! Realtime stamps: the in thread translates the send stamp (`sent_ns`, the sender's
+//! Realtime stamps: the in side translates the send stamp (`sent_ns`, the sender's
 //! `CLOCK_MONOTONIC`) of every state, share and command into its own host's clock with the clock
 //! offsets of the handshake ([`crate::clock`]) before it publishes, and records the one-way delay
 //! of the link (sending host -> this host): its clock at the publish minus the translated stamp.
@@ -94,7 +102,8 @@ pub struct Stats {
     pub refused: AtomicU64,
 }
 
-/// A running bridge; stopped and joined on drop.
+/// A running bridge; stopped on drop (the subscriber undeclared, the receiving side's ports
+/// dropped, the sending thread joined).
 pub struct Bridge {
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
@@ -102,9 +111,13 @@ pub struct Bridge {
     pub stats: Arc<Stats>,
     /// Services it forwards out and receives in.
     pub forwarded: (usize, usize),
-    /// Re-plans for the receiving and the sending thread, in that order.
-    replan: [mpsc::Sender<Replan>; 2],
+    /// Re-plans for the sending thread.
+    replan: mpsc::Sender<Replan>,
     links: Arc<Mutex<BTreeMap<String, LinkDelays>>>,
+    /// The receiving side, used by the subscriber's callback; `None` once stopped.
+    inbound: Arc<Mutex<Option<Inbound>>>,
+    /// This host's frames, handled in Zenoh's receiving thread; undeclared on drop.
+    subscriber: Option<zenoh::pubsub::Subscriber<()>>,
 }
 
 impl Bridge {
@@ -112,7 +125,7 @@ impl Bridge {
     /// `link/<from>-><to>` (ns) and counter `negative/<from>-><to>` per link.
     pub fn link_report(&self) -> TimingReport {
         let mut r = TimingReport::default();
-        for (name, l) in self.links.lock().unwrap().iter() {
+        for (name, l) in lock(&self.links).iter() {
             r.histograms
                 .insert(format!("link/{name}"), l.delays.clone());
             r.counters.insert(format!("negative/{name}"), l.negative);
@@ -124,11 +137,16 @@ impl Bridge {
 /// A new placement for a thread, and where it answers (services it forwards, or why not).
 type Replan = (Placement, mpsc::Sender<Result<usize, String>>);
 
-/// How long a re-plan may take (each thread looks between two cycles, at most every 100 ms).
+/// How long a re-plan of the sending thread may take (it looks between two cycles, at least every
+/// [`IDLE_WAKE`]).
 pub const REPLAN_TIMEOUT: Duration = Duration::from_secs(5);
 
 impl Drop for Bridge {
     fn drop(&mut self) {
+        // No frame after this; a callback still running holds the lock, so taking the receiving
+        // side waits for it, and its ports are dropped here, not later in a Zenoh thread.
+        drop(self.subscriber.take());
+        drop(lock(&self.inbound).take());
         self.stop.store(true, Ordering::SeqCst);
         for t in self.threads.drain(..) {
             let _ = t.join();
@@ -431,7 +449,8 @@ impl Visitor for Opener<'_> {
     }
 }
 
-/// Frames a receiving thread holds before Zenoh's receiving thread blocks (a full FIFO blocks it).
+/// Frames a [`frame_subscriber`] holds before Zenoh's receiving thread blocks (a full FIFO
+/// blocks it).
 pub const FRAME_QUEUE: usize = 4096;
 
 /// The publisher of a stream of frames to `key`: `CongestionControl::Block` (nothing is dropped),
@@ -451,8 +470,29 @@ pub fn frame_publisher(
         .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))
 }
 
-/// A subscriber of frames sent to `key` with [`frame_publisher`]: one FIFO of [`FRAME_QUEUE`]
-/// frames, so they stay in order; remote publishers only.
+/// Declares a subscriber of the frames sent to `key` with [`frame_publisher`], remote publishers
+/// only, with `handler`.
+fn declare_frame_subscriber<H>(
+    session: &zenoh::Session,
+    key: String,
+    handler: H,
+) -> Result<zenoh::pubsub::Subscriber<H::Handler>, String>
+where
+    H: zenoh::handlers::IntoHandler<zenoh::sample::Sample> + Send,
+    H::Handler: Send,
+{
+    session
+        .declare_subscriber(key)
+        .with(handler)
+        .allowed_origin(Locality::Remote)
+        .wait()
+        .map_err(|e| format!("bridge: cannot subscribe: {e}"))
+}
+
+/// A subscriber of frames sent to `key` with [`frame_publisher`] whose frames a thread of its
+/// own takes: one FIFO of [`FRAME_QUEUE`] frames, so they stay in order. The bare Zenoh cases
+/// of `formation bench` receive with it: there the thread that takes a frame stands for the role
+/// processes a bridge wakes.
 pub fn frame_subscriber(
     session: &zenoh::Session,
     key: String,
@@ -460,12 +500,17 @@ pub fn frame_subscriber(
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     String,
 > {
-    session
-        .declare_subscriber(key)
-        .with(zenoh::handlers::FifoChannel::new(FRAME_QUEUE))
-        .allowed_origin(Locality::Remote)
-        .wait()
-        .map_err(|e| format!("bridge: cannot subscribe: {e}"))
+    declare_frame_subscriber(session, key, zenoh::handlers::FifoChannel::new(FRAME_QUEUE))
+}
+
+/// A subscriber of frames sent to `key` with [`frame_publisher`] that handles each frame in
+/// Zenoh's receiving thread (`on_frame`), as they come, in order: what a bridge receives with.
+pub fn frame_callback_subscriber(
+    session: &zenoh::Session,
+    key: String,
+    on_frame: impl Fn(zenoh::sample::Sample) + Send + Sync + 'static,
+) -> Result<zenoh::pubsub::Subscriber<()>, String> {
+    declare_frame_subscriber(session, key, zenoh::handlers::Callback::from(on_frame))
 }
 
 /// The bytes of a `#[repr(C)]` wire value as they lie in memory: what crosses between hosts and
@@ -574,50 +619,43 @@ impl Bridge {
         let stats = Arc::new(Stats::default());
         let links = Arc::new(Mutex::new(BTreeMap::new()));
         let hosts = cfg.placement.hosts();
+        let inbound = Inbound::open(cfg.clone())?;
+        let forwarded_in = inbound.ins.len();
+        let inbound = Arc::new(Mutex::new(Some(inbound)));
+        let subscriber = {
+            let (inbound, stats, links) = (inbound.clone(), stats.clone(), links.clone());
+            frame_callback_subscriber(
+                &session,
+                proto::run_to(&cfg.run_id, &cfg.me),
+                move |sample| {
+                    if let Some(i) = lock(&inbound).as_mut() {
+                        i.receive(&sample.payload().to_bytes(), &stats, &links);
+                    }
+                },
+            )?
+        };
         let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
-        let (in_tx, in_rx) = mpsc::channel::<Replan>();
         let (out_tx, out_rx) = mpsc::channel::<Replan>();
-        let mut threads = Vec::new();
-        {
-            let (cfg, stop, stats, session, links) = (
-                cfg.clone(),
-                stop.clone(),
-                stats.clone(),
-                session.clone(),
-                links.clone(),
-            );
-            let tx = ready_tx.clone();
-            threads.push(
-                std::thread::Builder::new()
-                    .name("bridge-in".into())
-                    .spawn(move || run_in(session, cfg, stop, stats, links, tx, in_rx))
-                    .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
-            );
-        }
         let mut bridge = Bridge {
             stop: stop.clone(),
-            threads,
+            threads: Vec::new(),
             stats: stats.clone(),
-            forwarded: (0, 0),
-            replan: [in_tx, out_tx],
+            forwarded: (0, forwarded_in),
+            replan: out_tx,
             links,
+            inbound,
+            subscriber: Some(subscriber),
         };
-        let inbound = ready_rx
-            .recv()
-            .map_err(|_| "bridge: the receiving thread ended".to_string())??;
-        {
-            let tx = ready_tx;
-            bridge.threads.push(
-                std::thread::Builder::new()
-                    .name("bridge-out".into())
-                    .spawn(move || run_out(session, cfg, hosts, stop, stats, tx, out_rx))
-                    .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
-            );
-        }
+        bridge.threads.push(
+            std::thread::Builder::new()
+                .name("bridge-out".into())
+                .spawn(move || run_out(session, cfg, hosts, stop, stats, ready_tx, out_rx))
+                .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
+        );
         let outbound = ready_rx
             .recv()
             .map_err(|_| "bridge: the sending thread ended".to_string())??;
-        bridge.forwarded = (outbound, inbound);
+        bridge.forwarded.0 = outbound;
         Ok(bridge)
     }
 }
@@ -625,105 +663,126 @@ impl Bridge {
 impl Bridge {
     /// Re-plans the running bridge for a new placement (a lost host's agents moved to another
     /// host): the receiving side first, so a service this host now receives has its port before
-    /// any host sends it, then the sending side, between two of its cycles (every sample drained
-    /// before went out under the old plan, every one after under the new). Ports of services still
-    /// forwarded are kept, with their new destinations, so nothing queued in them is lost; ports of
-    /// services no longer forwarded are dropped, so a sample still coming from a lost host is
-    /// refused. Returns the services forwarded (out, in).
+    /// any host sends it (between two frames), then the sending side, between two of its cycles
+    /// (every sample drained before went out under the old plan, every one after under the new).
+    /// Ports of services still forwarded are kept, with their new destinations, so nothing queued
+    /// in them is lost; ports of services no longer forwarded are dropped, so a sample still
+    /// coming from a lost host is refused. Returns the services forwarded (out, in).
     pub fn replan(&mut self, placement: &Placement) -> Result<(usize, usize), String> {
-        let mut counts = [0; 2];
-        for (k, tx) in self.replan.iter().enumerate() {
-            let (ack, answer) = mpsc::channel();
-            tx.send((placement.clone(), ack))
-                .map_err(|_| "bridge: a thread has ended".to_string())?;
-            counts[k] = answer
-                .recv_timeout(REPLAN_TIMEOUT)
-                .map_err(|_| format!("bridge: no re-plan within {REPLAN_TIMEOUT:?}"))??;
-        }
-        self.forwarded = (counts[1], counts[0]);
+        let inbound = lock(&self.inbound)
+            .as_mut()
+            .ok_or_else(|| "bridge: stopped".to_string())?
+            .replan(placement)?;
+        let (ack, answer) = mpsc::channel();
+        self.replan
+            .send((placement.clone(), ack))
+            .map_err(|_| "bridge: the sending thread has ended".to_string())?;
+        let out = answer
+            .recv_timeout(REPLAN_TIMEOUT)
+            .map_err(|_| format!("bridge: no re-plan within {REPLAN_TIMEOUT:?}"))??;
+        self.forwarded = (out, inbound);
         Ok(self.forwarded)
     }
 }
 
-fn run_in(
-    session: zenoh::Session,
-    mut cfg: BridgeConfig,
-    stop: Arc<AtomicBool>,
-    stats: Arc<Stats>,
-    links: Arc<Mutex<BTreeMap<String, LinkDelays>>>,
-    ready: mpsc::Sender<Result<usize, String>>,
-    replan: mpsc::Receiver<Replan>,
-) {
-    let hosts = cfg.placement.hosts();
-    let offset = |h: &str| cfg.clock_offsets_ns.get(h).copied().unwrap_or(0);
-    let me_offset = offset(&cfg.me);
-    // Per sending host: the shift of its stamps onto this clock, and the link's name.
-    let from: HashMap<&str, (i64, String)> = hosts
-        .iter()
-        .filter(|h| **h != cfg.me)
-        .map(|h| {
-            (
-                h.as_str(),
+/// The receiving side of a bridge: its iceoryx2 node, the services it created (on a host other
+/// than the launcher) and its ports into the forwarded services, used from Zenoh's subscriber
+/// callback (Zenoh's receiving thread) under [`Bridge`]'s mutex.
+struct Inbound {
+    cfg: BridgeConfig,
+    node: RunNode,
+    /// The services this host created: they live as long as the bridge.
+    _keep: Vec<Box<dyn Any>>,
+    ins: HashMap<String, InPort>,
+    /// Per sending host: the shift of its stamps onto this host's clock, and the link's name.
+    from: HashMap<String, (i64, String)>,
+    /// Scratch: (translated send stamp, publish time) of the samples of one frame.
+    stamps: Vec<(u64, u64)>,
+}
+
+// SAFETY: `Inbound` owns an iceoryx2 node of the inter-process service flavour (`ipc::Service`)
+// and every port and port factory made from it. That flavour's ports share their state through
+// `Rc` (iceoryx2's `SingleThreaded` policy), which is what makes them `!Send`; `ipc_threadsafe`
+// differs from `ipc` only in swapping that `Rc` for an `Arc` behind a mutex, so nothing else in
+// the ports is bound to a thread. Every `Rc` clone of these ports (port factories, ports, loaned
+// samples) lives inside this value and never leaves it: samples are loaned and sent within one
+// call, no port or factory is handed out. The value is only reached through the bridge's
+// `Mutex<Option<Inbound>>`, so no two threads ever touch those reference counts at once, and the
+// mutex orders every access after the previous one. Moving it to another thread is then sound.
+unsafe impl Send for Inbound {}
+
+impl Inbound {
+    /// Creates the services (`cfg.create`) and opens the ports of the services this host
+    /// receives.
+    fn open(cfg: BridgeConfig) -> Result<Inbound, String> {
+        let hosts = cfg.placement.hosts();
+        let offset = |h: &str| cfg.clock_offsets_ns.get(h).copied().unwrap_or(0);
+        let me_offset = offset(&cfg.me);
+        let from = hosts
+            .iter()
+            .filter(|h| **h != cfg.me)
+            .map(|h| {
                 (
-                    clock::shift_ns(offset(h), me_offset),
-                    clock::link_name(h, &cfg.me),
-                ),
-            )
-        })
-        .collect();
-    let setup = || -> Result<_, String> {
+                    h.clone(),
+                    (
+                        clock::shift_ns(offset(h), me_offset),
+                        clock::link_name(h, &cfg.me),
+                    ),
+                )
+            })
+            .collect();
         let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
         let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
         let (keep, ins) = (o.keep, o.ins);
-        let sub = frame_subscriber(&session, proto::run_to(&cfg.run_id, &cfg.me))?;
-        Ok((node, keep, ins, sub))
-    };
-    let (node, _keep, mut ins, sub) = match setup() {
-        Ok(v) => v,
-        Err(e) => {
-            let _ = ready.send(Err(e));
-            return;
-        }
-    };
-    let _ = ready.send(Ok(ins.len()));
-    let mut stamps: Vec<(u64, u64)> = Vec::with_capacity(64);
-    while !stop.load(Ordering::SeqCst) {
-        if let Ok((placement, ack)) = replan.try_recv() {
-            cfg.placement = placement;
-            cfg.create = false;
-            let hosts = cfg.placement.hosts();
-            let old = Ports {
-                ins: std::mem::take(&mut ins),
-                ..Ports::default()
-            };
-            let _ = ack.send(Opener::visit_all(&node, &cfg, &hosts, false, old).map(|o| {
-                ins = o.ins;
-                ins.len()
-            }));
-        }
-        let sample = match sub.recv_timeout(Duration::from_millis(100)) {
-            Ok(Some(s)) => s,
-            Ok(None) => continue,
-            Err(_) => break,
+        Ok(Inbound {
+            cfg,
+            node,
+            _keep: keep,
+            ins,
+            from,
+            stamps: Vec::with_capacity(64),
+        })
+    }
+
+    /// Re-plans the receiving side (see [`Bridge::replan`]); the services it receives.
+    fn replan(&mut self, placement: &Placement) -> Result<usize, String> {
+        self.cfg.placement = placement.clone();
+        self.cfg.create = false;
+        let hosts = self.cfg.placement.hosts();
+        let old = Ports {
+            ins: std::mem::take(&mut self.ins),
+            ..Ports::default()
         };
+        let o = Opener::visit_all(&self.node, &self.cfg, &hosts, false, old)?;
+        self.ins = o.ins;
+        Ok(self.ins.len())
+    }
+
+    /// Publishes a frame's samples into the local services and re-raises its events, in the
+    /// frame's order; records the one-way delay of every stamped sample.
+    fn receive(
+        &mut self,
+        frame: &[u8],
+        stats: &Stats,
+        links: &Mutex<BTreeMap<String, LinkDelays>>,
+    ) {
         stats.frames_in.fetch_add(1, Ordering::Relaxed);
-        let payload = sample.payload().to_bytes();
-        let records = match parse_frame(&payload) {
+        let records = match parse_frame(frame) {
             Ok(r) => r,
             Err(e) => {
                 tracing::warn!("bridge: frame refused: {e}");
                 stats.refused.fetch_add(1, Ordering::Relaxed);
-                continue;
+                return;
             }
         };
         let mut source: Option<&(i64, String)> = None;
-        stamps.clear();
+        self.stamps.clear();
         for r in records {
             let key: &str = match &r {
                 Record::Sample { name, .. } => name,
                 Record::Event(name) => name,
                 Record::From(host) => {
-                    source = from.get(host);
+                    source = self.from.get(*host);
                     if source.is_none() {
                         tracing::warn!("bridge: a frame from {host}, not a host of the run");
                         stats.refused.fetch_add(1, Ordering::Relaxed);
@@ -731,7 +790,7 @@ fn run_in(
                     continue;
                 }
             };
-            match (r, ins.get_mut(key)) {
+            match (r, self.ins.get_mut(key)) {
                 (
                     Record::Sample {
                         name,
@@ -753,7 +812,7 @@ fn run_in(
                     } else {
                         match inject(bytes, source.map_or(0, |s| s.0)) {
                             Ok(0) => {}
-                            Ok(sent) => stamps.push((sent, now_ns())),
+                            Ok(sent) => self.stamps.push((sent, now_ns())),
                             Err(e) => tracing::warn!("{e}"),
                         }
                     }
@@ -765,16 +824,20 @@ fn run_in(
                 }
             }
         }
-        if let (Some((_, link)), false) = (source, stamps.is_empty()) {
-            let mut l = links.lock().unwrap();
+        if let (Some((_, link)), false) = (source, self.stamps.is_empty()) {
+            let mut l = lock(links);
             let d = l.entry(link.clone()).or_default();
-            for &(sent, now) in &stamps {
+            for &(sent, now) in &self.stamps {
                 d.record(sent, now);
             }
         }
     }
-    drop(ins);
-    drop(node);
+}
+
+/// Locks `m`, also after a panic of another holder (the data stays usable: every update is
+/// complete before the next record is handled).
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 fn run_out(
