@@ -516,7 +516,7 @@ mod tests {
         };
         let k = services::DEFAULT_OBSERVERS;
         // On a path of 9 the share has two neighbours' slots, twice, and the bridge's; on a path
-        // of 2 one neighbour's. Every service admits every node of the run.
+        // of 2 one neighbour's, twice, and the bridge's. Every service admits every node of the run.
         assert_eq!(share(9).receivers, 2 * 2 + 1 + k);
         assert_eq!(share(9).nodes, 9 + 4 + services::MAX_CLIENTS + k);
         assert_eq!(share(2).receivers, 2 + 1 + k);

@@ -4,10 +4,9 @@
 /// Grid points of the unit-area-weighted disk, relative to its centre, column by column.
 #[derive(Debug, Clone)]
 pub struct CoverageGrid {
-    points: Vec<[f64; 2]>,
-    /// The columns of `points`: their x offset and their points' range in `ys`.
+    /// The columns of grid points: their x offset and their points' range in `ys`.
     columns: Vec<Column>,
-    /// The y offsets of `points`, column by column (increasing y within a column).
+    /// The y offsets of the grid points, column by column (increasing y within a column).
     ys: Vec<f64>,
     radius: f64,
     half_fov_tan: f64,
@@ -38,7 +37,6 @@ impl CoverageGrid {
     /// A grid over the disk of radius `radius` for sensors of full angle of view `fov_deg`.
     pub fn new(radius: f64, fov_deg: f64) -> CoverageGrid {
         let h = radius / GRID_PER_RADIUS as f64;
-        let mut points = Vec::new();
         let mut columns = Vec::new();
         let mut ys = Vec::new();
         for ix in -GRID_PER_RADIUS..=GRID_PER_RADIUS {
@@ -46,7 +44,6 @@ impl CoverageGrid {
             for iy in -GRID_PER_RADIUS..=GRID_PER_RADIUS {
                 let (x, y) = (ix as f64 * h, iy as f64 * h);
                 if x * x + y * y <= radius * radius {
-                    points.push([x, y]);
                     ys.push(y);
                 }
             }
@@ -57,7 +54,6 @@ impl CoverageGrid {
             }
         }
         CoverageGrid {
-            points,
             columns,
             ys,
             radius,
@@ -123,7 +119,7 @@ impl CoverageGrid {
                 }
             }
         }
-        covered as f64 / self.points.len() as f64
+        covered as f64 / self.ys.len() as f64
     }
 }
 
@@ -131,10 +127,18 @@ impl CoverageGrid {
 mod tests {
     use super::*;
 
+    /// The grid points, [x, y] relative to the disk's centre.
+    fn points(g: &CoverageGrid) -> Vec<[f64; 2]> {
+        g.columns
+            .iter()
+            .flat_map(|c| g.ys[c.from..c.to].iter().map(move |&y| [c.x, y]))
+            .collect()
+    }
+
     /// The definition, point by point over every footprint.
     fn brute_force(g: &CoverageGrid, target: [f64; 2], positions: &[[f64; 3]]) -> f64 {
-        let hits = g
-            .points
+        let points = points(g);
+        let hits = points
             .iter()
             .filter(|p| {
                 let (x, y) = (target[0] + p[0], target[1] + p[1]);
@@ -145,7 +149,7 @@ mod tests {
                 })
             })
             .count();
-        hits as f64 / g.points.len() as f64
+        hits as f64 / points.len() as f64
     }
 
     #[test]
