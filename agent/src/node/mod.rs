@@ -9,6 +9,7 @@ mod neighbour_delay;
 mod ports;
 mod realtime;
 mod rejoin;
+mod shares;
 mod telemetry;
 
 use crate::Agent;
@@ -60,21 +61,18 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     let mut share_later: Option<NeighbourState> = None;
     let mut k: u64 = start;
     let mut sampler = telemetry::Sampler::new(&b.scenario, i);
+    let mut shares = shares::Shares::new(neighbours.len());
     tracing::info!(
         agent = i + 1,
         neighbours = ?neighbours.iter().map(|j| j + 1).collect::<Vec<_>>(),
         "agent ready"
     );
-    // The per-step inputs (own state, neighbour shares) are read on every wake-up; the slow ones
-    // (stop, delay injections, references) with the state of every HOUSEKEEPING_EVERY-th step, when
-    // a reference is missing, and on any wake-up that brought no state (docs/runtime.md, "Cost of a
-    // step").
+    // The per-step inputs (own state, neighbour shares up to the previous step, see `shares`) are
+    // read on every wake-up; the slow ones (stop, delay injections, references) with the state of
+    // every HOUSEKEEPING_EVERY-th step, when a reference is missing, and on any wake-up that brought
+    // no state (docs/runtime.md, "Cost of a step").
     loop {
-        for sub in &ports.shares_in {
-            while let Some(s) = sub.receive()? {
-                agent.observe_neighbour(&s);
-            }
-        }
+        shares.read_due(&ports.shares_in, k, &mut agent)?;
         let mut fresh = false;
         // One state per step: once it is in, the next one is read at the next step (a duplicate
         // is then caught as out of step).
@@ -182,6 +180,10 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
                     }
                 }
                 observed = true;
+            }
+            if !agent.ready(k) {
+                // A delay that rounds to zero steps needs a share of this very step.
+                shares.read_all(&ports.shares_in, &mut agent)?;
             }
             if agent.ready(k) {
                 checkpoints.before_step(&agent, k);
