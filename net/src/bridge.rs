@@ -8,9 +8,10 @@
 //!   wakes every [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry, and to
 //!   look for a stop or a re-plan). After a wake-up it drains the listeners *first*, then every
 //!   forwarded subscriber, again until a pass finds nothing (at most [`DRAIN_PASSES`]), and sends
-//!   one frame per destination host with each pass's samples before its events: a sample
-//!   published before a notification is therefore always delivered before that notification is
-//!   re-raised.
+//!   one frame per destination host with every sample of those passes, then each event that
+//!   fired, once: a sample published before a notification is therefore always delivered before
+//!   that notification is re-raised. In lockstep the frame to the plant's host waits until every
+//!   agent of this host has sent its command of the step ([`crate::hold`]): one frame per step.
 //! * **in** has no thread of its own: this host's frames are handled in Zenoh's subscriber
 //!   callback ([`frame_callback_subscriber`]), in Zenoh's receiving thread, which publishes each
 //!   sample into the local service, then notifies each event, as the frame lists them. A frame
@@ -36,6 +37,7 @@
 //! the frame is the batch) and `Locality::Remote`; nothing is re-forwarded (see `plan`).
 
 use crate::clock::{self, LinkDelays};
+use crate::hold::{CommandHold, Decision};
 use crate::plan::{agent_index, Placement};
 use crate::proto;
 use formation_config::node::clock::now_ns;
@@ -54,7 +56,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::Locality;
 use zenoh::Wait;
@@ -92,6 +94,9 @@ pub struct BridgeConfig {
 pub struct Stats {
     /// Frames sent.
     pub frames_out: AtomicU64,
+    /// Drains after which the frame to the plant's host was held for commands still to come
+    /// ([`CommandHold`]).
+    pub held: AtomicU64,
     /// Samples sent.
     pub samples_out: AtomicU64,
     /// Events sent.
@@ -178,6 +183,8 @@ struct OutTopic {
     name: String,
     type_name: &'static str,
     dests: Vec<usize>,
+    /// A command of an agent (to the plant): what a lockstep frame waits for ([`CommandHold`]).
+    command: bool,
     drain: Drain,
 }
 
@@ -322,6 +329,7 @@ impl Visitor for Opener<'_> {
                 name: s.name.clone(),
                 type_name,
                 dests,
+                command: TypeId::of::<T>() == TypeId::of::<ControlCommand>(),
                 drain,
             });
         } else if !self.out && inbound {
@@ -840,6 +848,62 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
+/// The next frame to one destination: every frame starts with this host's record, then the
+/// samples of every drain pass since the last frame, then each event that fired meanwhile, once.
+/// All samples before all events keeps the order that matters (a sample published before a
+/// notification is published on the other host before the notification is re-raised there) and
+/// wakes the receiving process once, with everything of the frame already in its queues.
+struct Pending {
+    frame: Vec<u8>,
+    header: usize,
+    /// Indices of the plan's events, in the order they first fired.
+    events: Vec<usize>,
+}
+
+impl Pending {
+    fn new(me: &str) -> Pending {
+        let mut frame = Vec::new();
+        put_from(&mut frame, me);
+        Pending {
+            header: frame.len(),
+            frame,
+            events: Vec::new(),
+        }
+    }
+
+    /// Event `k` of the plan fired.
+    fn event(&mut self, k: usize) {
+        if !self.events.contains(&k) {
+            self.events.push(k);
+        }
+    }
+
+    /// The frame to send (`None`: nothing in it), leaving an empty one.
+    fn take(&mut self, events: &[OutEvent]) -> Option<Vec<u8>> {
+        if self.frame.len() == self.header && self.events.is_empty() {
+            return None;
+        }
+        for k in self.events.drain(..) {
+            put_event(&mut self.frame, &events[k].name);
+        }
+        let empty = self.frame[..self.header].to_vec();
+        Some(std::mem::replace(&mut self.frame, empty))
+    }
+}
+
+/// Sends one frame to `host` and counts it.
+fn send_frame(
+    publisher: &zenoh::pubsub::Publisher<'static>,
+    host: &str,
+    frame: Vec<u8>,
+    stats: &Stats,
+) {
+    if let Err(e) = publisher.put(frame).wait() {
+        tracing::warn!("bridge: cannot send to {host}: {e}");
+    }
+    stats.frames_out.fetch_add(1, Ordering::Relaxed);
+}
+
 fn run_out(
     session: zenoh::Session,
     mut cfg: BridgeConfig,
@@ -896,19 +960,36 @@ fn run_out(
             }
         }
         let _ = ack.send(Ok(topics.len() + events.len()));
-        // Every frame starts with this host's name; a frame with nothing after it is not sent.
-        let mut from = Vec::new();
-        put_from(&mut from, &cfg.me);
-        let header = from.len();
-        let mut frames: Vec<Vec<u8>> = vec![from.clone(); hosts.len()];
+        // Per destination, what goes out in its next frame: the samples of every drain pass since
+        // the last frame, then (once each) the events that fired meanwhile.
+        let mut pending: Vec<Pending> = hosts.iter().map(|_| Pending::new(&cfg.me)).collect();
         let mut fired = vec![false; events.len()];
+        // Lockstep: the frame to the plant's host waits for the commands of every agent here.
+        let hold_dest = topics
+            .iter()
+            .find(|t| t.command)
+            .and_then(|t| t.dests.first().copied());
+        let is_command: Vec<bool> = topics
+            .iter()
+            .map(|t| t.command && t.dests.first() == hold_dest.as_ref())
+            .collect();
+        let mut hold = CommandHold::new(&is_command, !cfg.sizing.realtime);
+        let plant_wake = services::WAKE_PLANT.named().name;
         let next = loop {
-            if stop.load(Ordering::SeqCst) {
-                break None;
-            }
-            // Between two cycles: every sample drained so far went out under this plan.
-            if let Ok(r) = replan.try_recv() {
-                break Some(r);
+            let leaving = if stop.load(Ordering::SeqCst) {
+                Some(None)
+            } else {
+                // Between two cycles: every sample drained so far goes out under this plan.
+                replan.try_recv().ok().map(Some)
+            };
+            if let Some(next) = leaving {
+                // A held frame goes out under the plan it was drained in.
+                for (d, p) in pending.iter_mut().enumerate() {
+                    if let Some(f) = p.take(&events) {
+                        send_frame(&pubs[d], &hosts[d], f, &stats);
+                    }
+                }
+                break next;
             }
             // Pass after pass until one finds nothing (at most DRAIN_PASSES), into the same
             // frames: what comes in while the bridge drains goes out with it.
@@ -916,23 +997,26 @@ fn run_out(
             for _ in 0..DRAIN_PASSES {
                 more = false;
                 // Events first: any sample published before a notification we saw is in its
-                // queue now; each pass appends its samples, then its events.
+                // queue now, so it goes out in this frame, before the frame's events.
                 for (k, e) in events.iter().enumerate() {
                     let mut got = false;
                     let _ = e.listener.try_wait(|_| got = true);
                     fired[k] = got;
                     more |= got;
                 }
-                for t in topics.iter_mut() {
+                for (k, t) in topics.iter_mut().enumerate() {
                     let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
                     let r = (t.drain)(&mut |bytes| {
                         for &d in dests {
-                            put_sample(&mut frames[d], name, type_name, bytes);
+                            put_sample(&mut pending[d].frame, name, type_name, bytes);
                         }
                     });
                     match r {
                         Ok(n) => {
                             more |= n > 0;
+                            if n > 0 {
+                                hold.on_sample(k);
+                            }
                             stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
                         }
                         Err(e) => tracing::warn!("bridge: {name}: {e}"),
@@ -941,7 +1025,10 @@ fn run_out(
                 for (k, e) in events.iter().enumerate() {
                     if fired[k] {
                         for &d in &e.dests {
-                            put_event(&mut frames[d], &e.name);
+                            pending[d].event(k);
+                            if Some(d) == hold_dest {
+                                hold.on_event(e.name == plant_wake);
+                            }
                         }
                         stats.events_out.fetch_add(1, Ordering::Relaxed);
                     }
@@ -950,24 +1037,31 @@ fn run_out(
                     break;
                 }
             }
-            for (d, f) in frames.iter_mut().enumerate() {
-                if f.len() > header {
-                    if let Err(e) = pubs[d].put(std::mem::replace(f, from.clone())).wait() {
-                        tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
+            let held = match hold.decide(Instant::now()) {
+                Decision::Send => None,
+                Decision::Hold(at_most) => Some(at_most),
+            };
+            for (d, p) in pending.iter_mut().enumerate() {
+                if Some(d) == hold_dest {
+                    if held.is_some() {
+                        stats.held.fetch_add(1, Ordering::Relaxed);
+                        continue;
                     }
-                    stats.frames_out.fetch_add(1, Ordering::Relaxed);
+                    hold.sent();
+                }
+                if let Some(f) = p.take(&events) {
+                    send_frame(&pubs[d], &hosts[d], f, &stats);
                 }
             }
             if more {
                 continue;
             }
+            let sleep = held.map_or(IDLE_WAKE, |h| h.min(IDLE_WAKE));
             if guards.is_empty() {
-                std::thread::sleep(IDLE_WAKE);
+                std::thread::sleep(sleep);
             } else {
-                let _ = waitset.wait_and_process_once_with_timeout(
-                    |_| CallbackProgression::Continue,
-                    IDLE_WAKE,
-                );
+                let _ = waitset
+                    .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, sleep);
             }
         };
         drop(guards);

@@ -7,11 +7,13 @@
 //! * [`plan`]: which services cross hosts for a placement, and in which direction.
 //! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
 //!   bytes with their wire type name.
+//! * [`hold`]: lockstep frames from a host to the launcher wait for the commands of all its agents.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`bench`]: bare Zenoh links and the frames of a split lockstep step, for `formation bench`.
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
+//! * [`survey`]: `formation hosts`, every daemon reachable through any of the given endpoints.
 //!
 //! The topology (docs/multi-host.md): every host daemon is a Zenoh *router* that listens (loopback
 //! only unless authenticated); the launching orchestrator opens a Zenoh *router* session that
@@ -27,7 +29,9 @@ pub mod clock;
 pub mod cluster;
 pub mod daemon;
 pub mod export;
+pub mod hold;
 pub mod identity;
 pub mod plan;
 pub mod proto;
 pub mod session;
+pub mod survey;
