@@ -10,8 +10,9 @@
 //!   forwarded subscriber, again until a pass finds nothing (at most [`DRAIN_PASSES`]), and sends
 //!   one frame per destination host with every sample of those passes, then each event that
 //!   fired, once: a sample published before a notification is therefore always delivered before
-//!   that notification is re-raised. In lockstep the frame to the plant's host waits until every
-//!   agent of this host has sent its command of the step ([`crate::hold`]): one frame per step.
+//!   that notification is re-raised. In lockstep a frame that carries a state (to an agent's
+//!   host) or a command (to the plant's host) waits for the other states or commands of the step
+//!   between those two hosts ([`crate::hold`]): one frame per step and direction.
 //! * **in** has no thread of its own: this host's frames are handled in Zenoh's subscriber
 //!   callback ([`frame_callback_subscriber`]), in Zenoh's receiving thread, which publishes each
 //!   sample into the local service, then notifies each event, as the frame lists them. A frame
@@ -37,7 +38,7 @@
 //! the frame is the batch) and `Locality::Remote`; nothing is re-forwarded (see `plan`).
 
 use crate::clock::{self, LinkDelays};
-use crate::hold::{CommandHold, Decision};
+use crate::hold::{Decision, StepHold};
 use crate::plan::{agent_index, Placement};
 use crate::proto;
 use formation_config::node::clock::now_ns;
@@ -94,8 +95,7 @@ pub struct BridgeConfig {
 pub struct Stats {
     /// Frames sent.
     pub frames_out: AtomicU64,
-    /// Drains after which the frame to the plant's host was held for commands still to come
-    /// ([`CommandHold`]).
+    /// Drains after which a frame was held for per-step samples still to come ([`StepHold`]).
     pub held: AtomicU64,
     /// Samples sent.
     pub samples_out: AtomicU64,
@@ -183,8 +183,9 @@ struct OutTopic {
     name: String,
     type_name: &'static str,
     dests: Vec<usize>,
-    /// A command of an agent (to the plant): what a lockstep frame waits for ([`CommandHold`]).
-    command: bool,
+    /// A state (plant to agent) or a command (agent to plant): a per-step sample, what a
+    /// lockstep frame waits for ([`StepHold`]).
+    per_step: bool,
     drain: Drain,
 }
 
@@ -329,7 +330,8 @@ impl Visitor for Opener<'_> {
                 name: s.name.clone(),
                 type_name,
                 dests,
-                command: TypeId::of::<T>() == TypeId::of::<ControlCommand>(),
+                per_step: TypeId::of::<T>() == TypeId::of::<ControlCommand>()
+                    || TypeId::of::<T>() == TypeId::of::<VehicleState>(),
                 drain,
             });
         } else if !self.out && inbound {
@@ -964,17 +966,36 @@ fn run_out(
         // the last frame, then (once each) the events that fired meanwhile.
         let mut pending: Vec<Pending> = hosts.iter().map(|_| Pending::new(&cfg.me)).collect();
         let mut fired = vec![false; events.len()];
-        // Lockstep: the frame to the plant's host waits for the commands of every agent here.
-        let hold_dest = topics
-            .iter()
-            .find(|t| t.command)
-            .and_then(|t| t.dests.first().copied());
-        let is_command: Vec<bool> = topics
-            .iter()
-            .map(|t| t.command && t.dests.first() == hold_dest.as_ref())
+        // Lockstep: per destination, a frame with a state or a command waits for the others of
+        // the step (each per-step topic has one destination: the agent's host, the plant's).
+        let lockstep = !cfg.sizing.realtime;
+        let mut holds: Vec<StepHold> = (0..hosts.len())
+            .map(|d| {
+                let per_step: Vec<bool> = topics
+                    .iter()
+                    .map(|t| t.per_step && t.dests == [d])
+                    .collect();
+                StepHold::new(&per_step, lockstep)
+            })
             .collect();
-        let mut hold = CommandHold::new(&is_command, !cfg.sizing.realtime);
         let plant_wake = services::WAKE_PLANT.named().name;
+        // What may wait in a held frame: the plant's wake-up with commands (to the plant's host),
+        // any wake-up of an agent with states (to an agent's host).
+        let may_wait: Vec<Vec<bool>> = (0..hosts.len())
+            .map(|d| {
+                let to_plant = hosts[d] == cfg.placement.launcher;
+                events
+                    .iter()
+                    .map(|e| {
+                        if to_plant {
+                            e.name == plant_wake
+                        } else {
+                            agent_index(services::WAKE_AGENT.pattern, &e.name).is_some()
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
         let next = loop {
             let leaving = if stop.load(Ordering::SeqCst) {
                 Some(None)
@@ -1015,7 +1036,9 @@ fn run_out(
                         Ok(n) => {
                             more |= n > 0;
                             if n > 0 {
-                                hold.on_sample(k);
+                                for &d in dests {
+                                    holds[d].on_sample(k);
+                                }
                             }
                             stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
                         }
@@ -1026,9 +1049,7 @@ fn run_out(
                     if fired[k] {
                         for &d in &e.dests {
                             pending[d].event(k);
-                            if Some(d) == hold_dest {
-                                hold.on_event(e.name == plant_wake);
-                            }
+                            holds[d].on_event(may_wait[d][k]);
                         }
                         stats.events_out.fetch_add(1, Ordering::Relaxed);
                     }
@@ -1037,18 +1058,15 @@ fn run_out(
                     break;
                 }
             }
-            let held = match hold.decide(Instant::now()) {
-                Decision::Send => None,
-                Decision::Hold(at_most) => Some(at_most),
-            };
+            let now = Instant::now();
+            let mut held: Option<Duration> = None;
             for (d, p) in pending.iter_mut().enumerate() {
-                if Some(d) == hold_dest {
-                    if held.is_some() {
-                        stats.held.fetch_add(1, Ordering::Relaxed);
-                        continue;
-                    }
-                    hold.sent();
+                if let Decision::Hold(at_most) = holds[d].decide(now) {
+                    held = Some(held.map_or(at_most, |h| h.min(at_most)));
+                    stats.held.fetch_add(1, Ordering::Relaxed);
+                    continue;
                 }
+                holds[d].sent();
                 if let Some(f) = p.take(&events) {
                     send_frame(&pubs[d], &hosts[d], f, &stats);
                 }

@@ -1,31 +1,35 @@
-//! Lockstep: one frame per step from a host to the launcher.
+//! Lockstep: one frame per step and direction between the plant's host and another host.
 //!
-//! The agents of a host answer a lockstep step moments apart; a bridge that sent each command as
-//! it came would send the plant one frame per agent (1.6-1.8 frames per step from a host with
-//! two agents, docs/multi-host.md), each costing Zenoh's sending and receiving threads and a
-//! wake-up of the plant that finds its step still incomplete. The plant cannot advance before it
-//! has every command of the step, so a frame holding the command of one agent of the host gains
-//! nothing by leaving before the commands of the host's other agents: [`CommandHold`] keeps it
-//! until they are in, and the last one's wake-up sends the frame.
+//! In a lockstep step the plant publishes the states of a host's agents one after the other, and
+//! the agents of that host answer moments apart; a bridge that sent each as it came would send
+//! 1.2-1.3 frames per step to the host and 1.6-1.8 back from a host with two agents
+//! (docs/multi-host.md), each frame costing Zenoh's sending and receiving threads and a wake-up
+//! on the other side that finds its work still incomplete. Neither side gains from the first
+//! part alone: the plant cannot advance before it has every command of the step, and the plant
+//! publishes every state of the step in one go. So a frame holding a *per-step sample* (a state
+//! to the host, a command to the plant's host) waits until the host's other per-step samples of
+//! the step are in, and the last one's wake-up sends the frame ([`StepHold`]).
 //!
-//! Bounds, so that a hold never costs a step more than [`HOLD_FOR_COMMANDS`] once:
-//! * an agent whose command does not come within [`HOLD_FOR_COMMANDS`] (its process is down, the
-//!   plant flies its fallback) is no longer waited for until a command of it comes again;
-//! * a frame that carries an event other than the plant's wake-up (a neighbour woken after a
-//!   share it needs in this very step, a hello, a runtime event) leaves at once: someone may be
-//!   waiting for it within the step;
-//! * realtime runs never hold (every command has its own deadline).
+//! Bounds, so that a hold never costs a step more than [`HOLD_FOR_STEP`] once:
+//! * a sample that does not come within [`HOLD_FOR_STEP`] (its agent is down, the plant flies
+//!   its fallback and publishes no state) is no longer waited for until it comes again;
+//! * a frame to the plant's host that carries an event other than the plant's wake-up (a
+//!   neighbour woken after a share it needs in this very step, a hello, a runtime event) leaves
+//!   at once: its receiver may be what the missing command waits for. (A frame of states may
+//!   carry the agents' wake-ups, the plant's or a neighbour's: the states it waits for come from
+//!   the plant's one loop, which waits for nobody.)
+//! * realtime runs never hold (every message has its own deadline).
 //!
 //! Pure: the caller gives the time, drains and sends.
 
 use std::time::{Duration, Instant};
 
-/// Longest a frame to the launcher waits for the commands of the host's other agents. Far above
-/// an agent's step on a loaded machine (a few hundred µs), so a live agent is always waited for;
-/// paid once per outage of an agent (then it is not waited for until it answers again).
-pub const HOLD_FOR_COMMANDS: Duration = Duration::from_millis(2);
+/// Longest a frame waits for the per-step samples still missing. Far above an agent's step on a
+/// loaded machine (a few hundred µs), so a live agent is always waited for; paid once per outage
+/// of an agent (then it is not waited for until it answers again).
+pub const HOLD_FOR_STEP: Duration = Duration::from_millis(2);
 
-/// What to do with the frame to the launcher after a drain.
+/// What to do with a frame after a drain.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Decision {
     /// Send it (it may be empty).
@@ -34,27 +38,28 @@ pub enum Decision {
     Hold(Duration),
 }
 
-/// The hold of the frame to the launcher of one bridge plan (see the module doc).
+/// The hold of the frames to one destination host under one bridge plan (see the module doc).
 #[derive(Debug, Clone)]
-pub struct CommandHold {
-    /// Holding is on (lockstep, and this host forwards commands).
+pub struct StepHold {
+    /// Holding is on (lockstep, and this host sends per-step samples there).
     enabled: bool,
-    /// Per forwarded topic: `None` for a topic that is not a command; `Some(awaited)` for a
-    /// command: `awaited` false once it failed to come within the hold (until it comes again).
+    /// Per forwarded topic: `None` for a topic that is not a per-step sample to this destination;
+    /// `Some(awaited)` for one: `awaited` false once it failed to come within the hold (until it
+    /// comes again).
     commands: Vec<Option<bool>>,
     /// Per forwarded topic: a sample of it is in the pending frame.
     got: Vec<bool>,
-    /// The pending frame carries an event other than the plant's wake-up.
+    /// The pending frame carries an event that may not wait.
     other_event: bool,
     /// When the pending frame was first held.
     since: Option<Instant>,
 }
 
-impl CommandHold {
-    /// A hold over the forwarded topics, `is_command[k]` telling the commands of this host's
-    /// agents (sent to the launcher); `lockstep` false turns it off.
-    pub fn new(is_command: &[bool], lockstep: bool) -> CommandHold {
-        CommandHold {
+impl StepHold {
+    /// A hold over the forwarded topics, `is_command[k]` telling the per-step samples to this
+    /// destination; `lockstep` false turns it off.
+    pub fn new(is_command: &[bool], lockstep: bool) -> StepHold {
+        StepHold {
             enabled: lockstep && is_command.iter().any(|c| *c),
             commands: is_command.iter().map(|c| c.then_some(true)).collect(),
             got: vec![false; is_command.len()],
@@ -71,12 +76,12 @@ impl CommandHold {
         }
     }
 
-    /// An event went into the pending frame: the plant's wake-up (`plant_wake`) or another.
-    pub fn on_event(&mut self, plant_wake: bool) {
-        self.other_event |= !plant_wake;
+    /// An event went into the pending frame: one that may wait with it (`may_wait`), or another.
+    pub fn on_event(&mut self, may_wait: bool) {
+        self.other_event |= !may_wait;
     }
 
-    /// Send the pending frame now, or hold it (how long at most) for the commands still awaited.
+    /// Send the pending frame now, or hold it (how long at most) for the samples still awaited.
     pub fn decide(&mut self, now: Instant) -> Decision {
         let has_command = self
             .commands
@@ -94,7 +99,7 @@ impl CommandHold {
         }
         let since = *self.since.get_or_insert(now);
         let held = now.saturating_duration_since(since);
-        if held >= HOLD_FOR_COMMANDS {
+        if held >= HOLD_FOR_STEP {
             for (c, g) in self.commands.iter_mut().zip(&self.got) {
                 if *c == Some(true) && !*g {
                     *c = Some(false);
@@ -102,7 +107,7 @@ impl CommandHold {
             }
             return Decision::Send;
         }
-        Decision::Hold(HOLD_FOR_COMMANDS - held)
+        Decision::Hold(HOLD_FOR_STEP - held)
     }
 
     /// The pending frame went out: the next one starts empty.
@@ -120,8 +125,8 @@ mod tests {
     const MS: Duration = Duration::from_millis(1);
 
     /// Topics 0 and 2 are the commands of two agents; topic 1 a share.
-    fn two_agents() -> CommandHold {
-        CommandHold::new(&[true, false, true], true)
+    fn two_agents() -> StepHold {
+        StepHold::new(&[true, false, true], true)
     }
 
     #[test]
@@ -131,11 +136,11 @@ mod tests {
         h.on_sample(1);
         h.on_sample(0);
         h.on_event(true);
-        assert_eq!(h.decide(t), Decision::Hold(HOLD_FOR_COMMANDS));
+        assert_eq!(h.decide(t), Decision::Hold(HOLD_FOR_STEP));
         let later = t + Duration::from_micros(300);
         assert_eq!(
             h.decide(later),
-            Decision::Hold(HOLD_FOR_COMMANDS - Duration::from_micros(300))
+            Decision::Hold(HOLD_FOR_STEP - Duration::from_micros(300))
         );
         h.on_sample(2);
         h.on_event(true);
@@ -152,7 +157,7 @@ mod tests {
         let mut h = two_agents();
         h.on_sample(0);
         assert!(matches!(h.decide(t), Decision::Hold(_)));
-        assert_eq!(h.decide(t + HOLD_FOR_COMMANDS), Decision::Send);
+        assert_eq!(h.decide(t + HOLD_FOR_STEP), Decision::Send);
         h.sent();
         // Agent 2 is down: the next steps are not held for it.
         for k in 1..4 {
@@ -180,10 +185,10 @@ mod tests {
         h.on_sample(0);
         h.on_event(false);
         assert_eq!(h.decide(t), Decision::Send, "a neighbour's wake-up");
-        let mut rt = CommandHold::new(&[true, false, true], false);
+        let mut rt = StepHold::new(&[true, false, true], false);
         rt.on_sample(0);
         assert_eq!(rt.decide(t), Decision::Send);
-        let mut none = CommandHold::new(&[false, false], true);
+        let mut none = StepHold::new(&[false, false], true);
         none.on_sample(0);
         assert_eq!(none.decide(t), Decision::Send);
     }

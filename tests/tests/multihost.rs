@@ -356,6 +356,9 @@ fn spread_run_matches_sim(tag: &str, count: usize, args: &[&str], place: &[&str]
     for (h, left) in hosts.stop_daemons().iter().enumerate() {
         assert_no_residue(&format!("host h{}", h + 1), left);
     }
+    // Shown with a failure only (the test harness captures it): the run's own account of what
+    // happened (a takeover's warm or cold start, warnings).
+    eprintln!("formation run over {count} hosts, stderr:\n{err}");
     formation_tests::assert_trajectory_is_sims(&out, args, &dir.join("sim"));
     let _ = std::fs::remove_dir_all(&dir);
     err
