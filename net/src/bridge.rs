@@ -8,11 +8,9 @@
 //!   wakes every [`IDLE_WAKE`] for samples that come without a wake-up, such as telemetry, and to
 //!   look for a stop or a re-plan). After a wake-up it drains the listeners *first*, then every
 //!   forwarded subscriber, again until a pass finds nothing (at most [`DRAIN_PASSES`]), and sends
-//!   one frame per destination host with every sample of those passes, then each event that
-//!   fired, once: a sample published before a notification is therefore always delivered before
-//!   that notification is re-raised. In lockstep a frame that carries a state (to an agent's
-//!   host) or a command (to the plant's host) waits for the other states or commands of the step
-//!   between those two hosts ([`crate::hold`]): one frame per step and direction.
+//!   one frame per destination host with each pass's samples before its events: a sample
+//!   published before a notification is therefore always delivered before that notification is
+//!   re-raised.
 //! * **in** has no thread of its own: this host's frames are handled in Zenoh's subscriber
 //!   callback ([`frame_callback_subscriber`]), in Zenoh's receiving thread, which publishes each
 //!   sample into the local service, then notifies each event, as the frame lists them. A frame
@@ -38,7 +36,6 @@
 //! the frame is the batch) and `Locality::Remote`; nothing is re-forwarded (see `plan`).
 
 use crate::clock::{self, LinkDelays};
-use crate::hold::{Decision, StepHold};
 use crate::plan::{agent_index, Placement};
 use crate::proto;
 use formation_config::node::clock::now_ns;
@@ -57,7 +54,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::Locality;
 use zenoh::Wait;
@@ -95,8 +92,6 @@ pub struct BridgeConfig {
 pub struct Stats {
     /// Frames sent.
     pub frames_out: AtomicU64,
-    /// Drains after which a frame was held for per-step samples still to come ([`StepHold`]).
-    pub held: AtomicU64,
     /// Samples sent.
     pub samples_out: AtomicU64,
     /// Events sent.
@@ -183,9 +178,6 @@ struct OutTopic {
     name: String,
     type_name: &'static str,
     dests: Vec<usize>,
-    /// A state (plant to agent) or a command (agent to plant): a per-step sample, what a
-    /// lockstep frame waits for ([`StepHold`]).
-    per_step: bool,
     drain: Drain,
 }
 
@@ -330,8 +322,6 @@ impl Visitor for Opener<'_> {
                 name: s.name.clone(),
                 type_name,
                 dests,
-                per_step: TypeId::of::<T>() == TypeId::of::<ControlCommand>()
-                    || TypeId::of::<T>() == TypeId::of::<VehicleState>(),
                 drain,
             });
         } else if !self.out && inbound {
@@ -850,62 +840,6 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// The next frame to one destination: every frame starts with this host's record, then the
-/// samples of every drain pass since the last frame, then each event that fired meanwhile, once.
-/// All samples before all events keeps the order that matters (a sample published before a
-/// notification is published on the other host before the notification is re-raised there) and
-/// wakes the receiving process once, with everything of the frame already in its queues.
-struct Pending {
-    frame: Vec<u8>,
-    header: usize,
-    /// Indices of the plan's events, in the order they first fired.
-    events: Vec<usize>,
-}
-
-impl Pending {
-    fn new(me: &str) -> Pending {
-        let mut frame = Vec::new();
-        put_from(&mut frame, me);
-        Pending {
-            header: frame.len(),
-            frame,
-            events: Vec::new(),
-        }
-    }
-
-    /// Event `k` of the plan fired.
-    fn event(&mut self, k: usize) {
-        if !self.events.contains(&k) {
-            self.events.push(k);
-        }
-    }
-
-    /// The frame to send (`None`: nothing in it), leaving an empty one.
-    fn take(&mut self, events: &[OutEvent]) -> Option<Vec<u8>> {
-        if self.frame.len() == self.header && self.events.is_empty() {
-            return None;
-        }
-        for k in self.events.drain(..) {
-            put_event(&mut self.frame, &events[k].name);
-        }
-        let empty = self.frame[..self.header].to_vec();
-        Some(std::mem::replace(&mut self.frame, empty))
-    }
-}
-
-/// Sends one frame to `host` and counts it.
-fn send_frame(
-    publisher: &zenoh::pubsub::Publisher<'static>,
-    host: &str,
-    frame: Vec<u8>,
-    stats: &Stats,
-) {
-    if let Err(e) = publisher.put(frame).wait() {
-        tracing::warn!("bridge: cannot send to {host}: {e}");
-    }
-    stats.frames_out.fetch_add(1, Ordering::Relaxed);
-}
-
 fn run_out(
     session: zenoh::Session,
     mut cfg: BridgeConfig,
@@ -962,55 +896,19 @@ fn run_out(
             }
         }
         let _ = ack.send(Ok(topics.len() + events.len()));
-        // Per destination, what goes out in its next frame: the samples of every drain pass since
-        // the last frame, then (once each) the events that fired meanwhile.
-        let mut pending: Vec<Pending> = hosts.iter().map(|_| Pending::new(&cfg.me)).collect();
+        // Every frame starts with this host's name; a frame with nothing after it is not sent.
+        let mut from = Vec::new();
+        put_from(&mut from, &cfg.me);
+        let header = from.len();
+        let mut frames: Vec<Vec<u8>> = vec![from.clone(); hosts.len()];
         let mut fired = vec![false; events.len()];
-        // Lockstep: per destination, a frame with a state or a command waits for the others of
-        // the step (each per-step topic has one destination: the agent's host, the plant's).
-        let lockstep = !cfg.sizing.realtime;
-        let mut holds: Vec<StepHold> = (0..hosts.len())
-            .map(|d| {
-                let per_step: Vec<bool> = topics
-                    .iter()
-                    .map(|t| t.per_step && t.dests == [d])
-                    .collect();
-                StepHold::new(&per_step, lockstep)
-            })
-            .collect();
-        let plant_wake = services::WAKE_PLANT.named().name;
-        // What may wait in a held frame: the plant's wake-up with commands (to the plant's host),
-        // any wake-up of an agent with states (to an agent's host).
-        let may_wait: Vec<Vec<bool>> = (0..hosts.len())
-            .map(|d| {
-                let to_plant = hosts[d] == cfg.placement.launcher;
-                events
-                    .iter()
-                    .map(|e| {
-                        if to_plant {
-                            e.name == plant_wake
-                        } else {
-                            agent_index(services::WAKE_AGENT.pattern, &e.name).is_some()
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
         let next = loop {
-            let leaving = if stop.load(Ordering::SeqCst) {
-                Some(None)
-            } else {
-                // Between two cycles: every sample drained so far goes out under this plan.
-                replan.try_recv().ok().map(Some)
-            };
-            if let Some(next) = leaving {
-                // A held frame goes out under the plan it was drained in.
-                for (d, p) in pending.iter_mut().enumerate() {
-                    if let Some(f) = p.take(&events) {
-                        send_frame(&pubs[d], &hosts[d], f, &stats);
-                    }
-                }
-                break next;
+            if stop.load(Ordering::SeqCst) {
+                break None;
+            }
+            // Between two cycles: every sample drained so far went out under this plan.
+            if let Ok(r) = replan.try_recv() {
+                break Some(r);
             }
             // Pass after pass until one finds nothing (at most DRAIN_PASSES), into the same
             // frames: what comes in while the bridge drains goes out with it.
@@ -1018,28 +916,23 @@ fn run_out(
             for _ in 0..DRAIN_PASSES {
                 more = false;
                 // Events first: any sample published before a notification we saw is in its
-                // queue now, so it goes out in this frame, before the frame's events.
+                // queue now; each pass appends its samples, then its events.
                 for (k, e) in events.iter().enumerate() {
                     let mut got = false;
                     let _ = e.listener.try_wait(|_| got = true);
                     fired[k] = got;
                     more |= got;
                 }
-                for (k, t) in topics.iter_mut().enumerate() {
+                for t in topics.iter_mut() {
                     let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
                     let r = (t.drain)(&mut |bytes| {
                         for &d in dests {
-                            put_sample(&mut pending[d].frame, name, type_name, bytes);
+                            put_sample(&mut frames[d], name, type_name, bytes);
                         }
                     });
                     match r {
                         Ok(n) => {
                             more |= n > 0;
-                            if n > 0 {
-                                for &d in dests {
-                                    holds[d].on_sample(k);
-                                }
-                            }
                             stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
                         }
                         Err(e) => tracing::warn!("bridge: {name}: {e}"),
@@ -1048,8 +941,7 @@ fn run_out(
                 for (k, e) in events.iter().enumerate() {
                     if fired[k] {
                         for &d in &e.dests {
-                            pending[d].event(k);
-                            holds[d].on_event(may_wait[d][k]);
+                            put_event(&mut frames[d], &e.name);
                         }
                         stats.events_out.fetch_add(1, Ordering::Relaxed);
                     }
@@ -1058,28 +950,24 @@ fn run_out(
                     break;
                 }
             }
-            let now = Instant::now();
-            let mut held: Option<Duration> = None;
-            for (d, p) in pending.iter_mut().enumerate() {
-                if let Decision::Hold(at_most) = holds[d].decide(now) {
-                    held = Some(held.map_or(at_most, |h| h.min(at_most)));
-                    stats.held.fetch_add(1, Ordering::Relaxed);
-                    continue;
-                }
-                holds[d].sent();
-                if let Some(f) = p.take(&events) {
-                    send_frame(&pubs[d], &hosts[d], f, &stats);
+            for (d, f) in frames.iter_mut().enumerate() {
+                if f.len() > header {
+                    if let Err(e) = pubs[d].put(std::mem::replace(f, from.clone())).wait() {
+                        tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
+                    }
+                    stats.frames_out.fetch_add(1, Ordering::Relaxed);
                 }
             }
             if more {
                 continue;
             }
-            let sleep = held.map_or(IDLE_WAKE, |h| h.min(IDLE_WAKE));
             if guards.is_empty() {
-                std::thread::sleep(sleep);
+                std::thread::sleep(IDLE_WAKE);
             } else {
-                let _ = waitset
-                    .wait_and_process_once_with_timeout(|_| CallbackProgression::Continue, sleep);
+                let _ = waitset.wait_and_process_once_with_timeout(
+                    |_| CallbackProgression::Continue,
+                    IDLE_WAKE,
+                );
             }
         };
         drop(guards);

@@ -7,7 +7,6 @@
 //! * [`plan`]: which services cross hosts for a placement, and in which direction.
 //! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
 //!   bytes with their wire type name.
-//! * [`hold`]: lockstep frames from a host to the launcher wait for the commands of all its agents.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`bench`]: bare Zenoh links and the frames of a split lockstep step, for `formation bench`.
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
@@ -29,7 +28,6 @@ pub mod clock;
 pub mod cluster;
 pub mod daemon;
 pub mod export;
-pub mod hold;
 pub mod identity;
 pub mod plan;
 pub mod proto;

@@ -279,7 +279,6 @@ impl Drop for RemoteRun {
                 samples_out = s.samples_out.load(Relaxed),
                 events_out = s.events_out.load(Relaxed),
                 frames_in = s.frames_in.load(Relaxed),
-                held = s.held.load(Relaxed),
                 refused = s.refused.load(Relaxed),
                 "bridge stopped"
             );
