@@ -12,6 +12,7 @@
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
+//! * [`survey`]: `formation hosts`, every daemon reachable through any of the given endpoints.
 //!
 //! The topology (docs/multi-host.md): every host daemon is a Zenoh *router* that listens (loopback
 //! only unless authenticated); the launching orchestrator opens a Zenoh *router* session that
@@ -31,3 +32,4 @@ pub mod identity;
 pub mod plan;
 pub mod proto;
 pub mod session;
+pub mod survey;

@@ -46,7 +46,8 @@ pub struct HostArgs {
 /// Arguments of `formation hosts`.
 #[derive(clap::Args, Debug)]
 pub struct HostsArgs {
-    /// Daemon endpoint(s) to ask (repeatable); default tcp/127.0.0.1:7447.
+    /// Daemon endpoint(s) to ask (repeatable; one client session each): every daemon reachable
+    /// through any of them is listed once. Default tcp/127.0.0.1:7447.
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
     /// How long to wait for answers, ms.
@@ -143,41 +144,48 @@ pub fn host_main(a: HostArgs) -> ExitCode {
     }
 }
 
-/// `formation hosts`.
+/// `formation hosts`: one client session per `--connect` endpoint, all at once, merged by daemon
+/// identity (`formation_net::survey`). Exit 2 when no endpoint could be reached at all; an
+/// endpoint that cannot be reached while others can is named in a warning.
 pub fn hosts_main(a: HostsArgs) -> ExitCode {
     let connect = if a.connect.is_empty() {
         vec![session::default_endpoint()]
     } else {
         a.connect.clone()
     };
+    // Malformed endpoints or credentials: exit 2 before anything is opened.
     let opts = Options {
         mode: Mode::Client,
         listen: vec![],
-        connect,
+        connect: connect.clone(),
         auth: a.link.auth.clone(),
         lease_ms: a.link.lease_ms,
     };
-    let cluster = match formation_net::cluster::Cluster::open(&opts) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(cli::EXIT_INVALID);
-        }
-    };
+    if let Err(e) = opts.check() {
+        eprintln!("error: {e}");
+        return ExitCode::from(cli::EXIT_INVALID);
+    }
     let t = Duration::from_millis(a.timeout_ms);
-    let infos: Vec<_> = cluster
-        .names(t)
-        .iter()
-        .filter_map(|n| cluster.info(n, t).map(|(i, _)| i))
-        .collect();
+    let survey = formation_net::survey::survey(&connect, a.link.auth.clone(), a.link.lease_ms, t);
+    if survey.failed.len() == connect.len() {
+        for (ep, e) in &survey.failed {
+            eprintln!("error: {ep}: {e}");
+        }
+        return ExitCode::from(cli::EXIT_INVALID);
+    }
+    for (ep, e) in &survey.failed {
+        eprintln!("warning: {ep}: {e}");
+    }
+    let infos = &survey.hosts;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&infos).unwrap());
+        println!("{}", serde_json::to_string_pretty(infos).unwrap());
     } else {
         println!(
             "{:<16} {:<28} {:>4} {:>4}  BUILD",
             "NAME", "ADDRESS", "CPUS", "RUNS"
         );
-        for i in &infos {
+        for l in infos {
+            let i = &l.info;
             println!(
                 "{:<16} {:<28} {:>4} {:>4}  {} (protocol {})",
                 i.name,

@@ -356,6 +356,9 @@ fn spread_run_matches_sim(tag: &str, count: usize, args: &[&str], place: &[&str]
     for (h, left) in hosts.stop_daemons().iter().enumerate() {
         assert_no_residue(&format!("host h{}", h + 1), left);
     }
+    // Shown with a failure only (the test harness captures it): the run's own account of what
+    // happened (a takeover's warm or cold start, warnings).
+    eprintln!("formation run over {count} hosts, stderr:\n{err}");
     formation_tests::assert_trajectory_is_sims(&out, args, &dir.join("sim"));
     let _ = std::fs::remove_dir_all(&dir);
     err
@@ -461,6 +464,90 @@ fn a_twenty_ring_round_robin_over_three_hosts_with_a_remote_crash_is_byte_identi
         takeover.contains("(warm,"),
         "agent 3 restarts warm: {takeover}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `formation hosts ARGS --auth FILE` in the launcher's namespace: (exit code, stdout, stderr).
+fn hosts_in(hosts: &Hosts, args: &[&str]) -> (i32, String, String) {
+    let auth = hosts.auth.display().to_string();
+    let mut v: Vec<&str> = vec!["hosts"];
+    v.extend_from_slice(args);
+    v.extend_from_slice(&["--auth", &auth]);
+    let o = hosts
+        .command(0, None, &v)
+        .output()
+        .expect("formation hosts runs");
+    (
+        o.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn hosts_lists_every_daemon_reachable_through_several_connects_once_and_a_run_right_after_spans_them(
+) {
+    if !available(
+        "hosts_lists_every_daemon_reachable_through_several_connects_once_and_a_run_right_after_spans_them",
+    ) {
+        return;
+    }
+    let dir = work_dir("hosts");
+    let mut hosts = Hosts::new(3, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    hosts.start_daemon(2, &dir, &[]);
+    let ep = |h: usize| format!("tcp/{}:7447", hosts.addrs[h]);
+    let (a, b) = (ep(1), ep(2));
+    // h1 given twice: one daemon, listed once. The two daemons' namespaces have no route to each
+    // other, so each is reachable through its own endpoint only.
+    let (code, out, err) = hosts_in(
+        &hosts,
+        &["--json", "--connect", &a, "--connect", &b, "--connect", &a],
+    );
+    assert_eq!(code, 0, "{err}");
+    let listed: serde_json::Value = serde_json::from_str(&out).expect("--json prints JSON");
+    let listed = listed.as_array().expect("a JSON array");
+    let names: Vec<&str> = listed.iter().filter_map(|h| h["name"].as_str()).collect();
+    assert_eq!(names, ["h1", "h2"], "both daemons, once each: {out}");
+    for (h, endpoint) in listed.iter().zip([&a, &b]) {
+        assert_eq!(h["listen"], serde_json::json!([endpoint]), "{h}");
+        assert_eq!(h["via"], serde_json::json!([endpoint]), "{h}");
+        assert!(h["pid"].as_u64().is_some_and(|p| p > 0), "{h}");
+        assert!(
+            h["identity"]["build"]
+                .as_str()
+                .is_some_and(|b| !b.is_empty()),
+            "{h}"
+        );
+    }
+    // The table, and an endpoint nothing answers on: named in a warning, the others listed.
+    // 10.<k>.250.0/24: no link of the test, so no route from the launcher's namespace.
+    let net: Vec<&str> = hosts.addrs[1].split('.').take(2).collect();
+    let nowhere = format!("tcp/{}.250.2:7447", net.join("."));
+    let (code, out, err) = hosts_in(
+        &hosts,
+        &["--connect", &nowhere, "--connect", &b, "--connect", &a],
+    );
+    assert_eq!(code, 0, "{err}");
+    let rows: Vec<&str> = out.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2, "{out}");
+    assert!(rows[0].starts_with("h1 ") && rows[0].contains(&a), "{out}");
+    assert!(rows[1].starts_with("h2 ") && rows[1].contains(&b), "{out}");
+    assert!(err.contains(&format!("warning: {nowhere}")), "{err}");
+    // Only endpoints nothing answers on: exit 2.
+    let (code, _, err) = hosts_in(&hosts, &["--connect", &nowhere]);
+    assert_eq!(code, 2, "{err}");
+    // A three-host run started right after the listing finds both daemons and stays lockstep.
+    let out_dir = dir.join("run");
+    let args = ["paper", "--set", "simulation.duration_s=1"];
+    let run_args: Vec<&str> = args.iter().chain(&["--hosts", "h1,h2"]).copied().collect();
+    let (code, err, residue) = run_in(&hosts, &dir, &run_args, &out_dir, true);
+    assert_eq!(code, 0, "formation run right after formation hosts:\n{err}");
+    assert_no_residue("the launcher", &residue);
+    for (h, left) in hosts.stop_daemons().iter().enumerate() {
+        assert_no_residue(&format!("host h{}", h + 1), left);
+    }
+    formation_tests::assert_trajectory_is_sims(&out_dir, &args, &dir.join("sim"));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
