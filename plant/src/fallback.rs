@@ -14,10 +14,11 @@
 //! (61): the measured acceleration less the one its thrust and attitude give, low-passed at
 //! [`DISTURBANCE_OBSERVER_RATE`], starting at the controller's last estimate F-hat) whose estimate
 //! it cancels, an integral acceleration trim for what is left, and a repulsion from the quadrotors
-//! nearer than [`SEPARATION_ACTIVATION`] safety distances, the conversion (28) to thrust and roll/pitch at the current heading, a
-//! rate-limited attitude setpoint, a P attitude loop with setpoint-rate feedforward to a clamped
-//! body-rate setpoint, and a PI rate loop on the torque whose integrator starts at the last torque
-//! the controller sent (bumpless transfer) and absorbs the actuator faults. Every gain is a named
+//! nearer than [`SEPARATION_ACTIVATION`] safety distances, the conversion (28) to thrust and
+//! roll/pitch at the current heading, a rate-limited attitude setpoint, a P attitude loop with
+//! setpoint-rate feedforward to a clamped body-rate setpoint, and a PI rate loop on the torque
+//! whose integrator starts at the last torque the controller sent (bumpless transfer) and absorbs
+//! the actuator faults. Every gain is a named
 //! constant below (docs/failures.md lists them). Pure functions; [`Failsafe`] is the state the
 //! plant keeps per quadrotor while it flies it.
 
