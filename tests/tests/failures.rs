@@ -123,44 +123,47 @@ fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_beats_a
     assert!(residue_of(&run).is_empty());
 }
 
-/// The worst sample of the 2 s crash-time sweep (agent 4 down from 44 s, in the descent and spin of
-/// the enclosing phase): with its reference re-armed in its neighbours' controllers (the default)
-/// the formation error peaks near 1 m and no two quadrotors come closer than the safety distance;
-/// without the re-armed reference the same outage swings the formation by 1.7 m.
+/// Issue 20's bounds on the two outages of the descent and spin of the enclosing phase where a
+/// returning controller meets the largest re-entry error (docs/failures.md, crash-time sweeps):
+/// agent 4 down from 44 s for 2 s peaks under 1 m, agent 5 down from 43 s for 0.5 s recovers
+/// within 2 s; neither brings two quadrotors closer than the safety distance nor breaks a
+/// constraint once its controller is back (the failsafe's disturbance observer holds the slot).
 #[test]
-fn a_two_second_outage_in_the_enclosing_phase_rejoins_gently_with_the_neighbours_rearmed_reference()
-{
-    let dir = temp_dir("rejoin-reference");
+fn outages_in_the_descent_and_spin_stay_within_issue_20s_peak_and_recovery_bounds() {
+    let dir = temp_dir("rejoin-enclosing");
     let scenario = workspace_root().join("config/scenarios/crash-warm.toml");
-    let event = [
-        "--set",
-        "events[0].agent=4",
-        "--set",
-        "events[0].at_s=44",
-        "--set",
-        "events[0].down_s=2.0",
-    ];
-    let run = |tag: &str, extra: &[&str]| {
-        let out = dir.join(tag);
-        let mut args = vec![scenario.to_str().unwrap()];
-        args.extend(event);
-        args.extend(extra);
+    let run = |agent: u32, at_s: u32, down_s: f64| {
+        let out = dir.join(format!("{agent}-{at_s}-{down_s}"));
+        let (a, t, d) = (
+            format!("events[0].agent={agent}"),
+            format!("events[0].at_s={at_s}"),
+            format!("events[0].down_s={down_s}"),
+        );
+        let args = [
+            scenario.to_str().unwrap(),
+            "--set",
+            &a,
+            "--set",
+            &t,
+            "--set",
+            &d,
+        ];
         sim(&args, &out);
         summary(&out)["events"][0].clone()
     };
-    let rearmed = run("neighbours", &[]);
-    let off = run("off", &["--set", "runtime.rejoin_reference=false"]);
+    let long = run(4, 44, 2.0);
+    let short = run(5, 43, 0.5);
     let peak = |e: &serde_json::Value| e["peak_error_m"].as_f64().expect("peak");
+    assert!(peak(&long) <= 1.0, "agent 4 down 2 s: {long}");
+    let recovered = short["recovered_after_s"].as_f64();
     assert!(
-        peak(&rearmed) < 1.2,
-        "re-armed in the neighbours: {rearmed}"
+        recovered.is_some_and(|r| r <= 2.0),
+        "agent 5 down 0.5 s: {short}"
     );
-    assert!(
-        peak(&rearmed) < 0.75 * peak(&off),
-        "re-armed {rearmed} vs off {off}"
-    );
-    assert_eq!(rearmed["steps_below_safety_during"], 0, "{rearmed}");
-    assert_eq!(rearmed["violations_once_back"], 0, "{rearmed}");
+    for e in [&long, &short] {
+        assert_eq!(e["steps_below_safety_during"], 0, "{e}");
+        assert_eq!(e["violations_once_back"], 0, "{e}");
+    }
 }
 
 /// Agent 3 crashes for 2 s and agent 1 hangs for 1 s: the failsafe flies their slots (`slot`,
