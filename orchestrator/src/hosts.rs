@@ -148,11 +148,14 @@ pub fn host_main(a: HostArgs) -> ExitCode {
 /// identity (`formation_net::survey`). Exit 2 when no endpoint could be reached at all; an
 /// endpoint that cannot be reached while others can is named in a warning.
 pub fn hosts_main(a: HostsArgs) -> ExitCode {
-    let connect = if a.connect.is_empty() {
+    let mut connect = if a.connect.is_empty() {
         vec![session::default_endpoint()]
     } else {
         a.connect.clone()
     };
+    // An endpoint given twice is asked once (one session each).
+    let mut seen = std::collections::HashSet::new();
+    connect.retain(|ep| seen.insert(ep.clone()));
     // Malformed endpoints or credentials: exit 2 before anything is opened.
     let opts = Options {
         mode: Mode::Client,
