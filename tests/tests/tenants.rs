@@ -24,6 +24,10 @@ use std::time::{Duration, Instant};
 
 static NEXT: AtomicUsize = AtomicUsize::new(0);
 
+/// The two tests run one after the other: each is a whole split run under attack, and two at once
+/// on a 2-core machine measure the machine, not the daemon.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// `true`: run the test; `false`: skipped (panics instead when FORMATION_REQUIRE_NETNS=1).
 fn available(test: &str) -> bool {
     // SAFETY: geteuid has no preconditions.
@@ -66,6 +70,7 @@ fn work_dir(tag: &str) -> PathBuf {
 /// A daemon `t1` in its own mount namespace on a loopback port, killed on drop.
 struct Daemon {
     child: Child,
+    port: usize,
     endpoint: String,
     auth: PathBuf,
     log: PathBuf,
@@ -109,6 +114,7 @@ impl Daemon {
         }
         Daemon {
             child,
+            port,
             endpoint,
             auth,
             log,
@@ -277,6 +283,7 @@ fn a_second_tenant_with_the_daemons_credentials_can_neither_drive_nor_inject_int
     if !available(test) {
         return;
     }
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     let dir = work_dir("tenant");
     let mut d = Daemon::start(&dir);
     let args = run_args("20");
@@ -367,14 +374,19 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
     if !available(test) {
         return;
     }
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     let dir = work_dir("fuzz");
     let mut d = Daemon::start(&dir);
     let args = run_args("20");
-    let (run, out, err) = start_run(&d, &dir, &args, &[]);
+    // The run also exports its telemetry (`--zenoh-listen`): its info key is fuzzed too.
+    let export = format!("tcp/127.0.0.1:{}", d.port + 10_000);
+    let (run, out, err) = start_run(&d, &dir, &args, &["--zenoh-listen", &export]);
     let p = Probe::open(&d.endpoint, Some(d.auth.clone())).expect("the fuzzer connects");
     let ids = p.run_ids(Duration::from_secs(30));
     assert_eq!(ids.len(), 1, "{ids:?}");
     let id = &ids[0];
+    let e = Probe::open(&export, Some(d.auth.clone())).expect("the fuzzer reaches the export");
+    let export_info = formation_net::export::info_key(id);
     // Deterministic noise.
     let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
     let mut noise = |n: usize| -> Vec<u8> {
@@ -427,6 +439,20 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
                 sent += 1;
             }
         }
+        for pl in &payloads {
+            let _ = e.query(&export_info, Some(pl.clone()), Duration::from_millis(500));
+            sent += 1;
+        }
+        if round == 0 {
+            let _ = e.query(&export_info, Some(huge.clone()), Duration::from_secs(5));
+        }
+        let answers = e.query(&export_info, None, Duration::from_secs(5)).unwrap();
+        assert!(
+            answers
+                .iter()
+                .any(|a| a.as_ref().is_ok_and(|b| b.starts_with(b"{"))),
+            "the export answers its info amid the fuzz"
+        );
         for key in queried {
             for pl in &payloads {
                 // Answers or not, the daemon must stay up; the answers are not checked here.
@@ -443,7 +469,7 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
     let (code, err_text) = finish(run, &err);
     assert_eq!(code, 0, "the fuzzed run failed:\n{err_text}");
     assert!(d.alive(), "the daemon is up:\n{}", d.log());
-    // It still answers.
+    // The daemon still answers.
     let info = p
         .query("formation/host/t1/info", None, Duration::from_secs(5))
         .unwrap();
