@@ -597,9 +597,9 @@ fn a_mismatched_build_is_refused_before_anything_starts_naming_both_hosts() {
 }
 
 #[test]
-fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback() {
+fn an_orchestrator_without_or_with_wrong_credentials_is_refused_naming_the_host_and_why() {
     if !available(
-        "an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback",
+        "an_orchestrator_without_or_with_wrong_credentials_is_refused_naming_the_host_and_why",
     ) {
         return;
     }
@@ -607,20 +607,39 @@ fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_l
     let mut hosts = Hosts::new(2, &dir);
     hosts.start_daemon(1, &dir, &[]);
     let out = dir.join("run");
+    // Without credentials: refused before anything is sent, naming the option.
     let (code, err, residue) = run_in(&hosts, &dir, &["paper", "--hosts", "h1"], &out, false);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("h1"), "the host is named: {err}");
+    assert!(err.contains("--auth FILE"), "the option is named: {err}");
+    assert_no_residue("the launcher", &residue);
+    // With a password the daemon does not know: an authentication failure, the host named.
+    let wrong = dir.join("wrong-auth");
+    std::fs::write(&wrong, "formation:not-the-secret\n").unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&wrong, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let mut args: Vec<String> = ["paper", "--hosts", "h1"].map(String::from).to_vec();
+    args.extend(hosts.connect_args());
+    args.extend(["--auth".to_string(), wrong.display().to_string()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (code, err, residue) = run_in_with(&hosts, &dir, &refs, &out);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("h1") && err.contains("authentication failed"),
+        "the host and the authentication failure are named: {err}"
+    );
     assert!(!out.join("trajectory.csv").exists(), "nothing started");
     assert_no_residue("the launcher", &residue);
     let left = hosts.stop_daemons();
     assert_no_residue("host h1", &left[0]);
-    // A daemon refuses to listen beyond loopback without credentials at all.
-    let o = Command::new(bin("formation"))
-        .args(["host", "--name", "x", "--listen", "tcp/0.0.0.0:7447"])
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("requires authentication"));
+    // A daemon refuses to listen on TCP without credentials at all, loopback included.
+    for ep in ["tcp/0.0.0.0:7447", "tcp/127.0.0.1:7447"] {
+        let o = Command::new(bin("formation"))
+            .args(["host", "--name", "x", "--listen", ep])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("requires authentication"));
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

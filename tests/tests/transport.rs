@@ -7,15 +7,12 @@
 //! (65534) needs root: it skips elsewhere, unless `FORMATION_REQUIRE_ROOT=1` (set by `.ci/run`)
 //! makes it required.
 
-use formation_tests::{bin, stderr_of, temp_dir};
+use formation_tests::{bin, chown, root_or_skip, stderr_of, temp_dir, OTHER_UID};
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-/// The other user (`nobody`).
-const OTHER_UID: u32 = 65534;
 
 /// A `formation host` started by a test; killed and reaped on drop.
 struct Daemon {
@@ -296,29 +293,6 @@ fn a_certificate_of_another_ca_is_refused_and_named_either_way() {
         "{e}"
     );
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-/// True when the test can act as another uid; otherwise says why it skips (or fails, when CI
-/// requires it with `FORMATION_REQUIRE_ROOT=1`).
-fn root_or_skip(test: &str) -> bool {
-    // SAFETY: getuid has no preconditions.
-    if unsafe { libc::getuid() } == 0 {
-        return true;
-    }
-    assert!(
-        std::env::var("FORMATION_REQUIRE_ROOT").as_deref() != Ok("1"),
-        "{test} needs root (to act as uid {OTHER_UID}) and FORMATION_REQUIRE_ROOT=1 requires it"
-    );
-    eprintln!(
-        "skipping {test}: it needs root to run a daemon as root and a client as uid {OTHER_UID}"
-    );
-    false
-}
-
-fn chown(path: &Path, uid: u32) {
-    let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
-    // SAFETY: lchown on a valid C string path.
-    assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
 }
 
 /// `formation ARGS` as uid/gid 65534, with its own runtime folder `rt`.

@@ -1,6 +1,6 @@
 //! The bare Zenoh cases of `formation bench --transports zenoh` (cargo feature `multihost`): this
 //! process is the launcher, one `formation bench-peer --transport zenoh` process the other host,
-//! linked over TCP loopback with the sessions, publishers and subscribers of a run across hosts
+//! linked over loopback (TCP or TLS, `--zenoh-link`) with the sessions, publishers and subscribers of a run across hosts
 //! (`formation_net::bench`).
 //!
 //! * ping-pong: one message of the `--payload` sizes (default: the state down, the command up)
