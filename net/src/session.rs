@@ -583,8 +583,13 @@ pub fn diagnose(o: &Options, endpoint: &str) -> Option<LinkFailure> {
     };
     match parse_endpoint(endpoint).ok()? {
         Endpoint::Unix(path) => {
-            if std::fs::symlink_metadata(&path).is_err() {
-                return fail(LinkProblem::NoSocket);
+            match std::fs::symlink_metadata(&path) {
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                    return fail(LinkProblem::NoSocket)
+                }
+                // Another user's private folder: the kernel refuses even a look.
+                Err(e) => return fail(LinkProblem::Socket(e.to_string())),
+                Ok(_) => {}
             }
             if let Err(e) = std::os::unix::net::UnixStream::connect(&path) {
                 return fail(LinkProblem::Socket(e.to_string()));

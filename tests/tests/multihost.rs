@@ -1327,11 +1327,12 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
     );
     let connect = format!("tls/{relay_ip}:{}", relay.port);
     let out = dir.join("run-tls");
+    let a_tls = s(&a);
     let args: Vec<&str> = scenario
         .iter()
         .chain(&place)
         .copied()
-        .chain(["--connect", &connect, "--tls", &s(&a), "--auth", &auth])
+        .chain(["--connect", &connect, "--tls", &a_tls, "--auth", &auth])
         .collect();
     let (code, err, residue) = run_in_with(&hosts, &dir, &args, &out);
     assert_eq!(code, 0, "the TLS split run failed:\n{err}");

@@ -304,7 +304,6 @@ fn as_other(rt: &Path, args: &[&str]) -> Output {
         .env_remove("CARGO")
         .uid(OTHER_UID)
         .gid(OTHER_UID)
-        .groups(&[])
         .output()
         .expect("formation starts as uid 65534")
 }
