@@ -164,7 +164,7 @@ struct Step {
 
 enum Item {
     Step(Step),
-    Event { time_ns: u64, json: String },
+    Event(String),
 }
 
 /// Counts of a publisher's work.
@@ -314,9 +314,9 @@ impl Publisher {
         self.send(Item::Step(step));
     }
 
-    /// Offers an event (`/formation/events`) at `time_ns`; never blocks.
-    pub fn event(&mut self, time_ns: u64, json: String) {
-        self.send(Item::Event { time_ns, json });
+    /// Offers an event (`/formation/events`: its JSON); never blocks.
+    pub fn event(&mut self, json: String) {
+        self.send(Item::Event(json));
     }
 
     fn send(&mut self, item: Item) {
@@ -370,7 +370,7 @@ fn publish(rx: Receiver<Item>, mut encoder: Encoder, writers: Vec<Writer>, c: &C
                 encoder.frame(&f, write);
                 c.published.fetch_add(1, Ordering::Relaxed);
             }
-            Item::Event { json, .. } => encoder.event(&json, write),
+            Item::Event(json) => encoder.event(&json, write),
         }
     }
     for w in &writers {
