@@ -235,37 +235,48 @@ fn writer_of(
         .map_err(|e| StartError(format!("writer of {}: {e}", t.name)))
 }
 
+/// What the publisher thread hands back once it has joined the domain.
+type Joined = Result<(DomainParticipant, String), StartError>;
+
 impl Publisher {
-    /// Joins the domain and creates a writer per topic of `scene`; the writes run on a thread of
-    /// their own.
-    pub fn start(scene: Scene, options: Options) -> Result<Publisher, StartError> {
-        let mut builder = DomainParticipantBuilder::new(options.domain_id);
-        if options.range == DiscoveryRange::Localhost {
-            builder = builder.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
+    /// Joins the domain and creates a writer per topic of `scene`, all on a thread of the
+    /// publisher's own that first runs `on_thread` (e.g. lowering its priority: RustDDS' threads,
+    /// started from it, inherit that); the writes run there.
+    pub fn start(scene: Scene, options: Options, on_thread: fn()) -> Result<Publisher, StartError> {
+        // RustDDS reports routine discovery events (a peer gone, a locator it does not use) as
+        // warnings through the `log` crate, hundreds a run: only its errors are worth a line.
+        if log::max_level() > log::LevelFilter::Error {
+            log::set_max_level(log::LevelFilter::Error);
         }
-        let participant = builder
-            .build()
-            .map_err(|e| StartError(format!("domain {}: {e}", options.domain_id)))?;
-        let publisher = participant
-            .create_publisher(&QosPolicies::qos_none())
-            .map_err(|e| StartError(format!("publisher: {e}")))?;
-        let encoder = Encoder::new(scene);
-        let writers = encoder
-            .topics()
-            .iter()
-            .map(|t| writer_of(&participant, &publisher, t))
-            .collect::<Result<Vec<_>, _>>()?;
-        let watched = format!(
-            "rt{}",
-            encoder.topics()[crate::scene::POSES.min(encoder.topics().len() - 1)].name
-        );
         let (tx, rx) = sync_channel(QUEUE_STEPS);
+        let (joined_tx, joined_rx) = sync_channel::<Joined>(1);
         let counters = Arc::new(Counters::default());
         let c = counters.clone();
         let thread = std::thread::Builder::new()
             .name("ros2-publisher".into())
-            .spawn(move || publish(rx, encoder, writers, &c))
+            .spawn(move || {
+                on_thread();
+                match join(scene, options) {
+                    Ok((participant, encoder, writers, watched)) => {
+                        let _ = joined_tx.send(Ok((participant, watched)));
+                        publish(rx, encoder, writers, &c);
+                    }
+                    Err(e) => {
+                        let _ = joined_tx.send(Err(e));
+                    }
+                }
+            })
             .map_err(|e| StartError(format!("thread: {e}")))?;
+        let joined = joined_rx
+            .recv()
+            .map_err(|_| StartError("the publisher thread stopped".into()));
+        let (participant, watched) = match joined.and_then(|j| j) {
+            Ok(j) => j,
+            Err(e) => {
+                let _ = thread.join();
+                return Err(e);
+            }
+        };
         Ok(Publisher {
             tx: Some(tx),
             thread: Some(thread),
@@ -344,6 +355,35 @@ impl Publisher {
             writes_refused: self.counters.writes_refused.load(Ordering::Relaxed),
         }
     }
+}
+
+/// Joins the domain and creates a writer per topic: the participant, the encoder, the writers
+/// and the DDS topic whose readers [`Publisher::wait_for_subscriber`] waits for.
+fn join(
+    scene: Scene,
+    options: Options,
+) -> Result<(DomainParticipant, Encoder, Vec<Writer>, String), StartError> {
+    let mut builder = DomainParticipantBuilder::new(options.domain_id);
+    if options.range == DiscoveryRange::Localhost {
+        builder = builder.with_only_networks([IpAddr::V4(Ipv4Addr::LOCALHOST)]);
+    }
+    let participant = builder
+        .build()
+        .map_err(|e| StartError(format!("domain {}: {e}", options.domain_id)))?;
+    let publisher = participant
+        .create_publisher(&QosPolicies::qos_none())
+        .map_err(|e| StartError(format!("publisher: {e}")))?;
+    let encoder = Encoder::new(scene);
+    let writers = encoder
+        .topics()
+        .iter()
+        .map(|t| writer_of(&participant, &publisher, t))
+        .collect::<Result<Vec<_>, _>>()?;
+    let watched = format!(
+        "rt{}",
+        encoder.topics()[crate::scene::POSES.min(encoder.topics().len() - 1)].name
+    );
+    Ok((participant, encoder, writers, watched))
 }
 
 /// The publisher thread: encodes each queued item and writes it.

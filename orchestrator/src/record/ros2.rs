@@ -237,8 +237,12 @@ impl LiveRos2 {
     /// standard error; with `wait_s` > 0, waits that long at most for a subscriber.
     pub fn start(o: super::Ros2Options, s: &Scenario) -> std::io::Result<LiveRos2> {
         let options = env_options().map_err(std::io::Error::other)?;
-        let publisher = formation_ros2::dds::Publisher::start(scene_of(s), options)
-            .map_err(|e| std::io::Error::new(std::io::ErrorKind::AddrNotAvailable, e))?;
+        let publisher = formation_ros2::dds::Publisher::start(
+            scene_of(s),
+            options,
+            formation_config::node::sched::background_thread,
+        )
+        .map_err(|e| std::io::Error::new(std::io::ErrorKind::AddrNotAvailable, e))?;
         eprintln!(
             "ros2: publishing on DDS domain {} ({}): /formation/agent_<i>/pose, /tf, /formation/markers, /formation/reference, /formation/events, /clock (docs/ros2.md)",
             publisher.domain_id(),
