@@ -243,11 +243,6 @@ impl Publisher {
     /// publisher's own that first runs `on_thread` (e.g. lowering its priority: RustDDS' threads,
     /// started from it, inherit that); the writes run there.
     pub fn start(scene: Scene, options: Options, on_thread: fn()) -> Result<Publisher, StartError> {
-        // RustDDS reports routine discovery events (a peer gone, a locator it does not use) as
-        // warnings through the `log` crate, hundreds a run: only its errors are worth a line.
-        if log::max_level() > log::LevelFilter::Error {
-            log::set_max_level(log::LevelFilter::Error);
-        }
         let (tx, rx) = sync_channel(QUEUE_STEPS);
         let (joined_tx, joined_rx) = sync_channel::<Joined>(1);
         let counters = Arc::new(Counters::default());
