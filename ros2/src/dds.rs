@@ -172,7 +172,7 @@ enum Item {
 pub struct Stats {
     /// Output steps offered.
     pub offered: u64,
-    /// Output steps dropped because the queue was full.
+    /// Output steps (and events) dropped because the queue was full.
     pub dropped: u64,
     /// Output steps published.
     pub published: u64,
@@ -454,6 +454,42 @@ mod tests {
             Options::from_env(env(&both)).unwrap().range,
             DiscoveryRange::Localhost
         );
+    }
+
+    #[test]
+    fn every_offered_step_is_published_or_counted_as_dropped_and_offering_never_waits() {
+        let scene = Scene {
+            n_agents: 3,
+            edges: vec![(0, 1), (1, 2)],
+            leader_links: vec![0],
+            target_radius_m: 1.0,
+        };
+        // A domain of its own (localhost only), away from the default 0.
+        let domain_id = 1 + (std::process::id() % 200) as u16;
+        let options = Options {
+            domain_id,
+            range: DiscoveryRange::Localhost,
+        };
+        let mut p = Publisher::start(scene, options, || {}).expect("joins the domain");
+        let agents = [AgentPose {
+            position: [0.0; 3],
+            attitude: [0.0; 3],
+        }; 3];
+        let offers = 20 * QUEUE_STEPS as u64;
+        for k in 0..offers {
+            p.offer(&Frame {
+                time_ns: k * 10_000_000,
+                p_d: [0.0; 3],
+                target: [0.0; 3],
+                agents: &agents,
+                slots: &[[0.0; 3]; 3],
+                links: &[LinkState::Up, LinkState::Stale],
+            });
+        }
+        let s = p.finish();
+        assert_eq!(s.offered, offers);
+        assert_eq!(s.published + s.dropped, offers, "{s:?}");
+        assert!(s.published > 0, "{s:?}");
     }
 
     #[test]
