@@ -310,3 +310,17 @@ fn a_bad_ros_domain_id_is_refused_naming_the_variable() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("ROS_DOMAIN_ID"), "{err}");
 }
+
+#[test]
+fn without_record_rosbag2_a_stale_rosbag2_of_an_earlier_run_is_removed() {
+    let dir = temp_dir("rosbag2-stale");
+    let out = dir.join("sim");
+    sim(&["--set", DURATION, "--record", "rosbag2"], &out);
+    assert!(out.join("rosbag2/metadata.yaml").exists());
+    sim(&["--set", DURATION], &out);
+    assert!(
+        !out.join("rosbag2").exists(),
+        "a recording that is not this run's was left in {}",
+        out.display()
+    );
+}
