@@ -346,7 +346,8 @@ pub struct RunnerArgs {
     #[arg(long, value_enum)]
     pub restart_state: Option<RestartStateArg>,
     /// Also record in this format: `mcap` writes DIR/run.mcap (every output step of every agent
-    /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md).
+    /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md), `rosbag2`
+    /// writes DIR/rosbag2/ for `ros2 bag` (docs/ros2.md).
     #[arg(long, value_enum, value_name = "FORMAT", value_delimiter = ',')]
     pub record: Vec<crate::record::Format>,
     /// Serve the run live to Foxglove on ADDR (default 127.0.0.1:8765; port 0 picks a free port;
