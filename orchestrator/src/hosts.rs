@@ -111,8 +111,19 @@ pub fn machine_name() -> String {
     }
 }
 
+/// Ignores SIGPIPE (restored to its default by `main` for pipelines): Zenoh's TLS link writes to
+/// its socket with `writev`, which raises SIGPIPE on a link whose peer is gone, and the default
+/// would kill a daemon or an orchestrator instead of failing the link's write.
+pub fn ignore_sigpipe() {
+    // SAFETY: setting a signal disposition to SIG_IGN has no preconditions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_IGN);
+    }
+}
+
 /// `formation host`.
 pub fn host_main(a: HostArgs) -> ExitCode {
+    ignore_sigpipe();
     let name = a.name.clone().unwrap_or_else(machine_name);
     if !formation_net::proto::valid_name(&name) {
         eprintln!("error: --name '{name}': a host name is 1..=32 of [A-Za-z0-9_-]");

@@ -1236,6 +1236,9 @@ impl Relay {
                 let Ok(b) = std::net::TcpStream::connect(to) else {
                     continue;
                 };
+                // As Zenoh's own sockets: no Nagle delay (a lockstep step is a few small frames).
+                let _ = a.set_nodelay(true);
+                let _ = b.set_nodelay(true);
                 for (mut r, mut w) in [(a.try_clone().unwrap(), b.try_clone().unwrap()), (b, a)] {
                     let cap = cap.clone();
                     std::thread::spawn(move || {

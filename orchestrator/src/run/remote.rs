@@ -185,6 +185,7 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
         a.connect.clone()
     };
     let opts = a.link.options(Mode::Orchestrator, vec![], connect);
+    crate::hosts::ignore_sigpipe();
     let cluster = Cluster::open(&opts).map_err(|e| e.to_string())?;
     let me = formation_net::identity::local();
     let infos = cluster
