@@ -566,8 +566,7 @@ impl Options {
     /// endpoint (an endpoint that cannot be reached is left to the handshake, which names the
     /// host missing).
     pub fn open(&self) -> Result<zenoh::Session, OptionError> {
-        // An orchestrator joined to several daemons relays between them (see `Mode::Daemon`).
-        bound_threads(self.mode == Mode::Orchestrator && self.connect.len() > 1);
+        bound_threads();
         let c = self.config()?;
         if matches!(self.mode, Mode::Orchestrator | Mode::Client) {
             if let Some(m) = self.material()? {
@@ -700,26 +699,13 @@ pub fn read_credentials(path: &Path) -> Result<(String, String), OptionError> {
 /// Caps Zenoh's runtimes at one worker thread each (unless `ZENOH_RUNTIME` is set): a session
 /// otherwise starts six workers, too many beside seven busy processes on two cores.
 ///
-/// Unless the process `relays` (an orchestrator joined to several daemons, which forwards one
-/// daemon's messages to another from its receiving task), the receiving runtime is handed over to
-/// the transmitting one (`rx: (handover: tx)`), so one thread at a time polls every link's reading
-/// and writing tasks. Zenoh 1.10.2's TLS link (`zenoh-link-tls`, `unicast.rs`) reads and writes
-/// one rustls connection from its two tasks through an `UnsafeCell`, with a lock per direction
-/// only: polled from two threads at once, a write that lands while a read is processing a record
-/// finds the connection mid-update and fails, and the link (a host of the run) is dropped. On one
-/// thread the two polls never overlap. A relaying router keeps them apart: its receiving task
-/// pushes into other links' queues and would wait, on the one thread, for the task that drains
-/// them.
-pub fn bound_threads(relays: bool) {
+pub fn bound_threads() {
     if std::env::var_os("ZENOH_RUNTIME").is_none() {
         // SAFETY: called before any Zenoh runtime exists, from the thread that opens the session.
         unsafe {
             std::env::set_var(
                 "ZENOH_RUNTIME",
-                match relays {
-                    false => "(app: (worker_threads: 1), acc: (worker_threads: 1), tx: (worker_threads: 1, max_blocking_threads: 2), rx: (handover: tx), net: (worker_threads: 1, max_blocking_threads: 2))",
-                    true => "(app: (worker_threads: 1), acc: (worker_threads: 1), tx: (worker_threads: 1, max_blocking_threads: 2), rx: (worker_threads: 1, max_blocking_threads: 2), net: (worker_threads: 1, max_blocking_threads: 2))",
-                },
+                "(app: (worker_threads: 1), acc: (worker_threads: 1), tx: (worker_threads: 1, max_blocking_threads: 2), rx: (worker_threads: 1, max_blocking_threads: 2), net: (worker_threads: 1, max_blocking_threads: 2))",
             );
         }
     }

@@ -1329,7 +1329,6 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
         format!("{daemon_ip}:7447").parse().unwrap(),
     );
     let connect = format!("tls/{relay_ip}:{}", relay.port);
-    let out = dir.join("run-tls");
     let a_tls = s(&a);
     let args: Vec<&str> = scenario
         .iter()
@@ -1337,7 +1336,19 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
         .copied()
         .chain(["--connect", &connect, "--tls", &a_tls, "--auth", &auth])
         .collect();
-    let (code, err, residue) = run_in_with(&hosts, &dir, &args, &out);
+    // Zenoh 1.10.2's TLS link can drop mid-run (docs/multi-host.md, the known problem of its
+    // TLS link): such a run names its host as lost. Up to three tries for that cause alone; any
+    // other failure fails at once.
+    let mut attempt = 0;
+    let (out, code, err, residue) = loop {
+        attempt += 1;
+        let out = dir.join(format!("run-tls-{attempt}"));
+        let (code, err, residue) = run_in_with(&hosts, &dir, &args, &out);
+        if code == 0 || attempt == 3 || !err.contains("lost with host") {
+            break (out, code, err, residue);
+        }
+        eprintln!("TLS split run {attempt} lost its host (the known race of zenoh-link-tls 1.10.2):\n{err}");
+    };
     assert_eq!(code, 0, "the TLS split run failed:\n{err}");
     assert_no_residue("the launcher", &residue);
     for left in hosts.stop_daemons() {
