@@ -200,3 +200,23 @@ pub fn chown(path: &std::path::Path, uid: u32) {
     // SAFETY: lchown on a valid C string path.
     assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
 }
+
+/// Waits until the `formation host` daemon `child`, whose standard error goes to `log`, says it
+/// is `listening on` its endpoints (at most `limit`). Panics naming `what` with the daemon's log
+/// when it exits first or does not listen in time.
+pub fn wait_until_listening(
+    child: &mut std::process::Child,
+    log: &std::path::Path,
+    what: &str,
+    limit: std::time::Duration,
+) {
+    let t0 = std::time::Instant::now();
+    let text = || std::fs::read_to_string(log).unwrap_or_default();
+    while !text().contains("listening on") {
+        if let Ok(Some(st)) = child.try_wait() {
+            panic!("{what} exited ({st}) before listening: {}", text());
+        }
+        assert!(t0.elapsed() < limit, "{what} did not listen: {}", text());
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}

@@ -214,18 +214,13 @@ exec "$@""#
             .stderr(std::fs::File::create(&log).unwrap())
             .spawn()
             .expect("formation host starts");
-        let t0 = Instant::now();
-        while !std::fs::read_to_string(&log)
-            .unwrap_or_default()
-            .contains("listening on")
-        {
-            assert!(
-                t0.elapsed() < Duration::from_secs(20),
-                "daemon {h} did not start: {}",
-                std::fs::read_to_string(&log).unwrap_or_default()
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        let mut child = child;
+        formation_tests::wait_until_listening(
+            &mut child,
+            &log,
+            &format!("daemon {h}"),
+            Duration::from_secs(20),
+        );
         self.daemons.push(child);
     }
 

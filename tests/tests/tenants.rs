@@ -87,7 +87,7 @@ impl Daemon {
             + NEXT.fetch_add(1, Ordering::SeqCst) % 4;
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let log = dir.join("daemon.log");
-        let child = Command::new("unshare")
+        let mut child = Command::new("unshare")
             .args(["--mount", "--propagation", "private", "sh", "-c"])
             .arg("mount -t tmpfs -o mode=1777 tmpfs /dev/shm && mount -t tmpfs -o mode=1777 tmpfs /tmp || exit 97\nexec \"$@\"")
             .arg("sh")
@@ -100,18 +100,12 @@ impl Daemon {
             .stderr(std::fs::File::create(&log).unwrap())
             .spawn()
             .expect("formation host starts");
-        let t0 = Instant::now();
-        while !std::fs::read_to_string(&log)
-            .unwrap_or_default()
-            .contains("listening on")
-        {
-            assert!(
-                t0.elapsed() < Duration::from_secs(20),
-                "the daemon did not start: {}",
-                std::fs::read_to_string(&log).unwrap_or_default()
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        formation_tests::wait_until_listening(
+            &mut child,
+            &log,
+            "the daemon",
+            Duration::from_secs(20),
+        );
         Daemon {
             child,
             port,
@@ -119,6 +113,22 @@ impl Daemon {
             auth,
             log,
         }
+    }
+
+    /// The daemon's resident memory now and at its peak (`VmRSS`, `VmHWM` of
+    /// /proc/<pid>/status), in bytes. The child is the daemon itself: `unshare` and `sh` exec it.
+    fn memory(&self) -> (u64, u64) {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
+            .expect("the daemon's status is readable");
+        let kib = |key: &str| -> u64 {
+            status
+                .lines()
+                .find_map(|l| l.strip_prefix(key))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+                .unwrap_or_else(|| panic!("{key} in the daemon's status:\n{status}"))
+                * 1024
+        };
+        (kib("VmRSS:"), kib("VmHWM:"))
     }
 
     fn alive(&mut self) -> bool {
@@ -386,6 +396,7 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
     assert_eq!(ids.len(), 1, "{ids:?}");
     let id = &ids[0];
     let e = Probe::open(&export, Some(d.auth.clone())).expect("the fuzzer reaches the export");
+    let (rss_before, _) = d.memory();
     let export_info = formation_net::export::info_key(id);
     // Deterministic noise.
     let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
@@ -428,24 +439,23 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
         .map(|k| format!("formation/run/{id}/{k}"))
         .collect();
     let mut sent = 0usize;
-    for round in 0..3 {
+    // Resident memory after each round: it must not grow with the rounds.
+    let mut rss_rounds = Vec::new();
+    for _round in 0..3 {
         for key in &put_on {
             for pl in &payloads {
                 p.put(key, pl.clone()).unwrap();
                 sent += 1;
             }
-            if round == 0 {
-                p.put(key, huge.clone()).unwrap();
-                sent += 1;
-            }
+            p.put(key, huge.clone()).unwrap();
+            sent += 1;
         }
         for pl in &payloads {
             let _ = e.query(&export_info, Some(pl.clone()), Duration::from_millis(500));
             sent += 1;
         }
-        if round == 0 {
-            let _ = e.query(&export_info, Some(huge.clone()), Duration::from_secs(5));
-        }
+        let _ = e.query(&export_info, Some(huge.clone()), Duration::from_secs(5));
+        sent += 1;
         let answers = e.query(&export_info, None, Duration::from_secs(5)).unwrap();
         assert!(
             answers
@@ -459,11 +469,10 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
                 let _ = p.query(key, Some(pl.clone()), Duration::from_millis(500));
                 sent += 1;
             }
-            if round == 0 {
-                let _ = p.query(key, Some(huge.clone()), Duration::from_secs(5));
-                sent += 1;
-            }
+            let _ = p.query(key, Some(huge.clone()), Duration::from_secs(5));
+            sent += 1;
         }
+        rss_rounds.push(d.memory().0);
     }
     let log_during = d.log().lines().count();
     let (code, err_text) = finish(run, &err);
@@ -478,6 +487,38 @@ fn every_key_a_daemon_or_bridge_listens_on_takes_fuzz_with_the_daemon_up_the_run
             .as_ref()
             .is_ok_and(|b| serde_json::from_slice::<proto::HostInfo>(b).is_ok())),
         "the daemon answers its info after the fuzz"
+    );
+    let (rss_after, rss_peak) = d.memory();
+    // Bounded memory, however many messages came: each round sends the same (nine 64 MiB
+    // messages among them) and the daemon's resident memory does not grow from round to round
+    // (the allocator may keep what the first round freed: at most MEMORY_KEPT over before), and a
+    // 64 MiB message is held a few times over at most (the peak within MEMORY_PEAK of before).
+    const MIB: u64 = 1 << 20;
+    const MEMORY_GROWTH: u64 = 32 * MIB;
+    const MEMORY_KEPT: u64 = 160 * MIB;
+    const MEMORY_PEAK: u64 = 640 * MIB;
+    let mib: Vec<u64> = rss_rounds.iter().map(|r| r / MIB).collect();
+    eprintln!(
+        "daemon memory: {} MiB before the fuzz, {mib:?} MiB after each round, {} MiB after the run, {} MiB at its peak",
+        rss_before / MIB,
+        rss_after / MIB,
+        rss_peak / MIB
+    );
+    assert!(
+        rss_rounds[2] < rss_rounds[0] + MEMORY_GROWTH,
+        "the daemon's memory grows with the fuzz: {mib:?} MiB after rounds 1-3"
+    );
+    assert!(
+        rss_after < rss_before + MEMORY_KEPT,
+        "the daemon kept the fuzz: {} MiB resident before, {} MiB after",
+        rss_before / MIB,
+        rss_after / MIB
+    );
+    assert!(
+        rss_peak < rss_before + MEMORY_PEAK,
+        "the daemon's memory peaked at {} MiB ({} MiB before the fuzz)",
+        rss_peak / MIB,
+        rss_before / MIB
     );
     // Bounded logs: a handful of lines per reason and second, not one per message.
     let log = d.log();

@@ -12,7 +12,7 @@ use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// A `formation host` started by a test; killed and reaped on drop.
 struct Daemon {
@@ -37,18 +37,12 @@ impl Daemon {
             .spawn()
             .expect("formation host starts");
         let mut d = Daemon { child, log };
-        let t0 = Instant::now();
-        while !d.log_text().contains("listening on") {
-            if let Ok(Some(st)) = d.child.try_wait() {
-                panic!("the daemon exited ({st}): {}", d.log_text());
-            }
-            assert!(
-                t0.elapsed() < Duration::from_secs(30),
-                "the daemon did not listen: {}",
-                d.log_text()
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
+        formation_tests::wait_until_listening(
+            &mut d.child,
+            &d.log,
+            "the daemon",
+            Duration::from_secs(30),
+        );
         d
     }
 
