@@ -72,9 +72,15 @@ impl CpuSet {
 
     /// Restricts the calling thread (and what it later forks or execs) to this set.
     pub fn apply(&self) -> io::Result<()> {
-        // SAFETY: a valid cpu_set_t of the size passed; pid 0 is the calling thread.
-        let rc =
-            unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &self.0) };
+        self.apply_to(0)
+    }
+
+    /// Restricts thread `tid` (0: the calling thread) to this set.
+    pub fn apply_to(&self, tid: libc::pid_t) -> io::Result<()> {
+        // SAFETY: a valid cpu_set_t of the size passed; sched_setaffinity only reads it.
+        let rc = unsafe {
+            libc::sched_setaffinity(tid, std::mem::size_of::<libc::cpu_set_t>(), &self.0)
+        };
         if rc == 0 {
             Ok(())
         } else {

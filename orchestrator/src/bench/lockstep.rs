@@ -38,6 +38,8 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
         std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
         args.push(path.into());
     }
+    // Placed like the fan-out it is set against (`block/pinned/batch`), whatever the load.
+    args.extend(["--pin".into(), "always".into()]);
     let steps = WARMUP_STEPS as f64 + seconds * EXPECTED_AGENT_STEPS_PER_S / n as f64;
     let (summary, _) = run_formation(args, steps, &out)?;
     let row = row(n, &summary["timing"])
@@ -87,7 +89,7 @@ pub fn run_formation(
 
 /// The row of a lockstep run from the `timing` object of its summary.json.
 fn row(n: usize, timing: &Value) -> Option<Row> {
-    // `formation run` in lockstep: blocking waits, pinned (`--pin auto`), SCHED_BATCH.
+    // `formation run` in lockstep: blocking waits, pinned (`--pin always`), SCHED_BATCH.
     row_as(("iox2-event", "block/pinned/batch"), n, timing)
 }
 

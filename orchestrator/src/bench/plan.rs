@@ -197,7 +197,7 @@ pub fn plan(input: &PlanInput) -> (Vec<Case>, Vec<(String, String)>) {
             }
         }
         // The lockstep run pins plant and agents round-robin over the allowed CPUs under
-        // SCHED_BATCH (`formation run --pin auto`): its like-for-like baseline is the iceoryx2
+        // SCHED_BATCH (`formation run --pin always`): its like-for-like baseline is the iceoryx2
         // event fan-out placed and scheduled the same way (already in the list with `--cpu`).
         if pattern == Pattern::FanOut
             && input.lockstep

@@ -9,8 +9,10 @@
 mod cleanup;
 mod driver;
 pub mod export;
+mod governor;
 pub(crate) mod injections;
 pub(crate) mod placement;
+mod proc_load;
 mod progress;
 #[cfg(feature = "multihost")]
 pub(crate) mod remote;
@@ -66,12 +68,15 @@ pub struct RunArgs {
         allow_negative_numbers = true
     )]
     pub rt_priority: u32,
-    /// CPU placement of plant and agents: `auto` (lockstep: plant on the first CPU this process
-    /// may use with 4/5 of an even share of the agents, spread over the order, the other agents
-    /// round-robin over the other CPUs; realtime: not pinned), `off`, or a CPU list such as `0,1`
-    /// or `0-3` (plant on the first, agent i on the CPU i + 1 places further, round-robin).
-    /// Leader and orchestrator are never pinned. See docs/runtime.md, "Cost of a step".
-    #[arg(long, default_value = "auto", value_name = "auto|off|CPUS")]
+    /// CPU placement of plant and agents: `auto` (lockstep: the automatic layout, plant on the
+    /// first CPU this process may use with 4/5 of an even share of the agents, spread over the
+    /// order, the other agents round-robin over the other CPUs; not pinned while other programs
+    /// keep one of these CPUs busy, checked before the start and every 500 ms; realtime: not
+    /// pinned), `always` (the automatic layout whatever the load, also in realtime), `off`, or a
+    /// CPU list such as `0,1` or `0-3` (plant on the first, agent i on the CPU i + 1 places
+    /// further, round-robin; whatever the load). Leader and orchestrator are never pinned. See
+    /// docs/runtime.md, "Cost of a step".
+    #[arg(long, default_value = "auto", value_name = "auto|always|off|CPUS")]
     pub pin: String,
     /// Outside observers the run makes room for: K spare subscribers / listeners on every service
     /// (states, commands, telemetry, steps, events, wake-ups) and K spare nodes, for programs such
@@ -274,7 +279,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         }
     };
     // The rotation of an automatic layout, claimed atomically (see placement::claim_slot).
-    let rotating = matches!(pin, placement::PinRequest::Auto) && !args.realtime;
+    let rotating = placement::Placement::rotates(&pin, args.realtime);
     let slot = if rotating {
         placement::claim_slot(&runs_dir).unwrap_or_else(|e| {
             eprintln!("warning: {e}; the layout is not rotated");
@@ -283,7 +288,10 @@ pub fn main(args: RunArgs) -> ExitCode {
     } else {
         placement::Slot::none()
     };
-    let placement = placement::Placement::resolve(&pin, args.realtime, &allowed, slot.index);
+    let layout = placement::Placement::resolve(&pin, args.realtime, &allowed, slot.index);
+    // `--pin auto` in lockstep: the CPUs are sampled first (governor::START_WINDOW).
+    let (pins, adapt) =
+        governor::decide_start(layout, placement::Placement::adapts(&pin, args.realtime));
     // Held until the run's iceoryx2 files are removed below; if this process dies, the last role
     // process to exit removes them (formation_config::node::members).
     let membership = match Membership::create(&out, &prefix) {
@@ -302,7 +310,7 @@ pub fn main(args: RunArgs) -> ExitCode {
             ros2: args.common.ros2_options(),
             ..crate::record::Outputs::with(&args.common.record)
         },
-        placement.as_ref(),
+        (&pins, adapt.map(|g| (g, allowed))),
         &out,
         &run_id,
         &prefix,
@@ -390,7 +398,7 @@ fn run(
     variant: Variant,
     mode: Mode,
     outputs: crate::record::Outputs,
-    placement: Option<&placement::Placement>,
+    (pins, adapt): (&governor::Pins, Option<(governor::PinGovernor, Vec<usize>)>),
     out: &Path,
     run_id: &str,
     prefix: &str,
@@ -452,40 +460,32 @@ fn run(
         rejoin_at: None,
     };
     let mut children = Children(Vec::with_capacity(n + 2));
-    children.0.push(spawn::spawn(
-        &exe,
-        Role::Plant,
-        "plant".into(),
-        &child_args(None),
-        placement.map(|p| p.plant()),
-    )?);
-    children.0.push(spawn::spawn(
-        &exe,
-        Role::Leader,
-        "leader".into(),
-        &child_args(None),
-        None,
-    )?);
+    children.0.push(pins.spawn(governor::Place::Plant, |cpu| {
+        spawn::spawn(&exe, Role::Plant, "plant".into(), &child_args(None), cpu)
+    })?);
+    children.0.push(pins.spawn(governor::Place::Anywhere, |_| {
+        spawn::spawn(&exe, Role::Leader, "leader".into(), &child_args(None), None)
+    })?);
+    pins.add_anywhere(std::process::id());
     for i in 0..n {
         let label = format!("agent {} (--agent {i})", i + 1);
         children
             .0
             .push(match remote.as_ref().filter(|r| r.is_remote(i)) {
                 Some(r) => r.spawn(i, label, &child_args(Some(i)))?,
-                None => spawn::spawn(
-                    &exe,
-                    Role::Agent,
-                    label,
-                    &child_args(Some(i)),
-                    placement.map(|p| p.agent(i)),
-                )?,
+                None => pins.spawn(governor::Place::Agent(i), |cpu| {
+                    spawn::spawn(&exe, Role::Agent, label, &child_args(Some(i)), cpu)
+                })?,
             });
     }
     // Every child is started (they keep the normal priority): from here on the orchestrator records
     // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
     formation_config::node::sched::background_thread();
+    let mut pinned = pins.describe(n);
+    // Stopped once the steps are over (or when the run returns on an error).
+    let governor_thread =
+        adapt.map(|(g, allowed)| governor::Governor::start(pins.clone(), g, allowed));
     let pids: Vec<String> = children.0.iter().map(|c| c.pid().to_string()).collect();
-    let mut pinned = placement.map_or("not pinned".to_string(), |p| p.describe(n));
     if let Some(r) = &remote {
         pinned = format!("{}; {pinned}", r.describe());
     }
@@ -545,7 +545,7 @@ fn run(
         variant,
         exe.clone(),
         child_args(None),
-        (0..n).map(|i| placement.map(|p| p.agent(i))).collect(),
+        pins.clone(),
         formation_config::protocol::pacing::PLANT_LEAD + injections::SLACK,
         remote.clone(),
     )?;
@@ -576,6 +576,7 @@ fn run(
         Err(o) => (o, 0),
     };
     tracing::info!(recorded, outcome = ?outcome, "run ending");
+    drop(governor_thread);
     ports.stop(recorded);
     recorder.add_events(live.injections.changes());
     drop(live);

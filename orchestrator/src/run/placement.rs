@@ -10,6 +10,8 @@
 //! over when the busiest CPU is.
 //! Leader and orchestrator are not pinned: they have slack and run wherever there is room.
 //! With at least N + 1 CPUs every process of the step gets a CPU of its own.
+//! Beside other programs that keep a CPU busy pinning costs far more than it gains: `--pin auto`
+//! then leaves the layout while they run (`super::governor`); `--pin always` and CPU lists keep it.
 
 use crate::cpus;
 use formation_config::node::files::{self, Lock};
@@ -60,9 +62,12 @@ pub fn claim_slot(dir: &Path) -> Result<Slot, String> {
 /// What `--pin` asked for.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PinRequest {
-    /// Lockstep: pin over the CPUs this process may use (when there are at least 2); realtime:
+    /// Lockstep: the automatic layout over the CPUs this process may use (when there are at
+    /// least 2), left while other programs keep one of them busy (`super::governor`); realtime:
     /// do not pin.
     Auto,
+    /// The automatic layout, lockstep or realtime, whatever the load.
+    Always,
     /// Do not pin.
     Off,
     /// Pin over these CPUs (plant on the first).
@@ -74,10 +79,13 @@ impl PinRequest {
     pub fn parse(s: &str, allowed: &[usize]) -> Result<PinRequest, String> {
         match s.trim() {
             "auto" => Ok(PinRequest::Auto),
+            "always" => Ok(PinRequest::Always),
             "off" | "none" => Ok(PinRequest::Off),
             list => cpus::parse_list(list, allowed)
                 .map(PinRequest::Cpus)
-                .map_err(|e| format!("--pin: {e} (expected auto, off or a CPU list like 0,1)")),
+                .map_err(|e| {
+                    format!("--pin: {e} (expected auto, always, off or a CPU list like 0,1)")
+                }),
         }
     }
 }
@@ -104,6 +112,16 @@ pub struct Placement {
 }
 
 impl Placement {
+    /// Whether `request` adapts to the load of others (`auto` in lockstep, `super::governor`).
+    pub fn adapts(request: &PinRequest, realtime: bool) -> bool {
+        *request == PinRequest::Auto && !realtime
+    }
+
+    /// The automatic layout is rotated by the run's [`Slot`].
+    pub fn rotates(request: &PinRequest, realtime: bool) -> bool {
+        Placement::adapts(request, realtime) || *request == PinRequest::Always
+    }
+
     /// The placement for `request`: `None` when nothing is pinned. `allowed` is this process's
     /// affinity; `others` the run's [`Slot`] (0 when it runs alone), which rotates an automatic
     /// layout so that concurrent runs do not stack their plants on the same CPU.
@@ -115,8 +133,9 @@ impl Placement {
     ) -> Option<Placement> {
         match request {
             PinRequest::Off => None,
-            PinRequest::Auto if realtime || allowed.len() < 2 => None,
-            PinRequest::Auto => Some(Placement {
+            PinRequest::Auto | PinRequest::Always if allowed.len() < 2 => None,
+            PinRequest::Auto if realtime => None,
+            PinRequest::Auto | PinRequest::Always => Some(Placement {
                 cpus: allowed.to_vec(),
                 offset: others % allowed.len(),
                 weighted: true,
@@ -127,6 +146,14 @@ impl Placement {
                 weighted: false,
             }),
         }
+    }
+
+    /// The CPUs of the layout, each once.
+    pub fn cpus(&self) -> Vec<usize> {
+        let mut cpus = self.cpus.clone();
+        cpus.sort_unstable();
+        cpus.dedup();
+        cpus
     }
 
     /// CPU of the plant.
@@ -240,10 +267,16 @@ mod tests {
     }
 
     #[test]
-    fn auto_pins_lockstep_only_and_off_never_pins() {
+    fn auto_pins_lockstep_only_always_pins_both_and_off_never_pins() {
         assert!(Placement::resolve(&PinRequest::Auto, true, &[0, 1], 0).is_none());
         assert!(Placement::resolve(&PinRequest::Auto, false, &[3], 0).is_none());
         assert!(Placement::resolve(&PinRequest::Off, false, &[0, 1], 0).is_none());
+        let always = Placement::resolve(&PinRequest::Always, true, &[0, 1], 0).unwrap();
+        assert_eq!(always.describe(5), "plant cpu 0, agents 1 0 1 0 1");
+        assert!(Placement::adapts(&PinRequest::Auto, false));
+        assert!(!Placement::adapts(&PinRequest::Auto, true));
+        assert!(!Placement::adapts(&PinRequest::Always, false));
+        assert!(!Placement::adapts(&PinRequest::Cpus(vec![0, 1]), false));
         let explicit = Placement::resolve(&PinRequest::Cpus(vec![1]), true, &[0, 1], 0).unwrap();
         assert_eq!((explicit.plant(), explicit.agent(3)), (1, 1));
     }
@@ -252,6 +285,7 @@ mod tests {
     fn pin_requests_parse_and_bad_lists_name_the_flag() {
         assert_eq!(PinRequest::parse("auto", &[0, 1]), Ok(PinRequest::Auto));
         assert_eq!(PinRequest::parse("off", &[0, 1]), Ok(PinRequest::Off));
+        assert_eq!(PinRequest::parse("always", &[0, 1]), Ok(PinRequest::Always));
         assert_eq!(
             PinRequest::parse("1,0", &[0, 1]),
             Ok(PinRequest::Cpus(vec![1, 0]))

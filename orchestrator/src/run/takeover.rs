@@ -61,7 +61,7 @@ pub struct Takeover {
     agent_wakes: Vec<Notifier<Svc>>,
     exe: PathBuf,
     args: ChildArgs,
-    pins: Vec<Option<usize>>,
+    pins: super::governor::Pins,
     n: usize,
     capacity: usize,
     /// A realtime run: a dead agent is replaced at once, without take-down or announcement.
@@ -87,7 +87,7 @@ pub struct Takeover {
 
 impl Takeover {
     /// Opens the ports; `args` is an agent's command line (its index and rejoin step are set per
-    /// process), `pins` each agent's CPU.
+    /// process), `pins` the run's placement (where a successor starts).
     #[allow(clippy::too_many_arguments)] // the run's parts, each its own kind
     pub fn open(
         node: &RunNode,
@@ -95,7 +95,7 @@ impl Takeover {
         variant: formation_config::Variant,
         exe: PathBuf,
         args: ChildArgs,
-        pins: Vec<Option<usize>>,
+        pins: super::governor::Pins,
         lead: u64,
         remote: Option<std::rc::Rc<super::remote::RemoteRun>>,
     ) -> Result<Takeover, String> {
@@ -511,13 +511,9 @@ impl Takeover {
         let label = format!("agent {} (--agent {i})", i + 1);
         let child = match &remote {
             Some(r) => r.spawn(i, label, &args)?,
-            None => spawn::spawn(
-                &self.exe,
-                Role::Agent,
-                label,
-                &args,
-                self.pins.get(i).copied().flatten(),
-            )?,
+            None => self.pins.spawn(super::governor::Place::Agent(i), |cpu| {
+                spawn::spawn(&self.exe, Role::Agent, label, &args, cpu)
+            })?,
         };
         eprintln!(
             "formation run: agent {} taken over at step {} (t = {:.3} s) by pid {} ({}, down from step {})",
