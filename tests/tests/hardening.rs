@@ -278,7 +278,8 @@ fn runs_started_at_the_same_moment_put_their_plants_on_different_cpus() {
     let dir = temp_dir("hard-slots");
     let runs = runs_dir(&dir);
     let env = [("FORMATION_RUNS_DIR", runs.as_path())];
-    let set = ["--set", "simulation.duration_s=600"];
+    // `always`: the rotation of the automatic layout, whatever else runs on the machine.
+    let set = ["--set", "simulation.duration_s=600", "--pin", "always"];
     let a = RunningRun::start_with_env(&set, &dir.join("a"), &env);
     let b = RunningRun::start_with_env(&set, &dir.join("b"), &env);
     let plant_cpu = |r: &RunningRun| field_after(r, "plant cpu ");

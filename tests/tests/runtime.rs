@@ -239,6 +239,113 @@ fn a_lockstep_run_pins_the_plant_to_the_first_cpu_and_the_agents_round_robin_aft
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// CPU-bound loops (`sh -c 'while :; do :; done'`), one pinned to each CPU given; killed when
+/// dropped.
+struct BusyLoops(Vec<std::process::Child>);
+
+impl BusyLoops {
+    fn on(cpus: &[usize]) -> BusyLoops {
+        BusyLoops(
+            cpus.iter()
+                .map(|&cpu| {
+                    let child = Command::new("sh")
+                        .args(["-c", "while :; do :; done"])
+                        .spawn()
+                        .expect("sh starts");
+                    // SAFETY: a zeroed cpu_set_t is a valid empty set; CPU_SET within its size;
+                    // sched_setaffinity on our own child.
+                    unsafe {
+                        let mut set: libc::cpu_set_t = std::mem::zeroed();
+                        libc::CPU_SET(cpu, &mut set);
+                        libc::sched_setaffinity(
+                            child.id() as libc::pid_t,
+                            std::mem::size_of::<libc::cpu_set_t>(),
+                            &set,
+                        );
+                    }
+                    child
+                })
+                .collect(),
+        )
+    }
+}
+
+impl Drop for BusyLoops {
+    fn drop(&mut self) {
+        for c in &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// A long paper run started with `extra` arguments beside a CPU-bound loop on every CPU this
+/// process may use: (the loops, the run, its start line, its folder, those CPUs); `None` on one
+/// CPU (the automatic layout pins nothing there).
+fn run_beside_busy_loops(
+    extra: &[&str],
+    name: &str,
+) -> Option<(
+    BusyLoops,
+    RunningRun,
+    String,
+    std::path::PathBuf,
+    Vec<usize>,
+)> {
+    let allowed = cpus_allowed(std::process::id());
+    if allowed.len() < 2 {
+        eprintln!("one CPU: the automatic layout pins nothing");
+        return None;
+    }
+    let busy = BusyLoops::on(&allowed);
+    // Let the loops show in /proc/stat before the run samples it.
+    std::thread::sleep(Duration::from_millis(300));
+    let dir = temp_dir(name);
+    let mut args = vec!["--set", "simulation.duration_s=600"];
+    args.extend(extra);
+    let run = RunningRun::start(&args, &dir.join("run"));
+    let line = run
+        .wait_for_line("formation run: id ", Duration::from_secs(60))
+        .unwrap_or_else(|| panic!("not started: {}", run.stderr()));
+    Some((busy, run, line, dir, allowed))
+}
+
+#[test]
+fn beside_programs_keeping_every_cpu_busy_a_lockstep_run_starts_unpinned_and_says_why() {
+    let Some((busy, run, line, dir, allowed)) = run_beside_busy_loops(&[], "pin-busy") else {
+        return;
+    };
+    assert!(
+        line.contains("not pinned: cpu ") && line.contains("busy with other work"),
+        "{line}"
+    );
+    let mut seen = 0;
+    for pid in run.role_processes() {
+        assert_eq!(cpus_allowed(pid), allowed, "{}", cmdline(pid));
+        seen += 1;
+    }
+    assert_eq!(seen, 7, "plant, leader and 5 agents: {}", run.stderr());
+    drop((run, busy));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn pin_always_pins_the_automatic_layout_whatever_the_load() {
+    let Some((busy, run, line, dir, _)) = run_beside_busy_loops(&["--pin", "always"], "pin-always")
+    else {
+        return;
+    };
+    assert!(line.contains("plant cpu "), "{line}");
+    let pinned = run
+        .role_processes()
+        .into_iter()
+        .filter(|&pid| cpus_allowed(pid).len() == 1)
+        .count();
+    assert_eq!(pinned, 6, "plant and 5 agents: {}", run.stderr());
+    drop((run, busy));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn an_unavailable_cpu_in_pin_is_rejected_with_exit_2_naming_the_flag() {
     let out = Command::new(bin("formation"))
