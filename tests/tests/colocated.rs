@@ -35,17 +35,7 @@ fn start_line(err: &str) -> (String, Vec<u32>) {
         .and_then(|r| r.split(',').next())
         .expect("the prefix is named")
         .to_string();
-    let pids = line
-        .split("pids ")
-        .nth(1)
-        .and_then(|r| r.split(';').next())
-        .map(|p| {
-            p.split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect()
-        })
-        .unwrap_or_default();
-    (prefix, pids)
+    (prefix, formation_tests::run::start_line_pids(line))
 }
 
 /// Files whose name starts with `prefix` in /dev/shm and, recursively, in `iox2_root`.

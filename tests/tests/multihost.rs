@@ -724,16 +724,7 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
         std::thread::sleep(Duration::from_millis(50));
     };
     // `...; pids P L A1 A2 A3 A4 A5; agents ...`: plant, leader, then the agents in order.
-    let pids: Vec<u32> = start_line
-        .split("pids ")
-        .nth(1)
-        .and_then(|r| r.split(';').next())
-        .map(|p| {
-            p.split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect()
-        })
-        .unwrap_or_default();
+    let pids = formation_tests::run::start_line_pids(&start_line);
     assert_eq!(pids.len(), 7, "plant, leader and 5 agents: {start_line}");
     match at {
         KillAt::After(d) => std::thread::sleep(d),
