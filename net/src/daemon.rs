@@ -5,13 +5,17 @@
 //! For a run it creates a private run folder (mode 0700) with the validated scenario, every
 //! iceoryx2 service of the run and the bridge ([`crate::bridge`]), then starts the agent processes
 //! the orchestrator asks for — only `formation node agent ...` from its own executable — and
-//! reports each one's exit. A run ends when its orchestrator says so, or when the orchestrator's
+//! reports each one's exit. A daemon that shares the orchestrator's `/dev/shm` as its user
+//! (co-located, [`crate::colocate`]) creates no service and runs no bridge: it checks that the
+//! run's services are in its `/dev/shm` and its user's, and its agents open them and join the
+//! orchestrator's membership of the run. A run ends when its orchestrator says so, or when the orchestrator's
 //! liveliness token disappears (it died, or its link was lost): the processes are stopped, the
 //! run's iceoryx2 files and its folder removed. The daemon is a single-threaded state machine:
 //! one loop serves requests, reaps children and watches the orchestrators.
 
 use crate::auth::{Purpose, Replay, RunKey};
 use crate::bridge::{Bridge, BridgeConfig};
+use crate::colocate::{self, Facts};
 use crate::identity::{self, Identity};
 use crate::logs::LogLimit;
 use crate::plan::Placement;
@@ -207,6 +211,7 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
         me,
         runs: HashMap::new(),
         log: LogLimit::default(),
+        facts: Facts::here(),
     };
     // Runs whose orchestrator's token is alive (its Put may come before its run is prepared).
     let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
@@ -298,6 +303,8 @@ struct Daemon {
     runs: HashMap<String, HostRun>,
     /// Refusals are logged at most once a second per reason.
     log: LogLimit,
+    /// Its shared memory place, user and iceoryx2 root ([`crate::colocate`]).
+    facts: Facts,
 }
 
 fn refused(why: String) -> Vec<u8> {
@@ -318,6 +325,9 @@ impl Daemon {
             pid: std::process::id(),
             identity: self.me.clone(),
             clock_us: proto::now_us(),
+            shm: self.facts.shm.clone(),
+            uid: self.facts.uid,
+            iox2_root: self.facts.iox2_root.clone(),
         }
     }
 
@@ -511,6 +521,9 @@ impl Daemon {
                 services::MAX_OBSERVERS + 1
             ));
         }
+        if let Some(c) = &r.colocated {
+            self.check_colocated(&r, c)?;
+        }
         let dir = self.o.root.join(&r.run_id);
         // The daemon's own log names the folder; the refusal does not.
         private_dir(&dir).map_err(|e| {
@@ -523,6 +536,15 @@ impl Daemon {
         };
         std::fs::write(dir.join("scenario.toml"), &r.scenario_toml)
             .map_err(|e| fail(format!("cannot write the scenario: {e}"), &dir))?;
+        if r.colocated.is_some() {
+            eprintln!(
+                "formation host: run {} prepared (co-located: the orchestrator's services in this /dev/shm, no bridge): agents {:?} here",
+                r.run_id,
+                own_agents(&r.agent_hosts, &self.o.name)
+            );
+            self.insert(r, dir, variant, None, None, None);
+            return Ok(());
+        }
         let membership =
             Membership::create(&dir, &r.prefix).map_err(|e| fail(e.to_string(), &dir))?;
         let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.to_string(), &dir))?;
@@ -559,20 +581,57 @@ impl Daemon {
         eprintln!(
             "formation host: run {} prepared: agents {:?} here, {} services forwarded out, {} in",
             r.run_id,
-            r.agent_hosts
-                .iter()
-                .enumerate()
-                .filter(|(_, h)| **h == self.o.name)
-                .map(|(i, _)| i + 1)
-                .collect::<Vec<_>>(),
+            own_agents(&r.agent_hosts, &self.o.name),
             bridge.forwarded.0,
             bridge.forwarded.1
         );
-        let key = r.secret.keys(&r.run_id);
+        self.insert(r, dir, variant, Some(bridge), Some(node), Some(membership));
+        Ok(())
+    }
+
+    /// Checks a co-located run ([`colocate`]) against this host's own `/dev/shm`, user and
+    /// iceoryx2 root before anything of it is made: the orchestrator's services must be here and
+    /// this user's, its iceoryx2 root this daemon's, its membership lock a private file of this
+    /// user. A flag alone makes nobody's services reachable.
+    fn check_colocated(&self, r: &RunRequest, c: &proto::Colocated) -> Result<(), String> {
+        let euid = colocate::euid();
+        let mine = self.facts.iox2_root.clone().unwrap_or_default();
+        if c.iox2_root != mine {
+            return Err(colocate::ServicesError::OtherRoot {
+                theirs: c.iox2_root.clone(),
+                mine,
+            }
+            .to_string());
+        }
+        let entries = colocate::shm_entries().map_err(|e| e.to_string())?;
+        let n = colocate::check_services(&entries, &r.prefix, euid).map_err(|e| e.to_string())?;
+        colocate::check_members(&c.members, euid).map_err(|e| {
+            // The daemon's own log names the path; the refusal does not.
+            eprintln!("formation host: run {}: {e}", r.run_id);
+            "a co-located run whose membership lock is not a private file of this host's user"
+                .to_string()
+        })?;
+        eprintln!(
+            "formation host: run {}: co-located: {n} shared memory files of {} here, uid {euid}",
+            r.run_id, r.prefix
+        );
+        Ok(())
+    }
+
+    /// Records a prepared run.
+    fn insert(
+        &mut self,
+        r: RunRequest,
+        dir: PathBuf,
+        variant: Variant,
+        bridge: Option<Bridge>,
+        node: Option<RunNode>,
+        membership: Option<Membership>,
+    ) {
         self.runs.insert(
             r.run_id.clone(),
             HostRun {
-                key,
+                key: r.secret.keys(&r.run_id),
                 replay: Replay::default(),
                 reports: 0,
                 scenario_hash: restart::scenario_hash(r.scenario_toml.as_bytes()),
@@ -582,12 +641,11 @@ impl Daemon {
                 children: HashMap::new(),
                 prepared: Instant::now(),
                 forwarded: HashMap::new(),
-                bridge: Some(bridge),
-                node: Some(node),
-                membership: Some(membership),
+                bridge,
+                node,
+                membership,
             },
         );
-        Ok(())
     }
 
     fn spawn(
@@ -637,6 +695,7 @@ impl Daemon {
             spin_us: 0,
             rt_priority: r.req.rt_priority,
             rejoin_at,
+            members: r.req.colocated.as_ref().map(|c| c.members.clone()),
         };
         let mut cmd = Command::new(&exe);
         cmd.arg0(Role::Agent.process_name(Some(agent)))
@@ -655,6 +714,10 @@ impl Daemon {
             .map_err(|e| format!("cannot start agent {}: {e}", agent + 1))?;
         let pid = child.id();
         r.children.insert(agent, child);
+        eprintln!(
+            "formation host: run {run_id}: agent {} started, pid {pid}",
+            agent + 1
+        );
         Ok(pid)
     }
 
@@ -900,12 +963,28 @@ impl Daemon {
         drop(r.bridge.take());
         drop(r.node.take());
         drop(r.membership.take());
-        let removed = ipc::remove_residue(&r.req.prefix).unwrap_or(0);
         let _ = std::fs::remove_dir_all(&r.dir);
+        if r.req.colocated.is_some() {
+            // The files are the orchestrator's: it removes them, or the last process of the run
+            // does (its agents here were members of its run).
+            eprintln!("formation host: run {run_id} ended; its folder removed (co-located: its iceoryx2 files are the orchestrator's)");
+            return;
+        }
+        let removed = ipc::remove_residue(&r.req.prefix).unwrap_or(0);
         eprintln!(
             "formation host: run {run_id} ended; {removed} iceoryx2 files and its folder removed"
         );
     }
+}
+
+/// The 1-based ids of the agents placed on `me`.
+fn own_agents(agent_hosts: &[String], me: &str) -> Vec<usize> {
+    agent_hosts
+        .iter()
+        .enumerate()
+        .filter(|(_, h)| *h == me)
+        .map(|(i, _)| i + 1)
+        .collect()
 }
 
 /// Gives `children` up to `grace` to exit by themselves (polled every 10 ms).

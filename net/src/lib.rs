@@ -11,6 +11,8 @@
 //! * [`proto`]: the keys and messages between an orchestrator and the host daemons.
 //! * [`identity`]: protocol version, build identity and wire-layout hash, compared at the handshake.
 //! * [`plan`]: which services cross hosts for a placement, and in which direction.
+//! * [`colocate`]: a host whose daemon shares the launcher's `/dev/shm` and user: its agents use
+//!   the launcher's services, and nothing is bridged for it.
 //! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
 //!   bytes with their wire type name.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
@@ -35,6 +37,7 @@ pub mod bench;
 pub mod bridge;
 pub mod clock;
 pub mod cluster;
+pub mod colocate;
 pub mod daemon;
 pub mod export;
 pub mod identity;

@@ -111,6 +111,20 @@ impl Placement {
         Ok((next, moved))
     }
 
+    /// The placement the bridges work with when the hosts in `colocated` share the launcher's
+    /// `/dev/shm` ([`crate::colocate`]): their agents open the launcher's services directly, so
+    /// data-plane wise they are on the launcher and nothing is forwarded to or from those hosts.
+    /// Daemons still start and report their agents (the control placement is `self`).
+    pub fn data_plane<S: AsRef<str>>(&self, colocated: &[S]) -> Placement {
+        let mut p = self.clone();
+        for h in p.agent_hosts.iter_mut() {
+            if colocated.iter().any(|c| c.as_ref() == h.as_str()) {
+                *h = self.launcher.clone();
+            }
+        }
+        p
+    }
+
     fn hosts_of(&self, parties: &[Party], scope: Scope, i: Option<usize>) -> BTreeSet<&str> {
         let mut s = BTreeSet::new();
         for p in parties {
@@ -379,6 +393,60 @@ mod tests {
                 "{name} still crosses"
             );
         }
+    }
+
+    #[test]
+    fn a_co_located_hosts_agents_are_the_launchers_for_every_bridge() {
+        // Agents 4 and 5 on b, which shares the launcher's /dev/shm; agent 2 on c, remote.
+        let p = Placement {
+            agent_hosts: ["a", "c", "a", "b", "b"].map(String::from).to_vec(),
+            launcher: "a".into(),
+            neighbours: paper_neighbours(),
+        };
+        let d = p.data_plane(&["b"]);
+        assert_eq!(d.agent_hosts, ["a", "c", "a", "a", "a"]);
+        assert_eq!(d.hosts(), ["a", "c"], "no bridge plans for b");
+        assert_eq!(
+            p.data_plane::<&str>(&[]),
+            p,
+            "nothing co-located: unchanged"
+        );
+        let mut all = All::default();
+        services::visit(&Sizing::run(5, false), &mut all).unwrap();
+        for (name, s, r, scope, i) in &all.0 {
+            for me in ["a", "c"] {
+                let route = d.route(me, name, s, r, *scope, *i).unwrap();
+                assert!(
+                    !route.out_to.iter().any(|h| h == "b"),
+                    "{me} sends {name} to the co-located b"
+                );
+            }
+            // What only concerns agents 4 and 5 stays on the launcher.
+            if i.is_some_and(|k| k >= 3)
+                && !s.iter().chain(r.iter()).any(|x| *x == Party::Neighbours)
+            {
+                assert!(
+                    d.route("a", name, s, r, *scope, *i).unwrap().is_idle(),
+                    "{name}"
+                );
+            }
+        }
+        // All co-located: the launcher's bridge has nothing to do.
+        let only_b = Placement {
+            agent_hosts: ["a", "a", "a", "b", "b"].map(String::from).to_vec(),
+            ..p.clone()
+        }
+        .data_plane(&["b"]);
+        for (name, s, r, scope, i) in &all.0 {
+            assert!(
+                only_b.route("a", name, s, r, *scope, *i).unwrap().is_idle(),
+                "{name} crosses"
+            );
+        }
+        // A co-located host lost: its agents go to the launcher, where the data plane had them.
+        let (next, moved) = p.after_loss("b").unwrap();
+        assert_eq!(moved, vec![3, 4]);
+        assert_eq!(next.data_plane(&["b"]), d);
     }
 
     #[test]

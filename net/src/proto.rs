@@ -13,6 +13,7 @@
 //! | `formation/clock/<name>` | queryable: a daemon's `CLOCK_MONOTONIC`, ns, 8 bytes LE ([`crate::clock`]) |
 
 use crate::auth::RunSecret;
+use crate::colocate::{Facts, ShmPlace};
 use crate::identity::Identity;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -79,6 +80,39 @@ pub struct HostInfo {
     pub identity: Identity,
     /// Its wall clock when it answered, µs since the Unix epoch (clock offset estimate).
     pub clock_us: u64,
+    /// Where its shared memory lives (`None`: unknown), its effective uid and its iceoryx2
+    /// root: whether it is co-located with an orchestrator ([`crate::colocate`]).
+    #[serde(default)]
+    pub shm: Option<ShmPlace>,
+    /// Its effective uid.
+    #[serde(default)]
+    pub uid: Option<u32>,
+    /// Its iceoryx2 root folder.
+    #[serde(default)]
+    pub iox2_root: Option<String>,
+}
+
+impl HostInfo {
+    /// What the co-location decision needs of this daemon.
+    pub fn facts(&self) -> Facts {
+        Facts {
+            shm: self.shm.clone(),
+            uid: self.uid,
+            iox2_root: self.iox2_root.clone(),
+        }
+    }
+}
+
+/// A run on a co-located host ([`crate::colocate`]): the daemon creates no service and runs no
+/// bridge; its agents open the orchestrator's services and join its membership lock. The daemon
+/// checks all of it itself before it accepts the run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Colocated {
+    /// The orchestrator's iceoryx2 root (must be the daemon's own).
+    pub iox2_root: String,
+    /// The orchestrator's membership lock of the run (`formation_config::node::members`), which
+    /// the daemon's agents join: the last process of the run removes its files.
+    pub members: std::path::PathBuf,
 }
 
 /// A run's share of one host: its agents, and what the daemon needs to start them.
@@ -111,6 +145,10 @@ pub struct RunRequest {
     /// Every host's `CLOCK_MONOTONIC` minus the launcher's, ns (estimated at the handshake,
     /// [`crate::clock`]); the bridges translate send stamps with them.
     pub clock_offsets_ns: BTreeMap<String, i64>,
+    /// `Some`: the daemon shares the orchestrator's `/dev/shm`; the run's services exist already
+    /// and are not bridged ([`crate::colocate`]).
+    #[serde(default)]
+    pub colocated: Option<Box<Colocated>>,
 }
 
 /// What an orchestrator asks a daemon.

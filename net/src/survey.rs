@@ -159,6 +159,9 @@ mod tests {
                 layout: "test".into(),
             },
             clock_us: pid as u64,
+            shm: None,
+            uid: None,
+            iox2_root: None,
         }
     }
 

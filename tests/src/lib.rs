@@ -95,6 +95,7 @@ pub fn cpus_allowed(pid: u32) -> Vec<usize> {
     out
 }
 
+pub mod host;
 pub mod run;
 pub mod wire;
 

@@ -165,6 +165,20 @@ impl Drop for RunningRun {
     }
 }
 
+/// The pids of a run's start line (`formation run: id ID, ...; pids P L A1 ...; ...`): plant,
+/// leader, then the agents in order.
+pub fn start_line_pids(line: &str) -> Vec<u32> {
+    line.split("pids ")
+        .nth(1)
+        .and_then(|r| r.split(';').next())
+        .map(|p| {
+            p.split_whitespace()
+                .filter_map(|x| x.parse().ok())
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 /// Pids of the processes whose command line mentions `marker` (e.g. a run directory).
 pub fn processes_mentioning(marker: &Path) -> Vec<u32> {
     let canonical = std::fs::canonicalize(marker).unwrap_or_else(|_| marker.to_path_buf());

@@ -655,18 +655,14 @@ struct LostHost {
     dir: PathBuf,
 }
 
-/// The step of agent 4's newest checkpoint on the daemon's host (read through the daemon's view of
-/// its own mounts: its run folder is in its private /tmp), if one is written.
+/// The step of agent 4's newest checkpoint on the daemon of pid `daemon_pid` (its run folders are
+/// in its own mount namespace, seen through `/proc/<pid>/root`).
 fn remote_checkpoint_step(daemon_pid: u32, daemon_log: &Path) -> Option<u64> {
-    let log = std::fs::read_to_string(daemon_log).ok()?;
-    let root = log
-        .lines()
-        .find_map(|l| l.split("; runs in ").nth(1))?
-        .trim();
-    let root = PathBuf::from(format!("/proc/{daemon_pid}/root{root}"));
-    let run = std::fs::read_dir(root).ok()?.flatten().next()?;
-    let bytes = std::fs::read(run.path().join("checkpoints/agent-4.ckpt")).ok()?;
-    Some(u64::from_le_bytes(bytes.get(24..32)?.try_into().ok()?))
+    let root = formation_tests::host::runs_root(daemon_log)?;
+    formation_tests::host::agent_4_checkpoint_step(&PathBuf::from(format!(
+        "/proc/{daemon_pid}/root{}",
+        root.display()
+    )))
 }
 
 /// When [`run_and_kill_the_remote_daemon`] kills the daemon.
@@ -728,16 +724,7 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
         std::thread::sleep(Duration::from_millis(50));
     };
     // `...; pids P L A1 A2 A3 A4 A5; agents ...`: plant, leader, then the agents in order.
-    let pids: Vec<u32> = start_line
-        .split("pids ")
-        .nth(1)
-        .and_then(|r| r.split(';').next())
-        .map(|p| {
-            p.split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect()
-        })
-        .unwrap_or_default();
+    let pids = formation_tests::run::start_line_pids(&start_line);
     assert_eq!(pids.len(), 7, "plant, leader and 5 agents: {start_line}");
     match at {
         KillAt::After(d) => std::thread::sleep(d),
@@ -788,21 +775,6 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
     }
 }
 
-/// No process of the lost host's agents is left (they die with their daemon), so nothing of that
-/// host's private /dev/shm outlives it either: its mount namespace ends with its last process.
-fn assert_gone(pids: &[u32]) {
-    let t0 = Instant::now();
-    for p in pids {
-        while Path::new(&format!("/proc/{p}")).exists() {
-            assert!(
-                t0.elapsed() < Duration::from_secs(5),
-                "agent process {p} of the lost host is still alive"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
 #[test]
 fn a_killed_host_daemon_under_restart_never_is_named_at_once_and_the_run_stops_cleanly() {
     if !available(
@@ -832,7 +804,7 @@ fn a_killed_host_daemon_under_restart_never_is_named_at_once_and_the_run_stops_c
         r.ended_after.as_secs_f64() * 1e3
     );
     assert_no_residue("the launcher", &r.residue);
-    assert_gone(&r.remote_pids);
+    formation_tests::host::assert_gone(&r.remote_pids);
     assert!(
         r.out.join("trajectory.csv").exists(),
         "the recorded prefix is kept"
@@ -939,7 +911,7 @@ fn a_killed_host_daemon_under_on_failure_has_its_agents_taken_over_warm_here_and
     }
     assert_eq!(s["diverged"], false, "{s}");
     assert_no_residue("the launcher", &r.residue);
-    assert_gone(&r.remote_pids);
+    formation_tests::host::assert_gone(&r.remote_pids);
     let _ = std::fs::remove_dir_all(&r.dir);
 }
 

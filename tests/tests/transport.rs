@@ -7,80 +7,12 @@
 //! (65534) needs root: it skips elsewhere, unless `FORMATION_REQUIRE_ROOT=1` (set by `.ci/run`)
 //! makes it required.
 
+use formation_tests::host::{formation_rt, runtime, unique, Daemon};
 use formation_tests::{bin, chown, root_or_skip, stderr_of, temp_dir, OTHER_UID};
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::os::unix::process::CommandExt;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::time::Duration;
-
-/// A `formation host` started by a test; killed and reaped on drop.
-struct Daemon {
-    child: Child,
-    log: PathBuf,
-}
-
-impl Daemon {
-    /// Starts `formation host ARGS` with runtime folder `rt`; returns once it listens.
-    fn start(rt: &Path, args: &[&str]) -> Daemon {
-        let log = rt
-            .parent()
-            .expect("a runtime folder has a parent")
-            .join("daemon.log");
-        let child = Command::new(bin("formation"))
-            .arg("host")
-            .args(args)
-            .env("XDG_RUNTIME_DIR", rt)
-            .env_remove("CARGO")
-            .stdout(Stdio::null())
-            .stderr(std::fs::File::create(&log).unwrap())
-            .spawn()
-            .expect("formation host starts");
-        let mut d = Daemon { child, log };
-        formation_tests::wait_until_listening(
-            &mut d.child,
-            &d.log,
-            "the daemon",
-            Duration::from_secs(30),
-        );
-        d
-    }
-
-    fn log_text(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    /// The daemon's child processes (agents it spawned).
-    fn children(&self) -> String {
-        let pid = self.child.id();
-        std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children")).unwrap_or_default()
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// A runtime folder for one daemon and its clients (mode 0700 unless `mode`).
-fn runtime(dir: &Path, mode: u32) -> PathBuf {
-    let rt = dir.join("rt");
-    std::fs::create_dir_all(&rt).unwrap();
-    std::fs::set_permissions(&rt, std::fs::Permissions::from_mode(mode)).unwrap();
-    rt
-}
-
-/// `formation ARGS` with runtime folder `rt`, to its end.
-fn formation_rt(rt: &Path, args: &[&str]) -> Output {
-    Command::new(bin("formation"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", rt)
-        .env_remove("CARGO")
-        .output()
-        .expect("formation starts")
-}
+use std::path::Path;
+use std::process::{Command, Output};
 
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
@@ -93,10 +25,6 @@ fn free_port() -> u16 {
 fn write_secret(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
     std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).unwrap();
-}
-
-fn unique(tag: &str) -> String {
-    format!("{tag}{}", std::process::id() % 100_000)
 }
 
 #[test]

@@ -24,6 +24,10 @@ pub struct ChildArgs {
     pub rt_priority: u32,
     /// Agents: a new process taking over at this step (it rebuilds from `DIR/checkpoints/`).
     pub rejoin_at: Option<u64>,
+    /// The run's membership lock to join instead of the one in the run directory
+    /// ([`super::members`]): an agent started by a daemon that shares the orchestrator's
+    /// `/dev/shm` joins the orchestrator's.
+    pub members: Option<PathBuf>,
 }
 
 impl ChildArgs {
@@ -45,6 +49,10 @@ impl ChildArgs {
         if let Some(r) = self.rejoin_at {
             v.push("--rejoin-at".into());
             v.push(r.to_string().into());
+        }
+        if let Some(m) = &self.members {
+            v.push("--members".into());
+            v.push(m.clone().into_os_string());
         }
         if self.realtime {
             v.push("--mode".into());
@@ -71,6 +79,7 @@ impl ChildArgs {
             spin_us: 0,
             rt_priority: 0,
             rejoin_at: None,
+            members: None,
         };
         let mut it = args.into_iter();
         while let Some(flag) = it.next() {
@@ -96,6 +105,7 @@ impl ChildArgs {
                 "--prefix" => out.prefix = text,
                 "--variant" => out.variant = text,
                 "--run-dir" => out.run_dir = PathBuf::from(value),
+                "--members" => out.members = Some(PathBuf::from(value)),
                 "--mode" => {
                     out.realtime = match text.as_str() {
                         "realtime" => true,
@@ -145,8 +155,14 @@ mod tests {
             spin_us: 0,
             rt_priority: 0,
             rejoin_at: Some(20_500),
+            members: None,
         };
         assert_eq!(ChildArgs::parse(a.to_args()).unwrap(), a);
+        let joined = ChildArgs {
+            members: Some(PathBuf::from("/out/run x/iox2/members.lock")),
+            ..a.clone()
+        };
+        assert_eq!(ChildArgs::parse(joined.to_args()).unwrap(), joined);
         let rt = ChildArgs {
             realtime: true,
             spin_us: 20,

@@ -67,7 +67,11 @@ pub fn boot(role: Role, args: ChildArgs) -> Result<Boot, NodeError> {
             )));
         }
     }
-    let membership = match Membership::join(&args.run_dir, &args.prefix) {
+    let joined = match &args.members {
+        Some(lock) => Membership::join_file(lock, &args.prefix),
+        None => Membership::join(&args.run_dir, &args.prefix),
+    };
+    let membership = match joined {
         Ok(m) => Some(m),
         Err(e) => {
             tracing::warn!("{e}: this process will not clean up after a dead orchestrator");

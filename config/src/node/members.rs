@@ -42,6 +42,12 @@ impl Membership {
         Membership::open(&lock_path(run_dir), prefix, false)
     }
 
+    /// Joins the run of the lock file `lock` (an agent started by a daemon that shares the
+    /// orchestrator's `/dev/shm` joins the orchestrator's run this way).
+    pub fn join_file(lock: &Path, prefix: &str) -> Result<Membership, NodeError> {
+        Membership::open(lock, prefix, false)
+    }
+
     fn open(path: &Path, prefix: &str, create: bool) -> Result<Membership, NodeError> {
         let file =
             files::open_lock_file(path, create).map_err(|e| file_error(path, "cannot open", e))?;

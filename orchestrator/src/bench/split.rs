@@ -4,8 +4,8 @@
 //! same placement (`bench::zenoh`) in the same round.
 //!
 //! The second host is a `formation host` daemon the bench starts on a free port of 127.0.0.1.
-//! A run's iceoryx2 services have the same prefix on every host, so on one machine the daemon
-//! must not share the launcher's: it runs in a mount namespace of its own (`unshare --mount`,
+//! A daemon sharing the launcher's `/dev/shm` would be co-located and bridge nothing
+//! (`formation_net::colocate`), so the daemon runs in a mount namespace of its own (`unshare --mount`,
 //! with `--user --map-root-user` when not root) with a fresh tmpfs on /dev/shm, and with its own
 //! runtime folder (`XDG_RUNTIME_DIR`: its iceoryx2 root and its run folders). No shared memory
 //! crosses between the two "hosts"; every cross-host message goes through the bridges and Zenoh

@@ -434,7 +434,7 @@ fn run(
     let sizing = names::Sizing::for_scenario(scenario, mode.realtime, mode.observers);
     let services = services::RunServices::create(&node, sizing)?;
     if let Some(r) = &remote {
-        r.start_bridge(prefix, sizing)?;
+        r.attach(prefix, sizing, &run_dir)?;
     }
     // Reads the services as an outside observer from the first step on; stopped after the role
     // processes, once it has put their last samples.
@@ -458,6 +458,7 @@ fn run(
         },
         rt_priority: mode.rt_priority,
         rejoin_at: None,
+        members: None,
     };
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(pins.spawn(governor::Place::Plant, |cpu| {

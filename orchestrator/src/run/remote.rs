@@ -17,6 +17,7 @@ use formation_config::Scenario;
 use formation_net::bridge::{Bridge, BridgeConfig};
 use formation_net::clock::Offset;
 use formation_net::cluster::{Cluster, HandshakeError, LAUNCHER};
+use formation_net::colocate::{self, DataPlane, Facts};
 use formation_net::plan::Placement;
 use formation_net::proto::{self, Reply, Request, RunRequest};
 use formation_net::session::{self, Mode, Options};
@@ -120,34 +121,6 @@ fn why_missing(opts: &Options, e: HandshakeError) -> String {
     text
 }
 
-/// Whether the daemon named `name` with process id `pid` runs on this machine with this
-/// process's `/dev/shm`: a process of that pid here is `formation host --name NAME` and its
-/// `/dev/shm` (seen through `/proc/<pid>/root`) is this one's. A process that cannot be looked
-/// at (another user's) is not judged.
-fn shares_shared_memory(pid: u32, name: &str) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else {
-        return false;
-    };
-    let args: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
-    let named = args
-        .windows(2)
-        .any(|w| w[0] == b"--name" && w[1] == name.as_bytes())
-        || args
-            .iter()
-            .any(|a| *a == format!("--name={name}").as_bytes())
-        || (!args.iter().any(|a| a.starts_with(b"--name")) && crate::hosts::machine_name() == name);
-    let is_daemon = args.iter().any(|a| *a == b"host") && named;
-    if !is_daemon {
-        return false;
-    }
-    let id = |p: &str| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
-    match (id("/dev/shm"), id(&format!("/proc/{pid}/root/dev/shm"))) {
-        (Some(a), Some(b)) => a == b,
-        _ => false,
-    }
-}
-
 /// Hosts reached and checked, before the run is prepared.
 pub struct Remote {
     cluster: Cluster,
@@ -156,6 +129,8 @@ pub struct Remote {
     hosts: Vec<String>,
     neighbours: Vec<Vec<usize>>,
     offsets: BTreeMap<String, Offset>,
+    /// Hosts whose daemons share this orchestrator's `/dev/shm`, user and iceoryx2 root.
+    colocated: Vec<String>,
 }
 
 /// Opens the session and runs the handshake; `None` without `--hosts`.
@@ -191,12 +166,17 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
     let infos = cluster
         .handshake(&hosts, &me, session::REPLY_TIMEOUT)
         .map_err(|e| why_missing(&opts, e))?;
+    // A daemon sharing this /dev/shm as this user runs its agents on this orchestrator's
+    // services (co-located); as another user it cannot take part.
+    let here = Facts::here();
+    let mut colocated = Vec::new();
     for (h, i) in &infos {
-        if shares_shared_memory(i.pid, h) {
-            return Err(format!(
-                "host {h} is a daemon on this machine that shares this orchestrator's /dev/shm (pid {}): a run's iceoryx2 services have the same names on every host, so they would collide. Start that daemon with a /dev/shm and XDG_RUNTIME_DIR of its own and connect to its socket (docs/multi-host.md, \"One machine\"), or run without --hosts",
-                i.pid
-            ));
+        match colocate::data_plane(h, &here, &i.facts()).map_err(|e| e.to_string())? {
+            DataPlane::Colocated => {
+                tracing::info!(host = h.as_str(), pid = i.pid, "co-located host");
+                colocated.push(h.clone());
+            }
+            DataPlane::Remote => {}
         }
     }
     let mut offsets = BTreeMap::new();
@@ -219,12 +199,14 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
         hosts,
         offsets,
         neighbours: Placement::neighbours_of(n, scenario.graph.edges.iter().map(|e| (e.a, e.b))),
+        colocated,
     }))
 }
 
 impl Remote {
-    /// Prepares the run on every host (services and bridge there; no process yet). A refusal
-    /// ends the hosts already prepared.
+    /// Prepares the run on every host that is not co-located (services and bridge there; no
+    /// process yet). A refusal ends the hosts already prepared. The co-located hosts are prepared
+    /// once this orchestrator has created the run's services ([`RemoteRun::attach`]).
     pub fn prepare(
         mut self,
         run_id: &str,
@@ -250,34 +232,31 @@ impl Remote {
             observers: pacing.observers,
             identity: formation_net::identity::local(),
             clock_offsets_ns: clock_offsets_ns(&self.offsets),
+            colocated: None,
+        };
+        let placement = Placement {
+            agent_hosts: self.agent_hosts,
+            launcher: LAUNCHER.to_string(),
+            neighbours: self.neighbours,
         };
         let run = RemoteRun {
             cluster: Arc::new(self.cluster),
             run_id: run_id.to_string(),
-            placement: RefCell::new(Placement {
-                agent_hosts: self.agent_hosts,
-                launcher: LAUNCHER.to_string(),
-                neighbours: self.neighbours,
-            }),
+            placement: RefCell::new(placement.clone()),
+            colocated: self.colocated,
+            request: req,
             hosts: RefCell::new(Vec::new()),
             bridge: RefCell::new(None),
             lease: self.lease,
             moved: RefCell::new(BTreeMap::new()),
             offsets: self.offsets,
         };
-        for h in &self.hosts {
-            match run.cluster.request(
-                h,
-                &Request::Prepare(req.clone()),
-                &[],
-                session::REPLY_TIMEOUT,
-            ) {
-                Ok((Reply::Ok { .. }, _)) => run.hosts.borrow_mut().push(h.clone()),
-                Ok((Reply::Refused(why), _)) => {
-                    return Err(format!("host {h} refused the run: {why}"))
-                }
-                Err(e) => return Err(e),
-            }
+        for h in self.hosts.iter().filter(|h| !run.colocated.contains(h)) {
+            let req = RunRequest {
+                agent_hosts: run.placement_for(h, &placement).agent_hosts,
+                ..run.request.clone()
+            };
+            run.prepare_host(h, req)?;
         }
         Ok(run)
     }
@@ -298,6 +277,11 @@ pub struct RemoteRun {
     /// they were lost with.
     moved: RefCell<BTreeMap<usize, String>>,
     offsets: BTreeMap<String, Offset>,
+    /// Hosts sharing this orchestrator's `/dev/shm` (`formation_net::colocate`): prepared after
+    /// the services exist, never bridged.
+    colocated: Vec<String>,
+    /// The run request every host is prepared with (its placement per host).
+    request: RunRequest,
 }
 
 /// Every host's clock minus this machine's, ns, this machine included (0).
@@ -349,15 +333,71 @@ impl Drop for RemoteRun {
 }
 
 impl RemoteRun {
-    /// Starts this machine's bridge (after the orchestrator created the services).
-    pub fn start_bridge(&self, prefix: &str, sizing: Sizing) -> Result<(), String> {
+    /// The placement `host` works with: the daemons that bridge (and this machine's bridge, for
+    /// [`LAUNCHER`]) see the co-located hosts' agents on the launcher
+    /// (`Placement::data_plane`); a co-located daemon sees where every agent is started.
+    fn placement_for(&self, host: &str, placement: &Placement) -> Placement {
+        if self.colocated.iter().any(|c| c == host) {
+            placement.clone()
+        } else {
+            placement.data_plane(&self.colocated)
+        }
+    }
+
+    /// Prepares the run on `host`; it is ended with the run from then on.
+    fn prepare_host(&self, host: &str, req: RunRequest) -> Result<(), String> {
+        match self
+            .cluster
+            .request(host, &Request::Prepare(req), &[], session::REPLY_TIMEOUT)?
+        {
+            (Reply::Ok { .. }, _) => {
+                self.hosts.borrow_mut().push(host.to_string());
+                Ok(())
+            }
+            (Reply::Refused(why), _) => Err(format!("host {host} refused the run: {why}")),
+        }
+    }
+
+    /// Once the orchestrator has created the run's services (no process started yet): prepares
+    /// the co-located hosts, which check that those services are in their `/dev/shm` and their
+    /// user's, and starts this machine's bridge if any host is not co-located.
+    pub fn attach(&self, prefix: &str, sizing: Sizing, run_dir: &Path) -> Result<(), String> {
+        let placement = self.placement.borrow().clone();
+        for h in &self.colocated {
+            let req = RunRequest {
+                agent_hosts: placement.agent_hosts.clone(),
+                colocated: Some(Box::new(proto::Colocated {
+                    iox2_root: formation_config::node::ipc::root_dir()
+                        .to_string_lossy()
+                        .into_owned(),
+                    members: formation_config::node::members::lock_path(run_dir),
+                })),
+                ..self.request.clone()
+            };
+            self.prepare_host(h, req)?;
+        }
+        let data = self.placement_for(LAUNCHER, &placement);
+        if data.hosts().len() < 2 {
+            tracing::info!("every host is co-located: no bridge");
+            return Ok(());
+        }
+        self.start_bridge(prefix, sizing, data)
+    }
+
+    /// Starts this machine's bridge for the data-plane placement `placement`.
+    fn start_bridge(
+        &self,
+        prefix: &str,
+        sizing: Sizing,
+        placement: Placement,
+    ) -> Result<(), String> {
         let b = Bridge::start(
             self.cluster.session(),
             BridgeConfig {
                 run_id: self.run_id.clone(),
                 prefix: prefix.to_string(),
                 me: LAUNCHER.to_string(),
-                placement: self.placement.borrow().clone(),
+                placement,
                 sizing,
                 create: false,
                 key: self
@@ -537,14 +577,14 @@ impl RemoteRun {
         }
         let (next, moved) = self.placement.borrow().after_loss(host)?;
         if let Some(b) = self.bridge.borrow_mut().as_mut() {
-            let (out, inbound) = b.replan(&next)?;
+            let (out, inbound) = b.replan(&self.placement_for(LAUNCHER, &next))?;
             tracing::info!(out, inbound, lost = host, "bridge re-planned");
         }
         self.hosts.borrow_mut().retain(|h| h != host);
         for h in self.hosts.borrow().iter() {
             let req = Request::Replan {
                 run_id: self.run_id.clone(),
-                agent_hosts: next.agent_hosts.clone(),
+                agent_hosts: self.placement_for(h, &next).agent_hosts,
             };
             match self.cluster.request(h, &req, &[], session::REPLY_TIMEOUT)? {
                 (Reply::Ok { .. }, _) => {}
