@@ -517,12 +517,21 @@ impl Agent {
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
             // The network learns from the same (shaped, D18) position error the law acts on.
-            let ep_nn = clip_norm(ep, pg.position_error_limit_m.unwrap_or(f64::INFINITY));
-            let drive = [
-                pg.nn_k_p * ep_nn[0] + pg.nn_k_v * ev[0],
-                pg.nn_k_p * ep_nn[1] + pg.nn_k_v * ev[1],
-                pg.nn_k_p * ep_nn[2] + pg.nn_k_v * ev[2],
-            ];
+            let shaped = pg.position_error_limit_m.unwrap_or(f64::INFINITY);
+            let ep_nn = clip_norm(ep, shaped);
+            let mut drive: [f64; 3] =
+                std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
+            if self.p.leader_data && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0) {
+                // D23: the leader-relative errors of D11 drive the network too.
+                let lp = clip_norm(
+                    std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
+                    shaped,
+                );
+                for (k, d) in drive.iter_mut().enumerate() {
+                    *d += pg.nn_leader_k_p * lp[k]
+                        + pg.nn_leader_k_v * (me.v[k] - leader.v[k] - me.off_v[k]);
+                }
+            }
             self.nn
                 .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
         }
