@@ -385,6 +385,17 @@ impl Agent {
         self.attitude.resync(&Vector3::from(own.rate));
     }
 
+    /// Re-seeds the RBFNN so that F-hat_iP at the quadrotor's position `p` and velocity `v` equals
+    /// `observed`, the external acceleration the failsafe observed while this controller was down
+    /// (`runtime.rejoin_reseed`, docs/failures.md): the smallest change of the weights, then the
+    /// projection of D15. Nothing for the no-RBFNN variant.
+    pub fn reseed(&mut self, p: [f64; 3], v: [f64; 3], observed: [f64; 3]) {
+        if self.p.variant != Variant::NoRbfnn {
+            self.nn.reseed(p, v, observed);
+            self.nn.project(self.p.gains.rbfnn.max_weight_norm);
+        }
+    }
+
     /// Computes the command of step k from the current attitude and rate in `own` and the delayed
     /// information, then advances the controller's internal states by dt.
     pub fn step(&mut self, own: &VehicleState) -> ControlCommand {
@@ -521,8 +532,12 @@ impl Agent {
             let ep_nn = clip_norm(ep, shaped);
             let mut drive: [f64; 3] =
                 std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
-            if self.p.leader_data && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0) {
-                // D23: the leader-relative errors of D11 drive the network too.
+            // D23: the leader-relative errors of D11 drive the network too, once this agent's own
+            // start-up reference generator (D19) has brought its reference to the slot: the
+            // network does not integrate the shaped approach of the start-up.
+            let started = self.startup[0].is_none();
+            if self.p.leader_data && started && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0)
+            {
                 let lp = clip_norm(
                     std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
                     shaped,

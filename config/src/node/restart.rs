@@ -171,6 +171,12 @@ pub struct RejoinFile {
     pub commands: Vec<(f64, [f64; 3])>,
     /// Every runtime event published so far, in order (the new process's timeline).
     pub events: Vec<RuntimeEvent>,
+    /// The (thrust, torque) quadrotor `agent` was flown with while its controller was down, steps
+    /// [down_from, rejoin_at): its last command held, then the failsafe's (docs/failures.md). With
+    /// `states`, what the returning controller reads the failsafe's observed disturbance from
+    /// (`runtime.rejoin_reseed`).
+    #[serde(default)]
+    pub flown: Vec<(f64, [f64; 3])>,
 }
 
 impl RejoinFile {
@@ -182,6 +188,16 @@ impl RejoinFile {
     /// The agent's recorded command at step k (within [first, down_from)).
     pub fn command(&self, k: u64) -> (f64, [f64; 3]) {
         self.commands[(k - self.first) as usize]
+    }
+
+    /// What quadrotor `agent` was flown with at step k: its controller's recorded command before
+    /// `down_from`, the held or failsafe command from then to `rejoin_at`.
+    pub fn flown_command(&self, k: u64) -> (f64, [f64; 3]) {
+        if k < self.down_from {
+            self.command(k)
+        } else {
+            self.flown[(k - self.down_from) as usize]
+        }
     }
 }
 
