@@ -24,8 +24,12 @@
 //!
 //! Frame (little endian), records back to back: `u8 kind` (0 sample, 1 event, 2 sending host),
 //! `u16` name length, name; for a sample also `u8` type-name length, type name, `u32` size, bytes.
-//! Every frame starts with the sending host's record. The receiver checks the type name and size
-//! against its own service before it publishes.
+//! Every frame starts with the sending host's record and ends with the proof of the run's secret
+//! for its destination ([`crate::auth`]: the sender's sequence number, an HMAC-SHA256 tag). The
+//! receiver takes nothing from a frame longer than [`MAX_FRAME`], without a valid proof, repeating
+//! a sequence number of its sender, or whose sender is not a host of the run; then it checks each
+//! sample's type name and size against its own service before it publishes. Refusals are counted
+//! and logged at most once a second per sender and reason ([`LogLimit`]).
 //!
 //! Realtime stamps: the in side translates the send stamp (`sent_ns`, the sender's
 //! `CLOCK_MONOTONIC`) of every state, share and command into its own host's clock with the clock
@@ -35,7 +39,9 @@
 //! Publishers use `CongestionControl::Block` (nothing is dropped), `express` (no batching delay:
 //! the frame is the batch) and `Locality::Remote`; nothing is re-forwarded (see `plan`).
 
+use crate::auth::{Purpose, Replay, RunKey};
 use crate::clock::{self, LinkDelays};
+use crate::logs::LogLimit;
 use crate::plan::{agent_index, Placement};
 use crate::proto;
 use formation_config::node::clock::now_ns;
@@ -68,6 +74,11 @@ pub const IDLE_WAKE: Duration = Duration::from_millis(50);
 /// steady stream still goes out.
 pub const DRAIN_PASSES: usize = 4;
 
+/// The longest frame a bridge takes: every sample of a step of the largest run with room to spare
+/// (a frame holds what one drain pass found, [`DRAIN_PASSES`] at most); anything longer is
+/// refused unread.
+pub const MAX_FRAME: usize = 4 << 20;
+
 /// What a bridge is for.
 #[derive(Debug, Clone)]
 pub struct BridgeConfig {
@@ -85,6 +96,8 @@ pub struct BridgeConfig {
     pub create: bool,
     /// Every host's clock minus the launcher's, ns (a host not listed: 0).
     pub clock_offsets_ns: BTreeMap<String, i64>,
+    /// The run's keys: every frame carries proof of the run's secret ([`crate::auth`]).
+    pub key: RunKey,
 }
 
 /// Counters of a bridge.
@@ -552,6 +565,24 @@ pub(crate) fn put_event(frame: &mut Vec<u8>, name: &str) {
     frame.extend_from_slice(name.as_bytes());
 }
 
+/// The frame of `records`, in their order, without the proof a bridge appends (the inverse of
+/// [`parse_frame`]).
+pub fn encode_frame(records: &[Record<'_>]) -> Vec<u8> {
+    let mut f = Vec::new();
+    for r in records {
+        match r {
+            Record::Sample {
+                name,
+                type_name,
+                bytes,
+            } => put_sample(&mut f, name, type_name, bytes),
+            Record::Event(name) => put_event(&mut f, name),
+            Record::From(host) => put_from(&mut f, host),
+        }
+    }
+    f
+}
+
 /// One record of a frame.
 #[derive(Debug, PartialEq, Eq)]
 pub enum Record<'a> {
@@ -698,6 +729,10 @@ struct Inbound {
     from: HashMap<String, (i64, String)>,
     /// Scratch: (translated send stamp, publish time) of the samples of one frame.
     stamps: Vec<(u64, u64)>,
+    /// Sequence numbers seen per sending host.
+    replay: HashMap<String, Replay>,
+    /// Refusals logged at most once a second per sender and reason.
+    log: LogLimit,
 }
 
 // SAFETY: `Inbound` owns an iceoryx2 node of the inter-process service flavour (`ipc::Service`)
@@ -741,6 +776,8 @@ impl Inbound {
             ins,
             from,
             stamps: Vec::with_capacity(64),
+            replay: HashMap::new(),
+            log: LogLimit::default(),
         })
     }
 
@@ -767,27 +804,24 @@ impl Inbound {
         links: &Mutex<BTreeMap<String, LinkDelays>>,
     ) {
         stats.frames_in.fetch_add(1, Ordering::Relaxed);
-        let records = match parse_frame(frame) {
-            Ok(r) => r,
-            Err(e) => {
-                tracing::warn!("bridge: frame refused: {e}");
-                stats.refused.fetch_add(1, Ordering::Relaxed);
-                return;
-            }
+        let Some((records, sender)) = self.admit(frame) else {
+            stats.refused.fetch_add(1, Ordering::Relaxed);
+            return;
         };
-        let mut source: Option<&(i64, String)> = None;
+        let source = self.from.get(sender);
         self.stamps.clear();
-        for r in records {
+        for r in records.into_iter().skip(1) {
             let key: &str = match &r {
                 Record::Sample { name, .. } => name,
                 Record::Event(name) => name,
-                Record::From(host) => {
-                    source = self.from.get(*host);
-                    if source.is_none() {
-                        tracing::warn!("bridge: a frame from {host}, not a host of the run");
-                        stats.refused.fetch_add(1, Ordering::Relaxed);
-                    }
-                    continue;
+                Record::From(_) => {
+                    self.log.warn(sender, "second sender", || {
+                        format!(
+                            "bridge: a frame from {sender} names a second sender; the rest refused"
+                        )
+                    });
+                    stats.refused.fetch_add(1, Ordering::Relaxed);
+                    break;
                 }
             };
             match (r, self.ins.get_mut(key)) {
@@ -804,10 +838,12 @@ impl Inbound {
                     }),
                 ) => {
                     if type_name != *t || bytes.len() != *size {
-                        tracing::warn!(
-                            "bridge: {name}: refused a {type_name} of {} bytes (expected {t} of {size})",
-                            bytes.len()
-                        );
+                        self.log.warn(sender, "type or size", || {
+                            format!(
+                                "bridge: {name}: refused a {type_name} of {} bytes from {sender} (expected {t} of {size})",
+                                bytes.len()
+                            )
+                        });
                         stats.refused.fetch_add(1, Ordering::Relaxed);
                     } else {
                         match inject(bytes, source.map_or(0, |s| s.0)) {
@@ -819,7 +855,9 @@ impl Inbound {
                 }
                 (Record::Event(_), Some(InPort::Event(n))) => ports::poke(n),
                 (r, _) => {
-                    tracing::warn!("bridge: no such forwarded service here: {r:?}");
+                    self.log.warn(sender, "no such service", || {
+                        format!("bridge: no such forwarded service here: {r:?} from {sender}")
+                    });
                     stats.refused.fetch_add(1, Ordering::Relaxed);
                 }
             }
@@ -831,6 +869,70 @@ impl Inbound {
                 d.record(sent, now);
             }
         }
+    }
+}
+
+impl Inbound {
+    /// The records of a frame and its sending host, if the frame may be taken (see the module
+    /// documentation): not too long, with proof of the run's secret for this host, a sequence
+    /// number its sender has not used, and a sender that is a host of the run named first.
+    fn admit<'f>(&mut self, frame: &'f [u8]) -> Option<(Vec<Record<'f>>, &'f str)> {
+        let me = self.cfg.me.clone();
+        if frame.len() > MAX_FRAME {
+            self.log.warn("unknown", "oversized", || {
+                format!(
+                    "bridge: a frame of {} bytes refused unread (at most {MAX_FRAME})",
+                    frame.len()
+                )
+            });
+            return None;
+        }
+        let (body, seq) = match self.cfg.key.open(Purpose::Frame, &me, frame) {
+            Ok(v) => v,
+            Err(e) => {
+                self.log.warn("unknown", "no proof", || {
+                    format!("bridge: a frame refused: {e}")
+                });
+                return None;
+            }
+        };
+        let records = match parse_frame(body) {
+            Ok(r) => r,
+            Err(e) => {
+                self.log.warn("unknown", "malformed", || {
+                    format!("bridge: frame refused: {e}")
+                });
+                return None;
+            }
+        };
+        let sender = match records.first() {
+            Some(Record::From(h)) if self.from.contains_key(*h) => *h,
+            Some(Record::From(h)) => {
+                let h = h.to_string();
+                self.log.warn("unknown", "not a host", || {
+                    format!("bridge: a frame from {h}, not a host of the run, refused")
+                });
+                return None;
+            }
+            _ => {
+                self.log.warn("unknown", "no sender", || {
+                    "bridge: a frame that does not name its sender first refused".to_string()
+                });
+                return None;
+            }
+        };
+        if let Err(e) = self
+            .replay
+            .entry(sender.to_string())
+            .or_default()
+            .accept(seq)
+        {
+            self.log.warn(sender, "replayed", || {
+                format!("bridge: a frame from {sender} refused: {e}")
+            });
+            return None;
+        }
+        Some((records, sender))
     }
 }
 
@@ -868,6 +970,8 @@ fn run_out(
     };
     let mut old = Ports::default();
     let mut ack = ready;
+    // Sequence number of the last frame sent (to any host), for the receivers' replay check.
+    let mut sent: u64 = 0;
     // One plan after the other: the first, then one per re-plan.
     loop {
         let plan =
@@ -952,7 +1056,10 @@ fn run_out(
             }
             for (d, f) in frames.iter_mut().enumerate() {
                 if f.len() > header {
-                    if let Err(e) = pubs[d].put(std::mem::replace(f, from.clone())).wait() {
+                    let mut f = std::mem::replace(f, from.clone());
+                    sent += 1;
+                    cfg.key.seal(Purpose::Frame, &hosts[d], sent, &mut f);
+                    if let Err(e) = pubs[d].put(f).wait() {
                         tracing::warn!("bridge: cannot send to {}: {e}", hosts[d]);
                     }
                     stats.frames_out.fetch_add(1, Ordering::Relaxed);

@@ -1,12 +1,15 @@
 //! The orchestrator's side: reach the daemons, compare identities, prepare a run on each host,
 //! start and stop its remote processes, and hear of their exits.
 
+use crate::auth::{Purpose, Replay, RunKey, RunSecret};
 use crate::clock;
 use crate::identity::{self, Identity};
 use crate::proto::{self, ExitReport, HostInfo, Reply, Request};
 use crate::session;
 use formation_config::node::clock::now_ns;
 use std::collections::BTreeMap;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use zenoh::sample::SampleKind;
@@ -92,9 +95,18 @@ impl Checkpoints {
     }
 }
 
+/// The run's secret as this orchestrator holds it (made at [`Cluster::announce`]).
+struct RunAuth {
+    secret: RunSecret,
+    key: RunKey,
+    /// Sequence number of the last request sent about the run.
+    seq: AtomicU64,
+}
+
 /// An orchestrator's Zenoh session and what it hears.
 pub struct Cluster {
     session: zenoh::Session,
+    auth: Option<Arc<RunAuth>>,
     seen: Arc<Mutex<Seen>>,
     _token: Option<zenoh::liveliness::LivelinessToken>,
     _subs: Vec<zenoh::pubsub::Subscriber<()>>,
@@ -108,6 +120,7 @@ impl Cluster {
             .map_err(|e| HandshakeError::Session(e.to_string()))?;
         Ok(Cluster {
             session,
+            auth: None,
             seen: Arc::new(Mutex::new(Seen::default())),
             _token: None,
             _subs: Vec::new(),
@@ -231,6 +244,8 @@ impl Cluster {
     }
 
     /// Sends a request to a daemon and waits for its reply (with the bytes after it, if any).
+    /// A request about the run carries proof of the run's secret ([`crate::auth`]); a reply is
+    /// taken only with proof of it too, except a refusal (which changes nothing).
     pub fn request(
         &self,
         host: &str,
@@ -238,24 +253,26 @@ impl Cluster {
         bytes: &[u8],
         timeout: Duration,
     ) -> Result<(Reply, Vec<u8>), String> {
+        let mut payload = proto::frame(req, bytes);
+        let mut seq = 0;
+        if req.run_id().is_some() {
+            let a = self
+                .auth
+                .as_ref()
+                .ok_or_else(|| "a request about a run before the run was announced".to_string())?;
+            seq = a.seq.fetch_add(1, Ordering::SeqCst) + 1;
+            a.key.seal(Purpose::Request, host, seq, &mut payload);
+        }
         let replies = self
             .session
             .get(proto::host_req(host))
-            .payload(proto::frame(req, bytes))
+            .payload(payload)
             .timeout(timeout)
             .wait()
             .map_err(|e| format!("host {host}: {e}"))?;
         match replies.recv() {
             Ok(r) => match r.result() {
-                Ok(s) => {
-                    let data = s.payload().to_bytes();
-                    // A plain JSON reply, or a framed one carrying bytes.
-                    if let Ok(reply) = serde_json::from_slice::<Reply>(&data) {
-                        return Ok((reply, Vec::new()));
-                    }
-                    let (reply, rest): (Reply, &[u8]) = proto::unframe(&data)?;
-                    Ok((reply, rest.to_vec()))
-                }
+                Ok(s) => self.reply(host, seq, &s.payload().to_bytes()),
                 Err(e) => Err(format!(
                     "host {host}: {}",
                     String::from_utf8_lossy(&e.payload().to_bytes())
@@ -265,9 +282,54 @@ impl Cluster {
         }
     }
 
+    /// A daemon's reply to request `seq`: a plain JSON [`Reply`] or one framed with bytes, with
+    /// the proof of the run's secret once the run is announced.
+    fn reply(&self, host: &str, seq: u64, data: &[u8]) -> Result<(Reply, Vec<u8>), String> {
+        let parse = |data: &[u8]| -> Result<(Reply, Vec<u8>), String> {
+            if let Ok(reply) = serde_json::from_slice::<Reply>(data) {
+                return Ok((reply, Vec::new()));
+            }
+            let (reply, rest): (Reply, &[u8]) = proto::unframe(data)?;
+            Ok((reply, rest.to_vec()))
+        };
+        let Some(a) = &self.auth else {
+            return parse(data);
+        };
+        match a.key.open(Purpose::Reply, host, data) {
+            Ok((body, s)) if s == seq => parse(body),
+            Ok((_, s)) => Err(format!(
+                "host {host} answered request {seq} with the reply to request {s}"
+            )),
+            // A refusal without proof changes nothing (the daemon may not hold the run).
+            Err(e) => match serde_json::from_slice::<Reply>(data) {
+                Ok(Reply::Refused(why)) => Ok((Reply::Refused(why), Vec::new())),
+                _ => Err(format!("host {host}'s reply was refused: {e}")),
+            },
+        }
+    }
+
+    /// The run's secret, for its `Prepare` requests (`None` before [`Cluster::announce`]).
+    pub fn run_secret(&self) -> Option<RunSecret> {
+        self.auth.as_ref().map(|a| a.secret.clone())
+    }
+
+    /// The run's keys, for this machine's bridge (`None` before [`Cluster::announce`]).
+    pub fn run_key(&self) -> Option<RunKey> {
+        self.auth.as_ref().map(|a| a.key.clone())
+    }
+
     /// Declares this run's orchestrator (its liveliness token: the daemons end the run when it
     /// disappears) and starts hearing exit reports and lost hosts.
+    /// Makes the run's secret first ([`crate::auth`]): exit reports and checkpoints are taken
+    /// only with proof of it.
     pub fn announce(&mut self, run_id: &str) -> Result<(), String> {
+        let secret = RunSecret::generate().map_err(|e| e.to_string())?;
+        let key = secret.keys(run_id);
+        self.auth = Some(Arc::new(RunAuth {
+            secret,
+            key: key.clone(),
+            seq: AtomicU64::new(0),
+        }));
         self._token = Some(
             self.session
                 .liveliness()
@@ -276,30 +338,41 @@ impl Cluster {
                 .map_err(|e| format!("cannot declare the run's token: {e}"))?,
         );
         let seen = self.seen.clone();
+        let exits_key = proto::run_exit(run_id);
+        let exits_check = Reports::new(key.clone(), exits_key.clone());
         let exits = self
             .session
-            .declare_subscriber(proto::run_exit(run_id))
+            .declare_subscriber(exits_key)
             .callback(move |s| {
-                if let Ok(r) = serde_json::from_slice::<ExitReport>(&s.payload().to_bytes()) {
+                let data = s.payload().to_bytes();
+                let r = exits_check.open(&data, |body| {
+                    let r =
+                        serde_json::from_slice::<ExitReport>(body).map_err(|e| e.to_string())?;
+                    Ok((r.host.clone(), r))
+                });
+                if let Some(r) = r {
                     seen.lock().unwrap().exits.push((r.host.clone(), r));
                 }
             })
             .wait()
             .map_err(|e| format!("cannot subscribe to exits: {e}"))?;
         let seen = self.seen.clone();
+        let checkpoints_key = proto::run_checkpoint(run_id);
+        let checkpoints_check = Reports::new(key, checkpoints_key.clone());
         let checkpoints = self
             .session
-            .declare_subscriber(proto::run_checkpoint(run_id))
+            .declare_subscriber(checkpoints_key)
             .callback(move |s| {
                 let data = s.payload().to_bytes();
-                match proto::unframe::<proto::CheckpointNote>(&data) {
-                    Ok((n, bytes)) => {
-                        seen.lock()
-                            .unwrap()
-                            .checkpoints
-                            .offer(n.agent, n.step, bytes.to_vec());
-                    }
-                    Err(e) => tracing::warn!("a forwarded checkpoint was refused: {e}"),
+                let note = checkpoints_check.open(&data, |body| {
+                    let (n, bytes) = proto::unframe::<proto::CheckpointNote>(body)?;
+                    Ok((n.host.clone(), (n, bytes.to_vec())))
+                });
+                if let Some((n, bytes)) = note {
+                    seen.lock()
+                        .unwrap()
+                        .checkpoints
+                        .offer(n.agent, n.step, bytes);
                 }
             })
             .wait()
@@ -356,6 +429,58 @@ impl Cluster {
             .iter()
             .find(|(h, _)| h == host)
             .map(|(_, t)| *t)
+    }
+}
+
+/// The check of the reports (exit reports, checkpoints) put on one key expression of the run:
+/// proof of the run's secret for that key, a sequence number not seen before from that host.
+/// Refusals are logged at most once a second per reason.
+struct Reports {
+    key: RunKey,
+    on: String,
+    state: Mutex<(HashMap<String, Replay>, crate::logs::LogLimit)>,
+}
+
+impl Reports {
+    fn new(key: RunKey, on: String) -> Reports {
+        Reports {
+            key,
+            on,
+            state: Mutex::new((HashMap::new(), crate::logs::LogLimit::default())),
+        }
+    }
+
+    /// What `parse` makes of a sealed report (with the sending host), if it is one.
+    fn open<T>(
+        &self,
+        data: &[u8],
+        parse: impl FnOnce(&[u8]) -> Result<(String, T), String>,
+    ) -> Option<T> {
+        let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let (replays, log) = &mut *st;
+        let on = &self.on;
+        let (body, seq) = match self.key.open(Purpose::Report, on, data) {
+            Ok(v) => v,
+            Err(e) => {
+                log.warn(on, "no proof", || format!("a report on {on} refused: {e}"));
+                return None;
+            }
+        };
+        let (host, v) = match parse(body) {
+            Ok(v) => v,
+            Err(e) => {
+                log.warn(on, "malformed", || format!("a report on {on} refused: {e}"));
+                return None;
+            }
+        };
+        // Only holders of the run's secret get here: the table holds the run's hosts.
+        if let Err(e) = replays.entry(host.clone()).or_default().accept(seq) {
+            log.warn(on, "replayed", || {
+                format!("a report of {host} on {on} refused: {e}")
+            });
+            return None;
+        }
+        Some(v)
     }
 }
 

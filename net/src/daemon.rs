@@ -10,8 +10,10 @@
 //! run's iceoryx2 files and its folder removed. The daemon is a single-threaded state machine:
 //! one loop serves requests, reaps children and watches the orchestrators.
 
+use crate::auth::{Purpose, Replay, RunKey};
 use crate::bridge::{Bridge, BridgeConfig};
 use crate::identity::{self, Identity};
+use crate::logs::LogLimit;
 use crate::plan::Placement;
 use crate::proto::{self, ExitReport, HostInfo, Reply, Request, RunRequest};
 use crate::session;
@@ -49,7 +51,15 @@ pub struct DaemonOptions {
     pub exe: PathBuf,
     /// Folder of the run folders (private: mode 0700).
     pub root: PathBuf,
+    /// The highest `SCHED_FIFO` priority this daemon grants a run's agents
+    /// (`--max-rt-priority`; default 0: none, the agents run under the normal policy whatever a
+    /// run asks). A run asking for more is granted this, and the daemon says so.
+    pub max_rt_priority: u32,
 }
+
+/// The largest request a daemon reads (a `Spawn` carries a rejoin file: the recorded window of
+/// every quadrotor); anything longer is refused unread.
+pub const MAX_REQUEST: usize = 32 << 20;
 
 /// A run's share of this host.
 struct HostRun {
@@ -62,6 +72,12 @@ struct HostRun {
     scenario_hash: u64,
     /// The checkpoint file of each agent last forwarded (see [`Daemon::forward_checkpoints`]).
     forwarded: HashMap<usize, FileStamp>,
+    /// The run's keys ([`crate::auth`]).
+    key: RunKey,
+    /// Sequence numbers of the requests about the run accepted so far.
+    replay: Replay,
+    /// Sequence number of the last report (exit, checkpoint) this daemon sent about the run.
+    reports: u64,
     // Dropped in this order: bridge, node, membership (see `end`).
     bridge: Option<Bridge>,
     node: Option<RunNode>,
@@ -114,6 +130,7 @@ pub fn default_root(name: &str) -> PathBuf {
     }
 }
 
+/// Creates `dir` owner-only (mode 0700), refusing a symbolic link or another user's folder.
 fn private_dir(dir: &Path) -> Result<(), String> {
     use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
     let _ = std::fs::DirBuilder::new()
@@ -189,6 +206,7 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
         s: s.clone(),
         me,
         runs: HashMap::new(),
+        log: LogLimit::default(),
     };
     // Runs whose orchestrator's token is alive (its Put may come before its run is prepared).
     let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
@@ -278,6 +296,8 @@ struct Daemon {
     s: zenoh::Session,
     me: Identity,
     runs: HashMap<String, HostRun>,
+    /// Refusals are logged at most once a second per reason.
+    log: LogLimit,
 }
 
 fn refused(why: String) -> Vec<u8> {
@@ -301,13 +321,90 @@ impl Daemon {
         }
     }
 
-    /// Serves one request; a refusal changes nothing.
+    /// Serves one request; a refusal changes nothing. A request about a run (all but `Prepare`)
+    /// must carry proof of the run's secret for this host with a sequence number not seen before
+    /// ([`crate::auth`]): without it nothing is done. Replies about a run carry proof too.
     fn request(&mut self, bytes: &[u8]) -> Vec<u8> {
-        let (req, rest): (Request, &[u8]) = match proto::unframe(bytes) {
-            Ok(v) => v,
-            Err(e) => return refused(e),
+        match self.authenticated(bytes) {
+            Ok((req, rest, seq)) => {
+                // Replies are sealed with the key of the run asked about, or of the run a
+                // `Prepare` has just created (not of one it was refused for).
+                let (run_id, prepares) = match &req {
+                    Request::Prepare(p) => (p.run_id.clone(), true),
+                    r => (r.run_id().unwrap_or_default().to_string(), false),
+                };
+                // Taken before: `End` removes the run.
+                let before = self.runs.get(&run_id).map(|r| r.key.clone());
+                let result = self.dispatch(req, &rest);
+                let key = match prepares {
+                    true if result.is_ok() => self.runs.get(&run_id).map(|r| r.key.clone()),
+                    true => None,
+                    false => before,
+                };
+                let mut reply = result.unwrap_or_else(|e| {
+                    self.log.eprint("requests", "refused", || {
+                        format!("formation host: refused: {e}")
+                    });
+                    refused(e)
+                });
+                if let Some(k) = key {
+                    k.seal(Purpose::Reply, &self.o.name, seq, &mut reply);
+                }
+                reply
+            }
+            Err((reason, why)) => {
+                self.log.eprint("requests", reason, || {
+                    format!("formation host: refused: {why}")
+                });
+                refused(why)
+            }
+        }
+    }
+
+    /// The request in `bytes`, the bytes after it and its sequence number (0 for `Prepare`), if
+    /// it may be served: `Err((reason, why))` otherwise.
+    fn authenticated(
+        &mut self,
+        bytes: &[u8],
+    ) -> Result<(Request, Vec<u8>, u64), (&'static str, String)> {
+        if bytes.len() > MAX_REQUEST {
+            return Err((
+                "oversized",
+                format!("a request of {} bytes (at most {MAX_REQUEST})", bytes.len()),
+            ));
+        }
+        let (req, _): (Request, &[u8]) = proto::unframe(bytes).map_err(|e| ("malformed", e))?;
+        let Some(run_id) = req.run_id().map(str::to_string) else {
+            let (req, rest) = proto::unframe::<Request>(bytes).map_err(|e| ("malformed", e))?;
+            return Ok((req, rest.to_vec(), 0));
         };
-        let result = match req {
+        let me = self.o.name.clone();
+        let r = self
+            .runs
+            .get_mut(&run_id)
+            .ok_or_else(|| ("unknown run", format!("no run {run_id} on host {me}")))?;
+        let (body, seq) = r.key.open(Purpose::Request, &me, bytes).map_err(|e| {
+            (
+                "no proof",
+                format!("a request about run {run_id} refused: {e}"),
+            )
+        })?;
+        r.replay.accept(seq).map_err(|e| {
+            (
+                "replayed",
+                format!("a request about run {run_id} refused: {e}"),
+            )
+        })?;
+        let (req, rest) = proto::unframe::<Request>(body).map_err(|e| ("malformed", e))?;
+        if req.run_id() != Some(run_id.as_str()) {
+            return Err(("malformed", "a request changed its run".into()));
+        }
+        Ok((req, rest.to_vec(), seq))
+    }
+
+    /// Does what an accepted request asks.
+    fn dispatch(&mut self, req: Request, rest: &[u8]) -> Result<Vec<u8>, String> {
+        match req {
             Request::Prepare(r) => self.prepare(r).map(|_| ok(None)),
             Request::Spawn {
                 run_id,
@@ -334,11 +431,7 @@ impl Daemon {
                 }
                 Ok(ok(None))
             }
-        };
-        result.unwrap_or_else(|e| {
-            eprintln!("formation host: refused: {e}");
-            refused(e)
-        })
+        }
     }
 
     fn run(&mut self, run_id: &str) -> Result<&mut HostRun, String> {
@@ -403,6 +496,14 @@ impl Daemon {
         if r.rt_priority > 99 {
             return Err(format!("rt_priority {}: at most 99", r.rt_priority));
         }
+        let mut r = r;
+        if r.rt_priority > self.o.max_rt_priority {
+            eprintln!(
+                "formation host: run {}: asks for real-time priority {}; granted {} (--max-rt-priority)",
+                r.run_id, r.rt_priority, self.o.max_rt_priority
+            );
+            r.rt_priority = self.o.max_rt_priority;
+        }
         if r.observers > services::MAX_OBSERVERS + 1 {
             return Err(format!(
                 "{} observers: at most {}",
@@ -411,7 +512,11 @@ impl Daemon {
             ));
         }
         let dir = self.o.root.join(&r.run_id);
-        private_dir(&dir)?;
+        // The daemon's own log names the folder; the refusal does not.
+        private_dir(&dir).map_err(|e| {
+            eprintln!("formation host: run {}: {e}", r.run_id);
+            "cannot create the run's folder on this host".to_string()
+        })?;
         let fail = |e: String, dir: &Path| {
             let _ = std::fs::remove_dir_all(dir);
             e
@@ -438,6 +543,7 @@ impl Daemon {
                 placement,
                 sizing: Sizing::for_scenario(&scenario, r.realtime, r.observers),
                 create: true,
+                key: r.secret.keys(&r.run_id),
                 clock_offsets_ns: r.clock_offsets_ns.clone(),
             },
         );
@@ -462,9 +568,13 @@ impl Daemon {
             bridge.forwarded.0,
             bridge.forwarded.1
         );
+        let key = r.secret.keys(&r.run_id);
         self.runs.insert(
             r.run_id.clone(),
             HostRun {
+                key,
+                replay: Replay::default(),
+                reports: 0,
                 scenario_hash: restart::scenario_hash(r.scenario_toml.as_bytes()),
                 variant: variant.name().to_string(),
                 req: r,
@@ -493,7 +603,7 @@ impl Daemon {
         if r.req.agent_hosts.get(agent) != Some(&me) {
             return Err(format!(
                 "agent {} of run {run_id} is not placed on {me}",
-                agent + 1
+                agent.saturating_add(1)
             ));
         }
         if r.children.contains_key(&agent) {
@@ -502,16 +612,20 @@ impl Daemon {
                 agent + 1
             ));
         }
-        if rejoin_at.is_some() {
-            let path = restart::rejoin_path(&r.dir, agent);
-            if let Some(parent) = path.parent() {
-                std::fs::create_dir_all(parent)
-                    .map_err(|e| format!("{}: {e}", parent.display()))?;
-            }
-            let tmp = path.with_extension("part");
-            std::fs::write(&tmp, rejoin)
-                .and_then(|_| std::fs::rename(&tmp, &path))
-                .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        if let Some(at) = rejoin_at {
+            // Verified like a checkpoint before it is written or any process reads it.
+            let file =
+                restart::decode_rejoin(rejoin, agent, r.scenario_hash, at).map_err(|why| {
+                    format!("the rejoin file of agent {} is refused: {why}", agent + 1)
+                })?;
+            restart::write_rejoin(&restart::rejoin_path(&r.dir, agent), r.scenario_hash, &file)
+                .map_err(|e| {
+                    format!(
+                        "cannot write agent {}'s rejoin file: {}",
+                        agent + 1,
+                        e.kind()
+                    )
+                })?;
         }
         let args = ChildArgs {
             run_id: r.req.run_id.clone(),
@@ -576,9 +690,17 @@ impl Daemon {
     }
 
     fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
+        let me = self.o.name.clone();
         let r = self.run(run_id)?;
+        if r.req.agent_hosts.get(agent) != Some(&me) {
+            return Err(format!(
+                "agent {} of run {run_id} is not placed on {me}",
+                agent.saturating_add(1)
+            ));
+        }
         let path = restart::checkpoint_path(&r.dir, agent);
-        let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let bytes = std::fs::read(&path)
+            .map_err(|e| format!("agent {}'s checkpoint: {}", agent + 1, e.kind()))?;
         Ok(proto::frame(&Reply::Ok { pid: None }, &bytes))
     }
 
@@ -671,9 +793,13 @@ impl Daemon {
             }
         }
         for (id, note, bytes) in notes {
+            let key = proto::run_checkpoint(&id);
+            let Some(msg) = self.sealed_report(&id, &key, proto::frame(&note, &bytes)) else {
+                continue;
+            };
             let _ = self
                 .s
-                .put(proto::run_checkpoint(&id), proto::frame(&note, &bytes))
+                .put(key, msg)
                 .congestion_control(zenoh::qos::CongestionControl::Block)
                 .wait();
         }
@@ -694,13 +820,13 @@ impl Daemon {
         let mut out = proto::HostReport::default();
         let dir = formation_config::node::timing::dir(&r.dir);
         for e in std::fs::read_dir(&dir)
-            .map_err(|e| format!("{}: {e}", dir.display()))?
+            .map_err(|e| format!("the run's timing folder: {}", e.kind()))?
             .flatten()
         {
             let name = e.file_name().to_string_lossy().into_owned();
             if name.ends_with(".json") {
                 let text = std::fs::read_to_string(e.path())
-                    .map_err(|x| format!("{}: {x}", e.path().display()))?;
+                    .map_err(|x| format!("timing file {name}: {}", x.kind()))?;
                 out.timing.insert(name, text);
             }
         }
@@ -739,12 +865,24 @@ impl Daemon {
             }
         }
         for (id, rep) in reports {
+            let key = proto::run_exit(&id);
+            let Some(msg) = self.sealed_report(&id, &key, serde_json::to_vec(&rep).unwrap()) else {
+                continue;
+            };
             let _ = self
                 .s
-                .put(proto::run_exit(&id), serde_json::to_vec(&rep).unwrap())
+                .put(key, msg)
                 .congestion_control(zenoh::qos::CongestionControl::Block)
                 .wait();
         }
+    }
+
+    /// `msg` with the proof of run `id`'s secret for key expression `key` (see [`crate::auth`]).
+    fn sealed_report(&mut self, id: &str, key: &str, mut msg: Vec<u8>) -> Option<Vec<u8>> {
+        let r = self.runs.get_mut(id)?;
+        r.reports += 1;
+        r.key.seal(Purpose::Report, key, r.reports, &mut msg);
+        Some(msg)
     }
 
     /// Ends a run: its processes get [`STOP_GRACE`] to exit, then SIGKILL; bridge stopped; every

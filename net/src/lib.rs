@@ -1,5 +1,9 @@
 //! Multi-host runs over Eclipse Zenoh: one formation across several machines.
 //!
+//! * [`auth`]: each run's secret and the proof of it every request, reply, frame and report
+//!   carries.
+//! * [`logs`]: log lines about what arrives from the network, at most one a second per source and
+//!   reason.
 //! * [`session`]: Zenoh sessions of this project (topology, loopback default, authentication, a
 //!   bounded number of runtime threads).
 //! * [`proto`]: the keys and messages between an orchestrator and the host daemons.
@@ -12,6 +16,8 @@
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
+//! * [`probe`]: a plain client that puts and asks arbitrary bytes on arbitrary keys (the attacks of
+//!   the end-to-end tests).
 //! * [`survey`]: `formation hosts`, every daemon reachable through any of the given endpoints.
 //!
 //! The topology (docs/multi-host.md): every host daemon is a Zenoh *router* that listens (loopback
@@ -22,6 +28,7 @@
 //! everywhere.
 #![warn(missing_docs)]
 
+pub mod auth;
 pub mod bench;
 pub mod bridge;
 pub mod clock;
@@ -29,7 +36,9 @@ pub mod cluster;
 pub mod daemon;
 pub mod export;
 pub mod identity;
+pub mod logs;
 pub mod plan;
+pub mod probe;
 pub mod proto;
 pub mod session;
 pub mod survey;

@@ -12,6 +12,7 @@
 //! | `formation/run/<id>/checkpoint` | a daemon's copy of each checkpoint its agents write ([`CheckpointNote`] and the file) |
 //! | `formation/clock/<name>` | queryable: a daemon's `CLOCK_MONOTONIC`, ns, 8 bytes LE ([`crate::clock`]) |
 
+use crate::auth::RunSecret;
 use crate::identity::Identity;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -85,6 +86,9 @@ pub struct HostInfo {
 pub struct RunRequest {
     /// Run id (`[0-9a-f]`).
     pub run_id: String,
+    /// The run's secret ([`crate::auth`]): every later request about the run, the daemon's
+    /// replies, the bridge's frames and the daemon's reports carry proof of it.
+    pub secret: RunSecret,
     /// iceoryx2 prefix.
     pub prefix: String,
     /// The resolved scenario (validated again by the daemon).
@@ -97,7 +101,8 @@ pub struct RunRequest {
     pub launcher: String,
     /// Realtime mode.
     pub realtime: bool,
-    /// `SCHED_FIFO` priority of the agents in realtime mode (`--rt-priority`; 0: normal policy).
+    /// `SCHED_FIFO` priority the run asks for its agents in realtime mode (`--rt-priority`; 0:
+    /// normal policy); a daemon grants at most its own `--max-rt-priority`.
     pub rt_priority: u32,
     /// Outside observer slots of every service (the run's, plus one for the bridge).
     pub observers: usize,
@@ -165,6 +170,23 @@ pub enum Request {
         /// Run id.
         run_id: String,
     },
+}
+
+impl Request {
+    /// The run a request is about; `None` for `Prepare`, which creates it (and carries its
+    /// secret instead of proof of it).
+    pub fn run_id(&self) -> Option<&str> {
+        match self {
+            Request::Prepare(_) => None,
+            Request::Spawn { run_id, .. }
+            | Request::Kill { run_id, .. }
+            | Request::Signal { run_id, .. }
+            | Request::Checkpoint { run_id, .. }
+            | Request::Replan { run_id, .. }
+            | Request::Report { run_id }
+            | Request::End { run_id } => Some(run_id),
+        }
+    }
 }
 
 /// A daemon's answer.

@@ -38,6 +38,11 @@ pub struct HostArgs {
     /// Folder for the run folders (created with mode 0700).
     #[arg(long, value_name = "DIR")]
     pub root: Option<PathBuf>,
+    /// The highest SCHED_FIFO priority this daemon grants a run's agents (0..=99). A run asking
+    /// for more (`formation run --realtime --rt-priority P`) gets this; 0, the default: the agents
+    /// run under the normal policy whatever a run asks (a request never raises privileges).
+    #[arg(long, default_value_t = 0, value_name = "P", value_parser = clap::value_parser!(u32).range(0..=99))]
+    pub max_rt_priority: u32,
     /// Link options.
     #[command(flatten)]
     pub link: LinkArgs,
@@ -134,6 +139,7 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         session: opts,
         exe,
         root,
+        max_rt_priority: a.max_rt_priority,
     };
     match formation_net::daemon::serve(o, &stop) {
         Ok(()) => ExitCode::SUCCESS,

@@ -72,17 +72,8 @@ impl Checkpoints {
 pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), NodeError> {
     let dir = &b.args.run_dir;
     let path = restart::rejoin_path(dir, i);
-    let plan: RejoinFile = restart::read(&path)
-        .map_err(|e| NodeError::Args(format!("cannot read {}: {e}", path.display())))?;
-    if plan.agent != i || plan.rejoin_at != r {
-        return Err(NodeError::Args(format!(
-            "{} is for agent {} at step {}, not agent {} at step {r}",
-            path.display(),
-            plan.agent + 1,
-            plan.rejoin_at,
-            i + 1
-        )));
-    }
+    let plan: RejoinFile =
+        restart::read_rejoin(&path, i, b.scenario_hash, r).map_err(NodeError::Args)?;
     for e in &plan.events {
         e.apply(agent.timeline_mut());
     }

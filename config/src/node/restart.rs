@@ -45,7 +45,8 @@ pub struct Checkpoint {
 pub const CHECKPOINT_MAGIC: [u8; 8] = *b"FMCKPT\r\n";
 /// The checkpoint file format [`write_checkpoint`] writes.
 pub const CHECKPOINT_VERSION: u32 = 2;
-/// Bytes before the state: magic, version, agent id, scenario hash, step, state length.
+/// Bytes before the body of a checkpoint or rejoin file: magic, version, agent id, scenario hash,
+/// step, body length.
 const HEADER_LEN: usize = 8 + 4 + 4 + 8 + 8 + 8;
 
 /// FNV-1a 64 of `bytes`.
@@ -60,42 +61,55 @@ pub fn scenario_hash(scenario_toml: &[u8]) -> u64 {
     fnv1a(scenario_toml)
 }
 
-/// The bytes of agent i's checkpoint `c` in a run whose scenario hashes to `scenario`.
-pub fn encode_checkpoint(agent: usize, scenario: u64, c: &Checkpoint) -> Vec<u8> {
-    let mut out = Vec::with_capacity(HEADER_LEN + c.state.len() + 8);
-    out.extend_from_slice(&CHECKPOINT_MAGIC);
-    out.extend_from_slice(&CHECKPOINT_VERSION.to_le_bytes());
+/// Bytes of a framed file: `magic`, `version`, agent id (1-based), scenario hash, `step`, body
+/// length, body, then an FNV-1a 64 checksum of everything before it.
+fn encode_framed(
+    magic: &[u8; 8],
+    version: u32,
+    agent: usize,
+    scenario: u64,
+    step: u64,
+    body: &[u8],
+) -> Vec<u8> {
+    let mut out = Vec::with_capacity(HEADER_LEN + body.len() + 8);
+    out.extend_from_slice(magic);
+    out.extend_from_slice(&version.to_le_bytes());
     out.extend_from_slice(&((agent + 1) as u32).to_le_bytes());
     out.extend_from_slice(&scenario.to_le_bytes());
-    out.extend_from_slice(&c.step.to_le_bytes());
-    out.extend_from_slice(&(c.state.len() as u64).to_le_bytes());
-    out.extend_from_slice(&c.state);
+    out.extend_from_slice(&step.to_le_bytes());
+    out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    out.extend_from_slice(body);
     let sum = fnv1a(&out);
     out.extend_from_slice(&sum.to_le_bytes());
     out
 }
 
-/// The checkpoint in `bytes` if it is agent i's of the run whose scenario hashes to `scenario`;
-/// otherwise what failed.
-pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Checkpoint, String> {
+/// The `(step, body)` of a framed file if it is a `what` of agent i of the run whose scenario
+/// hashes to `scenario`; otherwise what failed.
+fn decode_framed<'a>(
+    bytes: &'a [u8],
+    (what, magic, version): (&str, &[u8; 8], u32),
+    agent: usize,
+    scenario: u64,
+) -> Result<(u64, &'a [u8]), String> {
     let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
     let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().expect("8 bytes"));
     if bytes.len() < HEADER_LEN + 8 {
         return Err(format!("truncated ({} bytes)", bytes.len()));
     }
-    if bytes[..8] != CHECKPOINT_MAGIC {
-        return Err("not a checkpoint (wrong magic number)".into());
+    if bytes[..8] != *magic {
+        return Err(format!("not a {what} (wrong magic number)"));
     }
-    let version = u32_at(8);
-    if version != CHECKPOINT_VERSION {
+    let found = u32_at(8);
+    if found != version {
         return Err(format!(
-            "format version {version}, this build reads {CHECKPOINT_VERSION}"
+            "format version {found}, this build reads {version}"
         ));
     }
     let len = u64_at(32);
     if len != (bytes.len() - HEADER_LEN - 8) as u64 {
         return Err(format!(
-            "truncated or padded: {len} state bytes announced, {} present",
+            "truncated or padded: {len} body bytes announced, {} present",
             bytes.len() - HEADER_LEN - 8
         ));
     }
@@ -106,7 +120,7 @@ pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Ch
     let id = u32_at(12) as usize;
     if id != agent + 1 {
         return Err(format!(
-            "it is agent {id}'s checkpoint, not agent {}'s",
+            "it is agent {id}'s {what}, not agent {}'s",
             agent + 1
         ));
     }
@@ -115,9 +129,33 @@ pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Ch
             "it belongs to another scenario (its scenario hash differs from this run's)".into(),
         );
     }
+    Ok((u64_at(24), &bytes[HEADER_LEN..body]))
+}
+
+/// The bytes of agent i's checkpoint `c` in a run whose scenario hashes to `scenario`.
+pub fn encode_checkpoint(agent: usize, scenario: u64, c: &Checkpoint) -> Vec<u8> {
+    encode_framed(
+        &CHECKPOINT_MAGIC,
+        CHECKPOINT_VERSION,
+        agent,
+        scenario,
+        c.step,
+        &c.state,
+    )
+}
+
+/// The checkpoint in `bytes` if it is agent i's of the run whose scenario hashes to `scenario`;
+/// otherwise what failed.
+pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Checkpoint, String> {
+    let (step, state) = decode_framed(
+        bytes,
+        ("checkpoint", &CHECKPOINT_MAGIC, CHECKPOINT_VERSION),
+        agent,
+        scenario,
+    )?;
     Ok(Checkpoint {
-        step: u64_at(24),
-        state: bytes[HEADER_LEN..body].to_vec(),
+        step,
+        state: state.to_vec(),
     })
 }
 
@@ -175,7 +213,6 @@ pub struct RejoinFile {
     /// [down_from, rejoin_at): its last command held, then the failsafe's (docs/failures.md). With
     /// `states`, what the returning controller reads the failsafe's observed disturbance from
     /// (`runtime.rejoin_reseed`).
-    #[serde(default)]
     pub flown: Vec<(f64, [f64; 3])>,
 }
 
@@ -201,42 +238,91 @@ impl RejoinFile {
     }
 }
 
-fn encode<T: Serialize>(v: &T) -> io::Result<Vec<u8>> {
-    bincode::serde::encode_to_vec(v, bincode::config::standard()).map_err(io::Error::other)
+/// The first bytes of every rejoin file.
+pub const REJOIN_MAGIC: [u8; 8] = *b"FMREJN\r\n";
+/// The rejoin file format [`encode_rejoin`] writes.
+pub const REJOIN_VERSION: u32 = 1;
+
+/// The bytes of a rejoin file: framed like a checkpoint (magic, version, agent, the run's scenario
+/// hash, the step it rejoins at, checksum) around the bincode of `file`.
+pub fn encode_rejoin(scenario: u64, file: &RejoinFile) -> io::Result<Vec<u8>> {
+    Ok(encode_framed(
+        &REJOIN_MAGIC,
+        REJOIN_VERSION,
+        file.agent,
+        scenario,
+        file.rejoin_at,
+        &encode(file)?,
+    ))
 }
 
-fn decode<T: for<'de> Deserialize<'de>>(bytes: &[u8], path: &Path) -> io::Result<T> {
-    bincode::serde::decode_from_slice(bytes, bincode::config::standard())
+/// The rejoin file in `bytes` if it is agent i's of the run whose scenario hashes to `scenario`,
+/// rejoining at `rejoin_at`, whole and self-consistent (its window holds every state and command
+/// it announces); otherwise what failed. A file that arrives from elsewhere (a daemon's `Spawn`)
+/// is checked with this before it is written or any process reads it.
+pub fn decode_rejoin(
+    bytes: &[u8],
+    agent: usize,
+    scenario: u64,
+    rejoin_at: u64,
+) -> Result<RejoinFile, String> {
+    let (step, body) = decode_framed(
+        bytes,
+        ("rejoin file", &REJOIN_MAGIC, REJOIN_VERSION),
+        agent,
+        scenario,
+    )?;
+    if step != rejoin_at {
+        return Err(format!("it rejoins at step {step}, not at {rejoin_at}"));
+    }
+    let f: RejoinFile = bincode::serde::decode_from_slice(body, bincode::config::standard())
         .map(|(v, _)| v)
-        .map_err(|e| {
-            io::Error::new(
-                io::ErrorKind::InvalidData,
-                format!("{}: {e}", path.display()),
-            )
-        })
+        .map_err(|e| format!("its body does not decode: {e}"))?;
+    let window = f.rejoin_at.checked_sub(f.first);
+    let consistent = f.agent == agent
+        && f.rejoin_at == rejoin_at
+        && f.down_from <= f.rejoin_at
+        && window.is_some_and(|w| Some(f.states.len()) == (w as usize).checked_mul(f.n))
+        && f.commands.len() as u64 == f.down_from.saturating_sub(f.first)
+        && f.flown.len() as u64 == f.rejoin_at - f.down_from
+        && f.checkpoint.is_none_or(|c| c < f.rejoin_at);
+    if !consistent {
+        return Err("its window is inconsistent (agent, steps, states, commands or flown)".into());
+    }
+    Ok(f)
 }
 
-/// Writes `value` to `path` atomically: a new owner-only temporary file (never through a symbolic
-/// link), then a rename over `path`. The folder is created owner-only if missing.
-pub fn write_atomic<T: Serialize>(path: &Path, value: &T) -> io::Result<()> {
-    let bytes = encode(value)?;
+/// Writes agent i's rejoin file atomically, owner-only.
+pub fn write_rejoin(path: &Path, scenario: u64, file: &RejoinFile) -> io::Result<()> {
     if let Some(parent) = path.parent() {
         super::files::ensure_private_dir(parent)?;
     }
-    super::files::write_atomic(path, &bytes)
+    super::files::write_atomic(path, &encode_rejoin(scenario, file)?)
 }
 
-/// Reads a file [`write_atomic`] wrote.
-pub fn read<T: for<'de> Deserialize<'de>>(path: &Path) -> io::Result<T> {
+/// Reads agent i's rejoin file for step `rejoin_at`, refusing (with the file named and why) one
+/// that fails [`decode_rejoin`].
+pub fn read_rejoin(
+    path: &Path,
+    agent: usize,
+    scenario: u64,
+    rejoin_at: u64,
+) -> Result<RejoinFile, String> {
     use std::io::Read;
     use std::os::unix::fs::OpenOptionsExt;
-    let mut f = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NOFOLLOW)
-        .open(path)?;
     let mut bytes = Vec::new();
-    f.read_to_end(&mut bytes)?;
-    decode(&bytes, path)
+    std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)
+        .and_then(|mut f| f.read_to_end(&mut bytes))
+        .map_err(|e| format!("rejoin file {}: {e}", path.display()))?;
+    decode_rejoin(&bytes, agent, scenario, rejoin_at)
+        .map_err(|why| format!("rejoin file {} refused: {why}", path.display()))
+}
+
+fn encode<T: Serialize>(v: &T) -> io::Result<Vec<u8>> {
+    bincode::serde::encode_to_vec(v, bincode::config::standard()).map_err(io::Error::other)
 }
 
 #[cfg(test)]
@@ -291,5 +377,64 @@ mod tests {
             "reading through a link is refused"
         );
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_rejoin_file_that_is_damaged_another_agents_or_inconsistent_is_refused_before_use() {
+        let f = RejoinFile {
+            agent: 3,
+            checkpoint: Some(90),
+            down_from: 100,
+            rejoin_at: 102,
+            first: 98,
+            n: 2,
+            states: vec![VehicleState::default(); 8],
+            commands: vec![(1.0, [0.0; 3]); 2],
+            events: Vec::new(),
+            flown: vec![(2.0, [0.0; 3]); 2],
+        };
+        let good = encode_rejoin(55, &f).unwrap();
+        assert_eq!(decode_rejoin(&good, 3, 55, 102).unwrap(), f);
+        let why = |b: &[u8], agent, hash, at| decode_rejoin(b, agent, hash, at).unwrap_err();
+        assert!(
+            why(&good, 2, 55, 102).contains("agent 4's"),
+            "another agent's"
+        );
+        assert!(why(&good, 3, 56, 102).contains("scenario"), "another run's");
+        assert!(
+            why(&good, 3, 55, 101).contains("step 102"),
+            "another step's"
+        );
+        let mut flipped = good.clone();
+        flipped[HEADER_LEN + 3] ^= 0x10;
+        assert!(why(&flipped, 3, 55, 102).contains("checksum"));
+        assert!(why(&good[..good.len() - 2], 3, 55, 102).contains("truncated"));
+        // A checkpoint is not a rejoin file.
+        let c = encode_checkpoint(
+            3,
+            55,
+            &Checkpoint {
+                step: 102,
+                state: vec![1; 40],
+            },
+        );
+        assert!(why(&c, 3, 55, 102).contains("magic"));
+        // Well framed, but the window does not hold what it announces.
+        let short = RejoinFile {
+            states: vec![VehicleState::default(); 7],
+            ..f.clone()
+        };
+        let bad = encode_rejoin(55, &short).unwrap();
+        assert!(why(&bad, 3, 55, 102).contains("inconsistent"));
+        let inner = RejoinFile { agent: 2, ..f };
+        let bad = encode_framed(
+            &REJOIN_MAGIC,
+            REJOIN_VERSION,
+            3,
+            55,
+            102,
+            &encode(&inner).unwrap(),
+        );
+        assert!(why(&bad, 3, 55, 102).contains("inconsistent"));
     }
 }

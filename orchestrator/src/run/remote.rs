@@ -178,6 +178,10 @@ impl Remote {
         self.cluster.announce(run_id)?;
         let req = RunRequest {
             run_id: run_id.to_string(),
+            secret: self
+                .cluster
+                .run_secret()
+                .ok_or("the run's secret was not made")?,
             prefix: prefix.to_string(),
             scenario_toml: scenario.to_toml_string(),
             variant: variant.to_string(),
@@ -298,6 +302,10 @@ impl RemoteRun {
                 placement: self.placement.borrow().clone(),
                 sizing,
                 create: false,
+                key: self
+                    .cluster
+                    .run_key()
+                    .ok_or("the run's secret was not made")?,
                 clock_offsets_ns: clock_offsets_ns(&self.offsets),
             },
         )?;

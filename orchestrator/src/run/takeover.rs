@@ -504,7 +504,7 @@ impl Takeover {
                 .collect(),
         };
         let path = restart::rejoin_path(&run_dir, i);
-        restart::write_atomic(&path, &file)
+        restart::write_rejoin(&path, self.scenario_hash, &file)
             .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         let args = ChildArgs {
             agent: Some(i),
