@@ -243,8 +243,15 @@ pub struct Link {
 
 impl Link {
     /// Opens this end of the link named `tag` (key-safe): the launcher connects to `endpoint`,
-    /// the host listens on it (`tcp/127.0.0.1:PORT`).
-    pub fn open(side: Side, endpoint: &str, tag: &str) -> Result<Link, String> {
+    /// the host listens on it (`tcp/127.0.0.1:PORT` with `auth`, or `tls/127.0.0.1:PORT` with
+    /// `tls`, as a run's hosts).
+    pub fn open(
+        side: Side,
+        endpoint: &str,
+        tag: &str,
+        auth: Option<std::path::PathBuf>,
+        tls: Option<std::path::PathBuf>,
+    ) -> Result<Link, String> {
         let (mode, listen, connect) = match side {
             Side::Launcher => (Mode::Orchestrator, vec![], vec![endpoint.to_string()]),
             Side::Host => (Mode::Daemon, vec![endpoint.to_string()], vec![]),
@@ -253,7 +260,8 @@ impl Link {
             mode,
             listen,
             connect,
-            auth: None,
+            auth,
+            tls,
             lease_ms: session::DEFAULT_LEASE_MS,
         };
         let s = opts.open().map_err(|e| e.to_string())?;

@@ -244,6 +244,7 @@ impl ExportConfig {
             listen: self.listen.clone(),
             connect: Vec::new(),
             auth: self.auth.clone(),
+            tls: None,
             lease_ms: crate::session::DEFAULT_LEASE_MS,
         }
     }

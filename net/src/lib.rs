@@ -4,8 +4,10 @@
 //!   carries.
 //! * [`logs`]: log lines about what arrives from the network, at most one a second per source and
 //!   reason.
-//! * [`session`]: Zenoh sessions of this project (topology, loopback default, authentication, a
-//!   bounded number of runtime threads).
+//! * [`session`]: Zenoh sessions of this project (topology, endpoints: an owner-only Unix socket
+//!   by default, TCP with user/password, mutual TLS; a bounded number of runtime threads).
+//! * [`tls`]: the CA and per-host certificates of `tls/` endpoints (`formation certs`), and the
+//!   pre-flight handshake that names a peer refused.
 //! * [`proto`]: the keys and messages between an orchestrator and the host daemons.
 //! * [`identity`]: protocol version, build identity and wire-layout hash, compared at the handshake.
 //! * [`plan`]: which services cross hosts for a placement, and in which direction.
@@ -20,8 +22,8 @@
 //!   the end-to-end tests).
 //! * [`survey`]: `formation hosts`, every daemon reachable through any of the given endpoints.
 //!
-//! The topology (docs/multi-host.md): every host daemon is a Zenoh *router* that listens (loopback
-//! only unless authenticated); the launching orchestrator opens a Zenoh *router* session that
+//! The topology (docs/multi-host.md): every host daemon is a Zenoh *router* that listens (on an
+//! owner-only Unix socket unless given authenticated or TLS endpoints); the launching orchestrator opens a Zenoh *router* session that
 //! connects to each daemon, so traffic between two remote hosts is routed through the launching
 //! machine (a router does not relay between the peers of its region, and Zenoh >= 1.9 peers do not
 //! relay for each other, so the daemons are routers, not peers). Multicast scouting is off
@@ -42,3 +44,4 @@ pub mod probe;
 pub mod proto;
 pub mod session;
 pub mod survey;
+pub mod tls;

@@ -20,6 +20,7 @@ impl Probe {
             listen: vec![],
             connect: vec![endpoint.to_string()],
             auth,
+            tls: None,
             lease_ms: crate::session::DEFAULT_LEASE_MS,
         };
         Ok(Probe {

@@ -8,14 +8,14 @@
 //! behind another one it is linked to) is listed once, with every endpoint it was seen through.
 //! Each session stays a client, the role the daemons' routing tolerates coming and going
 //! (docs/multi-host.md: a router that joins the daemons and leaves at once upsets their routing
-//! for seconds).
+//! for seconds). An endpoint whose session cannot be opened is diagnosed
+//! ([`crate::session::diagnose`]): an authentication failure is reported as one.
 
 use crate::cluster::{Cluster, HandshakeError};
 use crate::proto::HostInfo;
-use crate::session::{Mode, Options};
+use crate::session::{self, Mode, Options};
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// What tells two daemons apart: its name, its process id and its listening endpoints. Two
@@ -81,21 +81,24 @@ pub fn merge(answers: Vec<(String, Vec<HostInfo>)>) -> Vec<Listed> {
     by_key.into_values().collect()
 }
 
-/// The daemons one client session to `endpoint` sees, each asked for its info within `timeout`.
-fn ask(
-    endpoint: &str,
-    auth: Option<PathBuf>,
-    lease_ms: u64,
-    timeout: Duration,
-) -> Result<Vec<HostInfo>, HandshakeError> {
+/// The daemons one client session to `endpoint` sees, each asked for its info within `timeout`;
+/// a session that cannot be opened is diagnosed.
+fn ask(o: &Options, endpoint: &str, timeout: Duration) -> Result<Vec<HostInfo>, String> {
     let opts = Options {
         mode: Mode::Client,
         listen: vec![],
         connect: vec![endpoint.to_string()],
-        auth,
-        lease_ms,
+        ..o.clone()
     };
-    let cluster = Cluster::open(&opts)?;
+    let cluster = match Cluster::open(&opts) {
+        Ok(c) => c,
+        Err(e) => {
+            return Err(match session::diagnose(&opts, endpoint) {
+                Some(f) => f.problem_text(),
+                None => e.to_string(),
+            })
+        }
+    };
     Ok(cluster
         .names(timeout)
         .iter()
@@ -103,20 +106,14 @@ fn ask(
         .collect())
 }
 
-/// Asks every endpoint at once (one client session each, [`ask`]) and merges the answers.
-pub fn survey(
-    endpoints: &[String],
-    auth: Option<PathBuf>,
-    lease_ms: u64,
-    timeout: Duration,
-) -> Survey {
-    let results: Vec<(String, Result<Vec<HostInfo>, HandshakeError>)> = std::thread::scope(|s| {
+/// Asks every endpoint of `o.connect` at once (one client session each, [`ask`], with `o`'s
+/// credentials) and merges the answers.
+pub fn survey(o: &Options, timeout: Duration) -> Survey {
+    let endpoints = &o.connect;
+    let results: Vec<(String, Result<Vec<HostInfo>, String>)> = std::thread::scope(|s| {
         let handles: Vec<_> = endpoints
             .iter()
-            .map(|ep| {
-                let auth = auth.clone();
-                s.spawn(move || ask(ep, auth, lease_ms, timeout))
-            })
+            .map(|ep| s.spawn(move || ask(o, ep, timeout)))
             .collect();
         endpoints
             .iter()
@@ -124,7 +121,7 @@ pub fn survey(
             .zip(handles)
             .map(|(ep, h)| {
                 let r = h.join().unwrap_or_else(|_| {
-                    Err(HandshakeError::Session("the survey thread panicked".into()))
+                    Err(HandshakeError::Session("the survey thread panicked".into()).to_string())
                 });
                 (ep, r)
             })
@@ -135,7 +132,7 @@ pub fn survey(
     for (ep, r) in results {
         match r {
             Ok(infos) => answers.push((ep, infos)),
-            Err(e) => failed.push((ep, e.to_string())),
+            Err(e) => failed.push((ep, e)),
         }
     }
     Survey {

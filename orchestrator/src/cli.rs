@@ -44,6 +44,10 @@ pub fn whole_number<T: TryFrom<u64>>(text: &str) -> Result<T, String> {
 pub const NO_FOXGLOVE: &str =
     "--foxglove: this build has no Foxglove view (build the orchestrator with its default feature `foxglove`)";
 
+/// What `--ros2` and `--record rosbag2` say in a build without the cargo feature `ros2`.
+pub const NO_ROS2: &str =
+    "--ros2, --record rosbag2: this build has no ROS 2 view (build the orchestrator with its default feature `ros2`)";
+
 /// Value parser of `--foxglove ADDR`: `HOST:PORT` (a name is resolved; port 0 picks a free one).
 pub fn foxglove_addr(text: &str) -> Result<std::net::SocketAddr, String> {
     if !cfg!(feature = "foxglove") {
@@ -342,7 +346,8 @@ pub struct RunnerArgs {
     #[arg(long, value_enum)]
     pub restart_state: Option<RestartStateArg>,
     /// Also record in this format: `mcap` writes DIR/run.mcap (every output step of every agent
-    /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md).
+    /// and the injections, JSON with JSON Schemas; opens in Foxglove; docs/formats.md), `rosbag2`
+    /// writes DIR/rosbag2/ for `ros2 bag` (docs/ros2.md).
     #[arg(long, value_enum, value_name = "FORMAT", value_delimiter = ',')]
     pub record: Vec<crate::record::Format>,
     /// Serve the run live to Foxglove on ADDR (default 127.0.0.1:8765; port 0 picks a free port;
@@ -354,6 +359,14 @@ pub struct RunnerArgs {
     /// lockstep run of the paper scenario lasts a few seconds of wall time).
     #[arg(long, value_name = "S", requires = "foxglove", default_value_t = 0.0)]
     pub foxglove_wait: f64,
+    /// Publish the run on ROS 2 topics over DDS: each quadrotor's pose, /tf, markers, the
+    /// reference, the events and /clock on simulation time, in domain ROS_DOMAIN_ID, discovered on
+    /// this machine only unless ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (docs/ros2.md).
+    #[arg(long)]
+    pub ros2: bool,
+    /// With --ros2: wait up to S seconds for a subscriber of the pose topics before the run starts.
+    #[arg(long, value_name = "S", requires = "ros2", default_value_t = 0.0)]
+    pub ros2_wait: f64,
     /// Print the summary as JSON on standard output (the content of DIR/summary.json) instead of
     /// the table; everything else goes to standard error.
     #[arg(long)]
@@ -387,10 +400,36 @@ impl RunnerArgs {
         })
     }
 
+    /// The options of `--ros2` and `--ros2-wait`.
+    pub fn ros2_options(&self) -> Option<crate::record::Ros2Options> {
+        self.ros2.then(|| crate::record::Ros2Options {
+            wait_s: self.ros2_wait.max(0.0),
+        })
+    }
+
+    /// `--ros2` and `--record rosbag2` need the feature `ros2`; `--ros2` a valid ROS 2
+    /// environment (`ROS_DOMAIN_ID`, discovery range). Exit code 2 otherwise.
+    fn check_ros2(&self) -> Result<(), ExitCode> {
+        let wanted = self.ros2 || self.record.contains(&crate::record::Format::Rosbag2);
+        if wanted && !cfg!(feature = "ros2") {
+            eprintln!("error: {NO_ROS2}");
+            return Err(ExitCode::from(EXIT_INVALID));
+        }
+        #[cfg(feature = "ros2")]
+        if self.ros2 {
+            if let Err(e) = crate::record::ros2::env_options() {
+                eprintln!("error: --ros2: {e}");
+                return Err(ExitCode::from(EXIT_INVALID));
+            }
+        }
+        Ok(())
+    }
+
     /// The validated scenario (after the overrides, the runtime flags and the events file) and the
     /// variant; exit code 2 with clear errors.
     pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {
         use formation_config::scenario::events::{RestartPolicy, RestartState};
+        self.check_ros2()?;
         let mut scenario = load_with_overrides(self.scenario.as_deref(), &self.sets)?;
         let rt = &mut scenario.runtime;
         if let Some(r) = self.restart {

@@ -1,9 +1,11 @@
-//! `formation host` (the daemon that lends a machine's CPUs to runs) and `formation hosts` (the
-//! daemons an orchestrator can reach). The daemon itself is `formation_net::daemon`; this module
-//! is its command line. See docs/multi-host.md.
+//! `formation host` (the daemon that lends a machine's CPUs to runs), `formation hosts` (the
+//! daemons an orchestrator can reach) and `formation certs` (a CA and per-host certificates for
+//! `tls/` endpoints). The daemon itself is `formation_net::daemon`; this module is its command
+//! line. See docs/multi-host.md.
 
 use crate::cli;
 use formation_net::session::{self, Mode, Options};
+use formation_net::tls;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -14,19 +16,39 @@ use std::time::Duration;
 #[derive(clap::Args, Debug, Clone)]
 pub struct LinkArgs {
     /// `user:password` file (mode 0600): a daemon accepts only orchestrators that present one of
-    /// its lines; an orchestrator presents its first line. Required to listen beyond loopback.
+    /// its lines; an orchestrator presents its first line. Required by every tcp/ endpoint.
     #[arg(long, value_name = "FILE")]
     pub auth: Option<PathBuf>,
+    /// Folder with `ca.pem`, `cert.pem` and `key.pem` (`formation certs issue`): mutual TLS on
+    /// tls/HOST:PORT endpoints; a peer whose certificate this CA did not sign is refused.
+    #[arg(long, value_name = "DIR")]
+    pub tls: Option<PathBuf>,
     /// Zenoh link lease, ms: a host whose link stays silent this long is declared lost (a killed
     /// daemon is seen at once, its TCP link closes).
     #[arg(long, default_value_t = session::DEFAULT_LEASE_MS, value_name = "MS")]
     pub lease_ms: u64,
 }
 
+impl LinkArgs {
+    /// The session options of these link options.
+    pub fn options(&self, mode: Mode, listen: Vec<String>, connect: Vec<String>) -> Options {
+        Options {
+            mode,
+            listen,
+            connect,
+            auth: self.auth.clone(),
+            tls: self.tls.clone(),
+            lease_ms: self.lease_ms,
+        }
+    }
+}
+
 /// Arguments of `formation host`.
 #[derive(clap::Args, Debug)]
 pub struct HostArgs {
-    /// Endpoint to listen on (repeatable). Default: loopback only; anything else needs --auth.
+    /// Endpoint to listen on (repeatable): tls/ADDR:PORT (with --tls), tcp/ADDR:PORT (with
+    /// --auth) or unixsock-stream/PATH. Default: a Unix socket named after the host in your
+    /// private runtime folder, which only your user can connect to.
     #[arg(long, value_name = "ENDPOINT")]
     pub listen: Vec<String>,
     /// Endpoint of another daemon or router to connect to (repeatable).
@@ -52,7 +74,8 @@ pub struct HostArgs {
 #[derive(clap::Args, Debug)]
 pub struct HostsArgs {
     /// Daemon endpoint(s) to ask (repeatable; one client session each): every daemon reachable
-    /// through any of them is listed once. Default tcp/127.0.0.1:7447.
+    /// through any of them is listed once. Default: every daemon of yours on this machine (its
+    /// socket in your private runtime folder).
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
     /// How long to wait for answers, ms.
@@ -88,21 +111,36 @@ pub fn machine_name() -> String {
     }
 }
 
+/// Ignores SIGPIPE (restored to its default by `main` for pipelines): Zenoh's TLS link writes to
+/// its socket with `writev`, which raises SIGPIPE on a link whose peer is gone, and the default
+/// would kill a daemon or an orchestrator instead of failing the link's write.
+pub fn ignore_sigpipe() {
+    // SAFETY: setting a signal disposition to SIG_IGN has no preconditions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_IGN);
+    }
+}
+
 /// `formation host`.
 pub fn host_main(a: HostArgs) -> ExitCode {
+    ignore_sigpipe();
     let name = a.name.clone().unwrap_or_else(machine_name);
+    if !formation_net::proto::valid_name(&name) {
+        eprintln!("error: --name '{name}': a host name is 1..=32 of [A-Za-z0-9_-]");
+        return ExitCode::from(cli::EXIT_INVALID);
+    }
     let listen = if a.listen.is_empty() {
-        vec![session::default_endpoint()]
+        match session::local_endpoint(&name) {
+            Ok(ep) => vec![ep],
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(cli::EXIT_INVALID);
+            }
+        }
     } else {
         a.listen.clone()
     };
-    let opts = Options {
-        mode: Mode::Daemon,
-        listen,
-        connect: a.connect.clone(),
-        auth: a.link.auth.clone(),
-        lease_ms: a.link.lease_ms,
-    };
+    let opts = a.link.options(Mode::Daemon, listen, a.connect.clone());
     if let Err(e) = opts.check() {
         eprintln!("error: {e}");
         return ExitCode::from(cli::EXIT_INVALID);
@@ -155,7 +193,13 @@ pub fn host_main(a: HostArgs) -> ExitCode {
 /// endpoint that cannot be reached while others can is named in a warning.
 pub fn hosts_main(a: HostsArgs) -> ExitCode {
     let mut connect = if a.connect.is_empty() {
-        vec![session::default_endpoint()]
+        match session::local_endpoints() {
+            Ok(v) => v,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(cli::EXIT_INVALID);
+            }
+        }
     } else {
         a.connect.clone()
     };
@@ -163,19 +207,13 @@ pub fn hosts_main(a: HostsArgs) -> ExitCode {
     let mut seen = std::collections::HashSet::new();
     connect.retain(|ep| seen.insert(ep.clone()));
     // Malformed endpoints or credentials: exit 2 before anything is opened.
-    let opts = Options {
-        mode: Mode::Client,
-        listen: vec![],
-        connect: connect.clone(),
-        auth: a.link.auth.clone(),
-        lease_ms: a.link.lease_ms,
-    };
+    let opts = a.link.options(Mode::Client, vec![], connect.clone());
     if let Err(e) = opts.check() {
         eprintln!("error: {e}");
         return ExitCode::from(cli::EXIT_INVALID);
     }
     let t = Duration::from_millis(a.timeout_ms);
-    let survey = formation_net::survey::survey(&connect, a.link.auth.clone(), a.link.lease_ms, t);
+    let survey = formation_net::survey::survey(&opts, t);
     if survey.failed.len() == connect.len() {
         for (ep, e) in &survey.failed {
             eprintln!("error: {ep}: {e}");
@@ -210,4 +248,80 @@ pub fn hosts_main(a: HostsArgs) -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// Arguments of `formation certs`.
+#[derive(clap::Args, Debug)]
+pub struct CertsArgs {
+    /// What to make.
+    #[command(subcommand)]
+    pub what: CertsCommand,
+}
+
+/// `formation certs init` / `issue`.
+#[derive(clap::Subcommand, Debug)]
+pub enum CertsCommand {
+    /// A new certificate authority: DIR/ca.pem and DIR/ca.key (mode 0600; DIR owner-only).
+    Init {
+        /// The CA's folder (created with mode 0700; keep it on one trusted machine).
+        #[arg(long, value_name = "DIR")]
+        dir: PathBuf,
+    },
+    /// A host's key and certificate signed by the CA of --dir, with a copy of the CA certificate:
+    /// OUT/ca.pem, OUT/cert.pem, OUT/key.pem (0600; OUT owner-only), the folder to copy to that
+    /// host and pass to --tls.
+    Issue {
+        /// The CA's folder (`formation certs init --dir`).
+        #[arg(long, value_name = "DIR")]
+        dir: PathBuf,
+        /// The host's name (`formation host --name`; the orchestrator's machine needs one too).
+        #[arg(long)]
+        name: String,
+        /// An IP address the host is reached at (`tls/ADDR:PORT`; repeatable).
+        #[arg(long, value_name = "IP")]
+        addr: Vec<std::net::IpAddr>,
+        /// A DNS name the host is reached by (repeatable; the --name is one already).
+        #[arg(long, value_name = "NAME")]
+        dns: Vec<String>,
+        /// Where to write the host's folder; default DIR/NAME.
+        #[arg(long, value_name = "OUT")]
+        out: Option<PathBuf>,
+    },
+}
+
+/// `formation certs`.
+pub fn certs_main(a: CertsArgs) -> ExitCode {
+    let r = match a.what {
+        CertsCommand::Init { dir } => tls::init(&dir),
+        CertsCommand::Issue {
+            dir,
+            name,
+            addr,
+            dns,
+            out,
+        } => {
+            let out = out.unwrap_or_else(|| dir.join(&name));
+            tls::issue(
+                &dir,
+                &tls::Issue {
+                    name,
+                    addrs: addr,
+                    dns,
+                },
+                &out,
+            )
+        }
+    };
+    match r {
+        Ok(files) => {
+            for f in files {
+                println!("{}", f.display());
+            }
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(cli::EXIT_INVALID)
+        }
+    }
 }

@@ -93,15 +93,22 @@ enum Command {
     /// (docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[command(
-        after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tcp/0.0.0.0:7447 --auth /etc/formation/auth"
+        after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tls/0.0.0.0:7447 --tls /etc/formation/tls"
     )]
     Host(formation::hosts::HostArgs),
     /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
     #[cfg(feature = "multihost")]
     #[command(
-        after_help = "Examples:\n  formation hosts\n  formation hosts --connect tcp/10.0.0.2:7447 --auth auth.txt --json"
+        after_help = "Examples:\n  formation hosts\n  formation hosts --connect tls/10.0.0.2:7447 --tls ~/.formation/tls --json"
     )]
     Hosts(formation::hosts::HostsArgs),
+    /// Make a certificate authority and per-host certificates for mutual TLS between hosts
+    /// (tls/HOST:PORT endpoints, --tls DIR; docs/multi-host.md).
+    #[cfg(feature = "multihost")]
+    #[command(
+        after_help = "Examples:\n  formation certs init --dir ~/formation-ca\n  formation certs issue --dir ~/formation-ca --name b --addr 10.0.0.2 --out b-tls\n  formation certs issue --dir ~/formation-ca --name a --out a-tls"
+    )]
+    Certs(formation::hosts::CertsArgs),
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.
     #[command(hide = true)]
@@ -150,6 +157,8 @@ fn main() -> ExitCode {
         Some(Command::Host(a)) => formation::hosts::host_main(a),
         #[cfg(feature = "multihost")]
         Some(Command::Hosts(a)) => formation::hosts::hosts_main(a),
+        #[cfg(feature = "multihost")]
+        Some(Command::Certs(a)) => formation::hosts::certs_main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
         None => run::main(cli::defaults::<run::RunArgs>("run")),
     }

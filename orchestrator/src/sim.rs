@@ -30,6 +30,7 @@ pub fn main(args: SimArgs) -> ExitCode {
         Err(code) => return code,
     };
     let live = args.common.live_options();
+    let ros2 = args.common.ros2_options();
     let out = args
         .common
         .out
@@ -48,6 +49,7 @@ pub fn main(args: SimArgs) -> ExitCode {
     }
     let mut outputs = Outputs::with(&args.common.record);
     outputs.foxglove = live;
+    outputs.ros2 = ros2;
     let mut factors = Vec::new();
     for _ in 1..args.repeat.max(1) {
         match run_in_process_with(&scenario, variant, &out, outputs) {

@@ -175,3 +175,28 @@ pub fn assert_trajectory_is_sims(
         run_out.display()
     );
 }
+
+/// The other user of the tests that act as a second uid (`nobody`).
+pub const OTHER_UID: u32 = 65534;
+
+/// True when the test can act as another uid ([`OTHER_UID`]): it runs as root. Otherwise says
+/// why `test` skips, or fails when CI requires it with `FORMATION_REQUIRE_ROOT=1`.
+pub fn root_or_skip(test: &str) -> bool {
+    // SAFETY: getuid has no preconditions.
+    if unsafe { libc::getuid() } == 0 {
+        return true;
+    }
+    assert!(
+        std::env::var("FORMATION_REQUIRE_ROOT").as_deref() != Ok("1"),
+        "{test} needs root (to act as uid {OTHER_UID}) and FORMATION_REQUIRE_ROOT=1 requires it"
+    );
+    eprintln!("skipping {test}: it needs root to own files and run processes as uid {OTHER_UID}");
+    false
+}
+
+/// Gives `path` (not followed if a link) to `uid` (user and group).
+pub fn chown(path: &std::path::Path, uid: u32) {
+    let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: lchown on a valid C string path.
+    assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
+}

@@ -7,7 +7,8 @@
 
 use formation_tests::run::RunningRun;
 use formation_tests::{
-    assert_trajectory_is_sims, bin, formation, stderr_of as stderr, summary, temp_dir,
+    assert_trajectory_is_sims, bin, chown, formation, root_or_skip, stderr_of as stderr, summary,
+    temp_dir, OTHER_UID,
 };
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::os::unix::process::CommandExt;
@@ -17,29 +18,6 @@ use std::time::{Duration, Instant};
 
 /// Generous bound for anything to happen; reaching it means a hang.
 const TIMEOUT: Duration = Duration::from_secs(240);
-/// The other user (`nobody`).
-const OTHER_UID: u32 = 65534;
-
-/// True when the test can act as another uid; otherwise says why it skips (or fails, when CI
-/// requires it with `FORMATION_REQUIRE_ROOT=1`).
-fn root_or_skip(test: &str) -> bool {
-    // SAFETY: getuid has no preconditions.
-    if unsafe { libc::getuid() } == 0 {
-        return true;
-    }
-    assert!(
-        std::env::var("FORMATION_REQUIRE_ROOT").as_deref() != Ok("1"),
-        "{test} needs root (to act as uid {OTHER_UID}) and FORMATION_REQUIRE_ROOT=1 requires it"
-    );
-    eprintln!("skipping {test}: it needs root to own files and run processes as uid {OTHER_UID}");
-    false
-}
-
-fn chown(path: &Path, uid: u32) {
-    let c = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).unwrap();
-    // SAFETY: lchown on a valid C string path.
-    assert_eq!(unsafe { libc::lchown(c.as_ptr(), uid, uid) }, 0, "chown");
-}
 
 /// Waits until the run's CSV has rows.
 fn wait_stepping(run: &RunningRun) {

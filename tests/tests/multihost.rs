@@ -186,15 +186,26 @@ exec "$@""#
 
     /// Starts `formation host --name h<h>` in namespace h, listening on its link address.
     fn start_daemon(&mut self, h: usize, dir: &Path, extra_env: &[(&str, &str)]) {
-        let log = dir.join(format!("daemon-{h}.log"));
         let ep = format!("tcp/{}:7447", self.addrs[h]);
         let auth = self.auth.display().to_string();
+        self.start_daemon_with(h, dir, &["--listen", &ep, "--auth", &auth], extra_env);
+    }
+
+    /// Starts `formation host --name h<h> LINK...` in namespace h.
+    fn start_daemon_with(
+        &mut self,
+        h: usize,
+        dir: &Path,
+        link: &[&str],
+        extra_env: &[(&str, &str)],
+    ) {
+        let log = dir.join(format!("daemon-{h}.log"));
         let name = format!("h{h}");
-        let mut c = self.command(
-            h,
-            None,
-            &["host", "--name", &name, "--listen", &ep, "--auth", &auth],
-        );
+        let args: Vec<&str> = ["host", "--name", &name]
+            .into_iter()
+            .chain(link.iter().copied())
+            .collect();
+        let mut c = self.command(h, None, &args);
         for (k, v) in extra_env {
             c.env(k, v);
         }
@@ -271,14 +282,22 @@ fn run_in(
     out: &Path,
     with_auth: bool,
 ) -> (i32, String, String) {
-    let residue = dir.join("residue-launcher.txt");
-    let mut v: Vec<String> = vec!["run".into()];
-    v.extend(args.iter().map(|s| s.to_string()));
+    let mut v: Vec<String> = args.iter().map(|s| s.to_string()).collect();
     v.extend(hosts.connect_args());
     if with_auth {
         v.push("--auth".into());
         v.push(hosts.auth.display().to_string());
     }
+    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+    run_in_with(hosts, dir, &refs, out)
+}
+
+/// Runs `formation run ARGS --out OUT` in the launcher namespace, with exactly these link options
+/// in ARGS; (exit code, stderr, residue).
+fn run_in_with(hosts: &Hosts, dir: &Path, args: &[&str], out: &Path) -> (i32, String, String) {
+    let residue = dir.join("residue-launcher.txt");
+    let mut v: Vec<String> = vec!["run".into()];
+    v.extend(args.iter().map(|s| s.to_string()));
     v.push("--out".into());
     v.push(out.display().to_string());
     let refs: Vec<&str> = v.iter().map(String::as_str).collect();
@@ -578,9 +597,9 @@ fn a_mismatched_build_is_refused_before_anything_starts_naming_both_hosts() {
 }
 
 #[test]
-fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback() {
+fn an_orchestrator_without_or_with_wrong_credentials_is_refused_naming_the_host_and_why() {
     if !available(
-        "an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_loopback",
+        "an_orchestrator_without_or_with_wrong_credentials_is_refused_naming_the_host_and_why",
     ) {
         return;
     }
@@ -588,20 +607,39 @@ fn an_orchestrator_without_credentials_is_refused_by_a_daemon_listening_beyond_l
     let mut hosts = Hosts::new(2, &dir);
     hosts.start_daemon(1, &dir, &[]);
     let out = dir.join("run");
+    // Without credentials: refused before anything is sent, naming the option.
     let (code, err, residue) = run_in(&hosts, &dir, &["paper", "--hosts", "h1"], &out, false);
     assert_eq!(code, 2, "{err}");
-    assert!(err.contains("h1"), "the host is named: {err}");
+    assert!(err.contains("--auth FILE"), "the option is named: {err}");
+    assert_no_residue("the launcher", &residue);
+    // With a password the daemon does not know: an authentication failure, the host named.
+    let wrong = dir.join("wrong-auth");
+    std::fs::write(&wrong, "formation:not-the-secret\n").unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&wrong, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let mut args: Vec<String> = ["paper", "--hosts", "h1"].map(String::from).to_vec();
+    args.extend(hosts.connect_args());
+    args.extend(["--auth".to_string(), wrong.display().to_string()]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (code, err, residue) = run_in_with(&hosts, &dir, &refs, &out);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("h1") && err.contains("authentication failed"),
+        "the host and the authentication failure are named: {err}"
+    );
     assert!(!out.join("trajectory.csv").exists(), "nothing started");
     assert_no_residue("the launcher", &residue);
     let left = hosts.stop_daemons();
     assert_no_residue("host h1", &left[0]);
-    // A daemon refuses to listen beyond loopback without credentials at all.
-    let o = Command::new(bin("formation"))
-        .args(["host", "--name", "x", "--listen", "tcp/0.0.0.0:7447"])
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("requires authentication"));
+    // A daemon refuses to listen on TCP without credentials at all, loopback included.
+    for ep in ["tcp/0.0.0.0:7447", "tcp/127.0.0.1:7447"] {
+        let o = Command::new(bin("formation"))
+            .args(["host", "--name", "x", "--listen", ep])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("requires authentication"));
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -1160,5 +1198,210 @@ fn ps_and_inspect_show_the_agents_placed_on_another_host_with_that_host_and_its_
     );
     let left = hosts.stop_daemons();
     assert_no_residue("host h1", &left[0]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Moves the calling thread into network namespace `name` (`ip netns add` made it).
+fn enter_netns(name: &str) {
+    use std::os::fd::AsRawFd;
+    let f = std::fs::File::open(format!("/var/run/netns/{name}")).expect("the namespace exists");
+    // SAFETY: setns on an open namespace file, for this thread only.
+    let r = unsafe { libc::setns(f.as_raw_fd(), libc::CLONE_NEWNET) };
+    assert_eq!(r, 0, "setns {name}: {}", std::io::Error::last_os_error());
+}
+
+/// A TCP relay on a link of the test, recording every byte both ways (what a sniffer sees): it
+/// listens on `ip` in namespace `from` and connects each connection on to `to` from namespace
+/// `into`. Its threads end with the connections (the listener with the test process).
+struct Relay {
+    port: u16,
+    captured: std::sync::Arc<std::sync::Mutex<Vec<u8>>>,
+}
+
+impl Relay {
+    fn start(from: &str, ip: &str, into: &str, to: std::net::SocketAddr) -> Relay {
+        use std::io::Write;
+        let captured = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let cap = captured.clone();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let (from, ip, into) = (from.to_string(), ip.to_string(), into.to_string());
+        std::thread::spawn(move || {
+            enter_netns(&from);
+            let l = std::net::TcpListener::bind((ip.as_str(), 0)).expect("the relay listens");
+            tx.send(l.local_addr().unwrap().port()).unwrap();
+            // Sockets made from now on are in the daemon's namespace; the listener stays.
+            enter_netns(&into);
+            for c in l.incoming() {
+                let Ok(a) = c else { break };
+                let Ok(b) = std::net::TcpStream::connect(to) else {
+                    continue;
+                };
+                // As Zenoh's own sockets: no Nagle delay (a lockstep step is a few small frames).
+                let _ = a.set_nodelay(true);
+                let _ = b.set_nodelay(true);
+                for (mut r, mut w) in [(a.try_clone().unwrap(), b.try_clone().unwrap()), (b, a)] {
+                    let cap = cap.clone();
+                    std::thread::spawn(move || {
+                        let mut buf = [0u8; 65536];
+                        while let Ok(n) = r.read(&mut buf) {
+                            if n == 0 || w.write_all(&buf[..n]).is_err() {
+                                break;
+                            }
+                            cap.lock().unwrap().extend_from_slice(&buf[..n]);
+                        }
+                        let _ = w.shutdown(std::net::Shutdown::Write);
+                    });
+                }
+            }
+        });
+        Relay {
+            port: rx.recv().expect("the relay's port"),
+            captured,
+        }
+    }
+
+    fn bytes(&self) -> Vec<u8> {
+        self.captured.lock().unwrap().clone()
+    }
+}
+
+fn contains(hay: &[u8], needle: &[u8]) -> bool {
+    hay.windows(needle.len()).any(|w| w == needle)
+}
+
+/// `formation certs ARGS` (exit 0 asserted).
+fn certs(args: &[&str]) {
+    let o = formation_tests::formation(&[&["certs"][..], args].concat());
+    assert!(
+        o.status.success(),
+        "formation certs {args:?}: {}",
+        formation_tests::stderr_of(&o)
+    );
+}
+
+#[test]
+fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unlike_tcp() {
+    if !available(
+        "a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unlike_tcp",
+    ) {
+        return;
+    }
+    let dir = work_dir("tls");
+    let mut hosts = Hosts::new(2, &dir);
+    let daemon_ip = hosts.addrs[1].clone();
+    let relay_ip = format!("{}.1", daemon_ip.rsplit_once('.').unwrap().0);
+    // A CA, the daemon's folder (its address and the relay's, which the orchestrator dials) and
+    // the launcher's.
+    let (ca, h1, a) = (dir.join("ca"), dir.join("h1-tls"), dir.join("a-tls"));
+    let s = |p: &Path| p.display().to_string();
+    certs(&["init", "--dir", &s(&ca)]);
+    certs(&[
+        "issue",
+        "--dir",
+        &s(&ca),
+        "--name",
+        "h1",
+        "--addr",
+        &daemon_ip,
+        "--addr",
+        &relay_ip,
+        "--out",
+        &s(&h1),
+    ]);
+    certs(&["issue", "--dir", &s(&ca), "--name", "a", "--out", &s(&a)]);
+    let auth = s(&hosts.auth);
+    let secret: &[u8] = b"tests-only-secret";
+    let scenario = ["paper", "--set", "simulation.duration_s=2"];
+    let place = ["--hosts", "h1", "--place", "4,5@h1"];
+
+    // TLS (with a user and password inside it): byte-identical, and nothing readable on the wire.
+    let listen = format!("tls/{daemon_ip}:7447");
+    hosts.start_daemon_with(
+        1,
+        &dir,
+        &["--listen", &listen, "--tls", &s(&h1), "--auth", &auth],
+        &[],
+    );
+    let relay = Relay::start(
+        &hosts.names[0],
+        &relay_ip,
+        &hosts.names[1],
+        format!("{daemon_ip}:7447").parse().unwrap(),
+    );
+    let connect = format!("tls/{relay_ip}:{}", relay.port);
+    let a_tls = s(&a);
+    let args: Vec<&str> = scenario
+        .iter()
+        .chain(&place)
+        .copied()
+        .chain(["--connect", &connect, "--tls", &a_tls, "--auth", &auth])
+        .collect();
+    // Zenoh 1.10.2's TLS link can drop mid-run (docs/multi-host.md, the known problem of its
+    // TLS link): such a run names its host as lost. Up to three tries for that cause alone; any
+    // other failure fails at once.
+    let mut attempt = 0;
+    let (out, code, err, residue) = loop {
+        attempt += 1;
+        let out = dir.join(format!("run-tls-{attempt}"));
+        let (code, err, residue) = run_in_with(&hosts, &dir, &args, &out);
+        if code == 0 || attempt == 3 || !err.contains("lost with host") {
+            break (out, code, err, residue);
+        }
+        eprintln!("TLS split run {attempt} lost its host (the known race of zenoh-link-tls 1.10.2):\n{err}");
+    };
+    assert_eq!(code, 0, "the TLS split run failed:\n{err}");
+    assert_no_residue("the launcher", &residue);
+    for left in hosts.stop_daemons() {
+        assert_no_residue("host h1", &left);
+    }
+    formation_tests::assert_trajectory_is_sims(&out, &scenario, &dir.join("sim"));
+    let wire = relay.bytes();
+    assert!(
+        wire.len() > 100_000,
+        "the run crossed the relay: {} bytes",
+        wire.len()
+    );
+    for plain in [
+        &b"formation"[..],
+        b"VehicleState",
+        b"ControlCommand",
+        secret,
+    ] {
+        assert!(
+            !contains(&wire, plain),
+            "'{}' is readable on the TLS link",
+            String::from_utf8_lossy(plain)
+        );
+    }
+
+    // The control: the same run over TCP with a user and password shows keys and wire types in
+    // clear (the password itself never crosses: Zenoh sends a keyed hash of it).
+    let listen = format!("tcp/{daemon_ip}:7448");
+    hosts.start_daemon_with(1, &dir, &["--listen", &listen, "--auth", &auth], &[]);
+    let relay = Relay::start(
+        &hosts.names[0],
+        &relay_ip,
+        &hosts.names[1],
+        format!("{daemon_ip}:7448").parse().unwrap(),
+    );
+    let connect = format!("tcp/{relay_ip}:{}", relay.port);
+    let args: Vec<&str> = scenario
+        .iter()
+        .chain(&place)
+        .copied()
+        .chain(["--connect", &connect, "--auth", &auth])
+        .collect();
+    let (code, err, _) = run_in_with(&hosts, &dir, &args, &dir.join("run-tcp"));
+    assert_eq!(code, 0, "the TCP split run failed:\n{err}");
+    hosts.stop_daemons();
+    let wire = relay.bytes();
+    for plain in [&b"formation/"[..], b"VehicleState", b"formation"] {
+        assert!(
+            contains(&wire, plain),
+            "'{}' is readable on the TCP link",
+            String::from_utf8_lossy(plain)
+        );
+    }
+    assert!(!contains(&wire, secret), "the password never crosses");
     let _ = std::fs::remove_dir_all(&dir);
 }

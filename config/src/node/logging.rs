@@ -33,11 +33,17 @@ fn colour_on_stderr() -> bool {
     std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
 }
 
+/// The log filter without `RUST_LOG`: info, and only errors of RustDDS (`--ros2`, crate
+/// formation-ros2), which reports routine discovery events (a peer gone, a locator it does not
+/// use) as warnings, hundreds a run.
+const DEFAULT_FILTER: &str = "info,rustdds=error";
+
 /// Installs the global subscriber: a file layer writing to `<run_dir>/logs/<name>` (created if
 /// needed) and, if `console`, a compact layer on stderr. Returns an error text (logging then stays
 /// off or console-only) when the file cannot be created; never panics.
 pub fn init(run_dir: &Path, file_name: &str, console: bool) -> Result<(), NodeError> {
-    let filter = || EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let filter =
+        || EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_FILTER));
     let dir = run_dir.join("logs");
     let file = super::files::ensure_private_dir(&dir)
         .map_err(std::io::Error::from)

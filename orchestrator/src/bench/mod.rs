@@ -24,6 +24,8 @@ mod peer;
 mod plan;
 mod procs;
 mod report;
+#[cfg(feature = "multihost")]
+mod secure;
 mod sock;
 #[cfg(feature = "multihost")]
 mod split;
@@ -87,6 +89,12 @@ pub struct BenchArgs {
     /// `--n`; `--payload` sizes the ping-pong only).
     #[arg(long)]
     pub transports: Option<String>,
+    /// How the two hosts of the Zenoh cases are linked: `tcp` (loopback, user/password) or
+    /// `tls` (loopback, mutual TLS); the bench makes the credentials. Compare the two with
+    /// alternated invocations (docs/multi-host.md).
+    #[cfg(feature = "multihost")]
+    #[arg(long, value_enum, default_value = "tcp")]
+    pub zenoh_link: secure::ZenohLink,
     /// Skip the lockstep case (a real `formation run` in lockstep, timed per step and set against
     /// the iceoryx2 event fan-out; it runs for every N from 2 to MAX_AGENTS (128) whenever
     /// iox2-event is measured: the paper scenario for N = 5, a generated path formation
@@ -273,7 +281,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         let first = (round - 1) * (cases.len() + zenoh_cases);
         failures += run_round(&ctx, &cases, first, &inputs, &args, &mut rows);
         if zenoh && !procs::aborted() {
-            failures += run_zenoh(&ctx, first + cases.len(), args.seconds, &mut rows);
+            failures += run_zenoh(&ctx, first + cases.len(), &args, &mut rows);
         }
         rounds.push(rows);
     }
@@ -338,7 +346,25 @@ fn run_round(
 /// The Zenoh cases of one round, case numbers from `first`: ping-pong, then the split step's
 /// fan-out and the split lockstep run, one after the other; returns the number that failed.
 #[cfg(feature = "multihost")]
-fn run_zenoh(ctx: &case::Ctx, first: usize, seconds: f64, rows: &mut Vec<report::Row>) -> usize {
+fn run_zenoh(
+    ctx: &case::Ctx,
+    first: usize,
+    args: &BenchArgs,
+    rows: &mut Vec<report::Row>,
+) -> usize {
+    let seconds = args.seconds;
+    let link = args.zenoh_link;
+    let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
+    let sec = match secure::Secured::make(link, &scratch.join("creds")) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!(
+                "  zenoh over {}: FAILED: cannot make its credentials: {e}",
+                link.name()
+            );
+            return 1;
+        }
+    };
     let mut failures = 0;
     for (k, pattern) in [plan::Pattern::PingPong, plan::Pattern::FanOut]
         .into_iter()
@@ -347,8 +373,8 @@ fn run_zenoh(ctx: &case::Ctx, first: usize, seconds: f64, rows: &mut Vec<report:
         if procs::aborted() {
             return failures;
         }
-        let what = format!("zenoh {} block", pattern.name());
-        match zenoh::run(ctx, first + k, pattern) {
+        let what = format!("zenoh ({}) {} block", link.name(), pattern.name());
+        match zenoh::run(ctx, first + k, pattern, &sec) {
             Ok(row) => {
                 eprintln!(
                     "  {what}: p50 {:.1} µs, p99 {:.1} µs ({} samples)",
@@ -366,9 +392,12 @@ fn run_zenoh(ctx: &case::Ctx, first: usize, seconds: f64, rows: &mut Vec<report:
     if procs::aborted() {
         return failures;
     }
-    let what = format!("zenoh lockstep split {}", split::place_arg());
-    let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
-    match split::run(seconds, &scratch) {
+    let what = format!(
+        "zenoh ({}) lockstep split {}",
+        link.name(),
+        split::place_arg()
+    );
+    match split::run(seconds, &scratch, &sec) {
         Ok(s) => {
             eprintln!(
                 "  {what}: p50 {:.1} µs, mean {:.1} µs per step ({} steps; iceoryx2 prefix {})",
@@ -385,13 +414,14 @@ fn run_zenoh(ctx: &case::Ctx, first: usize, seconds: f64, rows: &mut Vec<report:
             failures += 1;
         }
     }
+    drop(sec);
     let _ = std::fs::remove_dir_all(&scratch);
     failures
 }
 
 /// Without Zenoh nothing runs (`--transports zenoh` is refused by [`validate`]).
 #[cfg(not(feature = "multihost"))]
-fn run_zenoh(_: &case::Ctx, _: usize, _: f64, _: &mut Vec<report::Row>) -> usize {
+fn run_zenoh(_: &case::Ctx, _: usize, _: &BenchArgs, _: &mut Vec<report::Row>) -> usize {
     0
 }
 

@@ -43,9 +43,15 @@ pub struct PeerArgs {
     /// UDP port of the plant on 127.0.0.1.
     #[arg(long)]
     pub plant_port: Option<u16>,
-    /// Zenoh: the endpoint this peer listens on (`tcp/127.0.0.1:PORT`).
+    /// Zenoh: the endpoint this peer listens on (`tcp/127.0.0.1:PORT` or `tls/127.0.0.1:PORT`).
     #[arg(long)]
     pub endpoint: Option<String>,
+    /// Zenoh over TCP: the `user:password` file.
+    #[arg(long)]
+    pub auth: Option<std::path::PathBuf>,
+    /// Zenoh over TLS: this host's certificate folder.
+    #[arg(long)]
+    pub tls: Option<std::path::PathBuf>,
     /// Zenoh: `ping-pong` or `fan-out` (the frames of a split lockstep step).
     #[arg(long)]
     pub pattern: Option<String>,

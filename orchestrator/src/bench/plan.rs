@@ -17,7 +17,7 @@ pub enum Transport {
     Uds,
     /// UDP on 127.0.0.1.
     Udp,
-    /// Zenoh over TCP loopback, with the sessions and frames of a run across hosts (measured by
+    /// Zenoh over loopback (TCP or TLS), with the sessions and frames of a run across hosts (measured by
     /// `bench::zenoh` and `bench::split`, never planned here; only when named in `--transports`).
     Zenoh,
 }

@@ -9,11 +9,13 @@
 //! with `--user --map-root-user` when not root) with a fresh tmpfs on /dev/shm, and with its own
 //! runtime folder (`XDG_RUNTIME_DIR`: its iceoryx2 root and its run folders). No shared memory
 //! crosses between the two "hosts"; every cross-host message goes through the bridges and Zenoh
-//! over TCP loopback. They still share one kernel and its CPUs, and the link has no latency of
-//! its own.
+//! over loopback, TCP with a user and password or mutual TLS (`--zenoh-link`, credentials made for
+//! the bench: [`super::secure`]). They still share one kernel and its CPUs, and the link has no
+//! latency of its own.
 
 use super::lockstep::{self, row_as};
 use super::report::Row;
+use super::secure::Secured;
 use super::zenoh::free_port;
 use crate::run::step_timing::WARMUP_STEPS;
 use formation_net::bench::{SPLIT_AGENTS, SPLIT_HOST};
@@ -60,7 +62,7 @@ struct Daemon {
 }
 
 impl Daemon {
-    fn start(exe: &Path, port: u16, dir: &Path) -> Result<Daemon, String> {
+    fn start(exe: &Path, endpoint: &str, creds: &[String], dir: &Path) -> Result<Daemon, String> {
         let runtime = dir.join("runtime");
         std::fs::DirBuilder::new()
             .recursive(true)
@@ -86,8 +88,8 @@ impl Daemon {
             "sh",
         ])
         .arg(exe)
-        .args(["host", "--name", SPLIT_HOST, "--listen"])
-        .arg(format!("tcp/127.0.0.1:{port}"))
+        .args(["host", "--name", SPLIT_HOST, "--listen", endpoint])
+        .args(creds)
         .env("XDG_RUNTIME_DIR", &runtime)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
@@ -158,19 +160,19 @@ fn prefix_of(stderr: &str) -> Option<String> {
 }
 
 /// Runs the split lockstep for about `seconds` of steady state (plus the warm-up) in `scratch`.
-pub fn run(seconds: f64, scratch: &Path) -> Result<Split, String> {
+pub fn run(seconds: f64, scratch: &Path, sec: &Secured) -> Result<Split, String> {
     let exe = std::env::current_exe().map_err(|e| format!("cannot locate formation: {e}"))?;
     let dir = scratch.join("split");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let result = run_in(&exe, seconds, &dir);
+    let result = run_in(&exe, seconds, &dir, sec);
     let _ = std::fs::remove_dir_all(&dir);
     result
 }
 
-fn run_in(exe: &Path, seconds: f64, dir: &Path) -> Result<Split, String> {
-    let port = free_port()?;
-    let daemon = Daemon::start(exe, port, dir)?;
+fn run_in(exe: &Path, seconds: f64, dir: &Path, sec: &Secured) -> Result<Split, String> {
+    let endpoint = sec.endpoint(free_port()?);
+    let daemon = Daemon::start(exe, &endpoint, &sec.args(SPLIT_HOST), dir)?;
     let out = dir.join("run");
     let args: Vec<OsString> = [
         "--hosts".to_string(),
@@ -178,9 +180,10 @@ fn run_in(exe: &Path, seconds: f64, dir: &Path) -> Result<Split, String> {
         "--place".to_string(),
         place_arg(),
         "--connect".to_string(),
-        format!("tcp/127.0.0.1:{port}"),
+        endpoint,
     ]
     .into_iter()
+    .chain(sec.args(formation_net::cluster::LAUNCHER))
     .map(OsString::from)
     .collect();
     let steps = WARMUP_STEPS as f64 + seconds * EXPECTED_SPLIT_STEPS_PER_S;

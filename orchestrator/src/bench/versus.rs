@@ -14,8 +14,8 @@ pub const SPLIT_WAIT: &str = "split ";
 
 /// What a split run on one machine measures (in the JSON next to the figures).
 pub const MEASURES: &str = "one machine: the second host is a formation host daemon in its own \
-     mount namespace (its own /dev/shm, no shared memory crosses), linked over Zenoh on TCP \
-     loopback; both share one kernel and its CPUs, and the link adds no latency of its own";
+     mount namespace (its own /dev/shm, no shared memory crosses), linked over Zenoh on \
+     loopback (TCP or TLS, `--zenoh-link`); both share one kernel and its CPUs, and the link adds no latency of its own";
 
 /// `zenoh_split_vs_fan_out` of the JSON report.
 #[derive(Debug, Clone, Serialize)]
@@ -91,7 +91,7 @@ fn round2(x: f64) -> f64 {
 /// The comparison's lines of the text report.
 pub fn text(c: &SplitComparison) -> String {
     format!(
-        "n={} split {} (Zenoh over TCP loopback): lockstep step / bare Zenoh fan-out of the same \
+        "n={} split {} (Zenoh over loopback, `--zenoh-link`): lockstep step / bare Zenoh fan-out of the same \
          placement, over {} round(s): median steps {:.1} / {:.1} µs; ratio of the medians within \
          a round: {:.2}x (median; range {:.2}-{:.2}x), of the means: {:.2}x; real time {:.2}x \
          (median step), {:.2}x (mean step)\n  ({MEASURES})\n",

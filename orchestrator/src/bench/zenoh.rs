@@ -1,6 +1,6 @@
 //! The bare Zenoh cases of `formation bench --transports zenoh` (cargo feature `multihost`): this
 //! process is the launcher, one `formation bench-peer --transport zenoh` process the other host,
-//! linked over TCP loopback with the sessions, publishers and subscribers of a run across hosts
+//! linked over loopback (TCP or TLS, `--zenoh-link`) with the sessions, publishers and subscribers of a run across hosts
 //! (`formation_net::bench`).
 //!
 //! * ping-pong: one message of the `--payload` sizes (default: the state down, the command up)
@@ -16,6 +16,7 @@ use super::link::{self, Link, Msg, Sizes, Wait, MIN_PAYLOAD};
 use super::plan::Pattern;
 use super::procs::Peers;
 use super::report::Row;
+use super::secure::Secured;
 use super::PeerArgs;
 use formation_net::bench::{self as zb, Records, Side, StepPattern};
 use formation_net::cluster::LAUNCHER;
@@ -139,8 +140,8 @@ fn split_step() -> Result<StepPattern, String> {
 
 /// Measures bare Zenoh case number `idx`; its row (`n`: 1 for ping-pong, the split run's N for
 /// the fan-out; sizes: the frames' for the fan-out).
-pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern) -> Result<Row, String> {
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port()?);
+pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern, sec: &Secured) -> Result<Row, String> {
+    let endpoint = sec.endpoint(free_port()?);
     let (body, expect, sizes, n) = match pattern {
         Pattern::PingPong => (Body::Filler(ctx.sizes.down), None, ctx.sizes, 1),
         Pattern::FanOut => {
@@ -153,8 +154,8 @@ pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern) -> Result<Row, String> {
             (Body::Frame(step.out, LAUNCHER), Some(step.back), sizes, n)
         }
     };
-    let args = vec![
-        "--transport".into(),
+    let args: Vec<String> = vec![
+        "--transport".to_string(),
         TRANSPORT.into(),
         "--prefix".into(),
         ctx.prefix.into(),
@@ -170,10 +171,16 @@ pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern) -> Result<Row, String> {
         endpoint.clone(),
         "--pattern".into(),
         pattern.name().into(),
-    ];
+    ]
+    .into_iter()
+    .chain(sec.args(zb::SPLIT_HOST))
+    .collect();
     let peers = Peers::spawn(vec![args]).map_err(|e| format!("spawn the peer process: {e}"))?;
     let mut l = ZenohLink {
-        link: zb::Link::open(Side::Launcher, &endpoint, &tag(ctx.prefix, idx))?,
+        link: {
+            let (auth, tls) = sec.of(LAUNCHER);
+            zb::Link::open(Side::Launcher, &endpoint, &tag(ctx.prefix, idx), auth, tls)?
+        },
         body,
         expect,
         from: u32::MAX,
@@ -207,7 +214,13 @@ pub fn peer(a: &PeerArgs) -> Result<(), String> {
         }
     };
     let mut l = ZenohLink {
-        link: zb::Link::open(Side::Host, endpoint, &tag(&a.prefix, a.case))?,
+        link: zb::Link::open(
+            Side::Host,
+            endpoint,
+            &tag(&a.prefix, a.case),
+            a.auth.clone(),
+            a.tls.clone(),
+        )?,
         body,
         expect,
         from: a.index,

@@ -129,12 +129,17 @@ pub struct Files<'a> {
     pub trajectory: Option<&'a Path>,
     /// `run.mcap`, if written (`--record mcap`).
     pub mcap: Option<super::mcap::McapSink>,
+    /// `rosbag2/`, if written (`--record rosbag2`).
+    #[cfg(feature = "ros2")]
+    pub rosbag2: Option<super::ros2::BagSink>,
 }
 
 /// The sinks the writer thread owns.
 struct Sinks {
     rows: Option<RowWriter>,
     mcap: Option<super::mcap::McapSink>,
+    #[cfg(feature = "ros2")]
+    rosbag2: Option<super::ros2::BagSink>,
 }
 
 impl Sinks {
@@ -145,10 +150,18 @@ impl Sinks {
         if let Some(mcap) = &mut self.mcap {
             mcap.write_step(r)?;
         }
+        #[cfg(feature = "ros2")]
+        if let Some(bag) = &mut self.rosbag2 {
+            bag.write_step(r)?;
+        }
         Ok(())
     }
 
     fn write_event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        #[cfg(feature = "ros2")]
+        if let Some(bag) = &mut self.rosbag2 {
+            bag.write_event(line)?;
+        }
         if let Some(mcap) = &mut self.mcap {
             mcap.injection(line);
         }
@@ -167,6 +180,10 @@ impl Sinks {
 
     fn close(mut self) -> std::io::Result<()> {
         self.flush()?;
+        #[cfg(feature = "ros2")]
+        if let Some(bag) = self.rosbag2.take() {
+            bag.finish()?;
+        }
         match self.mcap.take() {
             Some(mcap) => mcap.finish(),
             None => Ok(()),
@@ -194,6 +211,8 @@ impl TrajectoryWriter {
                 .map(|path| RowWriter::create(path, s))
                 .transpose()?,
             mcap: files.mcap,
+            #[cfg(feature = "ros2")]
+            rosbag2: files.rosbag2,
         };
         let (tx, rx) = std::sync::mpsc::sync_channel::<Msg>(1024);
         let handle = std::thread::Builder::new()
@@ -504,6 +523,8 @@ mod tests {
             Files {
                 trajectory: Some(&path),
                 mcap: None,
+                #[cfg(feature = "ros2")]
+                rosbag2: None,
             },
             &s,
         )

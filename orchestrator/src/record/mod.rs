@@ -14,6 +14,8 @@ pub mod mcap;
 mod mcap_scene;
 pub mod metrics;
 pub mod recovery;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 pub mod separation;
 pub mod summary;
 pub mod table;
@@ -31,6 +33,9 @@ pub enum Format {
     /// `DIR/run.mcap`: every output step and injection as JSON messages with JSON Schemas, one
     /// channel per agent and kind (docs/formats.md); opens in Foxglove.
     Mcap,
+    /// `DIR/rosbag2/`: a rosbag2 folder (`metadata.yaml`, MCAP storage, CDR) with the ROS 2
+    /// topics of `--ros2`, for `ros2 bag info/play` (docs/ros2.md; feature `ros2`).
+    Rosbag2,
 }
 
 /// Which files a [`Recorder`] writes.
@@ -42,6 +47,18 @@ pub struct Outputs {
     pub mcap: bool,
     /// `--foxglove ADDR`: serve the live view there (feature `foxglove`).
     pub foxglove: Option<LiveOptions>,
+    /// `DIR/rosbag2/` (feature `ros2`).
+    pub rosbag2: bool,
+    /// `--ros2`: publish on DDS (feature `ros2`).
+    pub ros2: Option<Ros2Options>,
+}
+
+/// How the live ROS 2 topics start (`--ros2`); the domain and discovery range come from ROS 2's
+/// environment variables.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ros2Options {
+    /// `--ros2-wait S`: seconds to wait for a subscriber before the run starts (0: none).
+    pub wait_s: f64,
 }
 
 /// Where the live Foxglove view is served and how long the run waits for a first viewer.
@@ -60,6 +77,8 @@ impl Outputs {
             trajectory: true,
             mcap: formats.contains(&Format::Mcap),
             foxglove: None,
+            rosbag2: formats.contains(&Format::Rosbag2),
+            ros2: None,
         }
     }
 }
@@ -88,6 +107,9 @@ pub struct Recorder {
     /// The live Foxglove view (`--foxglove`).
     #[cfg(feature = "foxglove")]
     live: Option<live::LiveFeed>,
+    /// The live ROS 2 topics (`--ros2`).
+    #[cfg(feature = "ros2")]
+    live_ros2: Option<ros2::LiveRos2>,
     checkpoints_refused: Vec<u32>,
     /// Multi-host runs: each agent's host at the end (empty: one machine).
     agent_hosts: Vec<String>,
@@ -131,14 +153,35 @@ impl Recorder {
         if outputs.foxglove.is_some() {
             return Err(std::io::Error::other(crate::cli::NO_FOXGLOVE));
         }
+        #[cfg(feature = "ros2")]
+        let (live_ros2, rosbag2) = {
+            if !outputs.rosbag2 {
+                ros2::remove_stale(out_dir)?;
+            }
+            let live = outputs
+                .ros2
+                .map(|o| ros2::LiveRos2::start(o, s))
+                .transpose()?;
+            let bag = outputs
+                .rosbag2
+                .then(|| ros2::BagSink::create(out_dir, s))
+                .transpose()?;
+            (live, bag)
+        };
+        #[cfg(not(feature = "ros2"))]
+        if outputs.ros2.is_some() || outputs.rosbag2 {
+            return Err(std::io::Error::other(crate::cli::NO_ROS2));
+        }
         let mcap = outputs
             .mcap
             .then(|| mcap::McapSink::create(&mcap_path, s, variant))
             .transpose()?;
-        let csv = if outputs.trajectory || mcap.is_some() {
+        let csv = if outputs.trajectory || mcap.is_some() || outputs.rosbag2 {
             let files = csv::Files {
                 trajectory: outputs.trajectory.then_some(csv_path.as_path()),
                 mcap,
+                #[cfg(feature = "ros2")]
+                rosbag2,
             };
             Some(csv::TrajectoryWriter::create(files, s)?)
         } else {
@@ -166,6 +209,8 @@ impl Recorder {
             restarts: vec![0; s.n_agents()],
             #[cfg(feature = "foxglove")]
             live,
+            #[cfg(feature = "ros2")]
+            live_ros2,
             checkpoints_refused: vec![0; s.n_agents()],
             agent_hosts: Vec::new(),
         })
@@ -199,6 +244,10 @@ impl Recorder {
             let errors = self.metrics.agents.iter().map(|a| a.last_error);
             live.step(step, reference, truths, commands, errors);
         }
+        #[cfg(feature = "ros2")]
+        if let Some(live) = &mut self.live_ros2 {
+            live.step(step, reference, truths);
+        }
         if let Some(csv) = &mut self.csv {
             if step.is_multiple_of(self.decimation) || div.is_some() {
                 csv.write_step(reference, truths, commands, &self.metrics)?;
@@ -212,6 +261,10 @@ impl Recorder {
     pub fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
         #[cfg(feature = "foxglove")]
         if let Some(live) = &mut self.live {
+            live.injection(line);
+        }
+        #[cfg(feature = "ros2")]
+        if let Some(live) = &mut self.live_ros2 {
             live.injection(line);
         }
         match &mut self.csv {
@@ -269,6 +322,10 @@ impl Recorder {
     pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
         #[cfg(feature = "foxglove")]
         if let Some(live) = self.live.take() {
+            live.finish();
+        }
+        #[cfg(feature = "ros2")]
+        if let Some(live) = self.live_ros2.take() {
             live.finish();
         }
         if let Some(csv) = self.csv.take() {

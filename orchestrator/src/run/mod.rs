@@ -299,6 +299,7 @@ pub fn main(args: RunArgs) -> ExitCode {
         mode,
         crate::record::Outputs {
             foxglove: args.common.live_options(),
+            ros2: args.common.ros2_options(),
             ..crate::record::Outputs::with(&args.common.record)
         },
         placement.as_ref(),

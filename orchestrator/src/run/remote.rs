@@ -16,7 +16,7 @@ use formation_config::protocol::services::Sizing;
 use formation_config::Scenario;
 use formation_net::bridge::{Bridge, BridgeConfig};
 use formation_net::clock::Offset;
-use formation_net::cluster::{Cluster, LAUNCHER};
+use formation_net::cluster::{Cluster, HandshakeError, LAUNCHER};
 use formation_net::plan::Placement;
 use formation_net::proto::{self, Reply, Request, RunRequest};
 use formation_net::session::{self, Mode, Options};
@@ -40,7 +40,9 @@ pub struct PlaceArgs {
     /// stay on this machine.
     #[arg(long, value_name = "IDS@HOST")]
     pub place: Vec<String>,
-    /// Endpoint of a host's daemon (repeatable); default tcp/127.0.0.1:7447.
+    /// Endpoint of a host's daemon (repeatable): tls/ADDR:PORT (with --tls), tcp/ADDR:PORT (with
+    /// --auth) or unixsock-stream/PATH. Default: each --hosts daemon of yours on this machine
+    /// (its socket in your private runtime folder).
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
     /// Zenoh link options.
@@ -99,6 +101,53 @@ pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<Str
     Ok(v)
 }
 
+/// A handshake error, with what is wrong with each endpoint when hosts did not answer (an
+/// authentication failure, a socket or an address that cannot be reached).
+fn why_missing(opts: &Options, e: HandshakeError) -> String {
+    let mut text = e.to_string();
+    if let HandshakeError::Missing(_) = e {
+        let found: Vec<String> = opts
+            .connect
+            .iter()
+            .filter_map(|ep| session::diagnose(opts, ep))
+            .map(|f| f.to_string())
+            .collect();
+        if !found.is_empty() {
+            text.push_str(": ");
+            text.push_str(&found.join("; "));
+        }
+    }
+    text
+}
+
+/// Whether the daemon named `name` with process id `pid` runs on this machine with this
+/// process's `/dev/shm`: a process of that pid here is `formation host --name NAME` and its
+/// `/dev/shm` (seen through `/proc/<pid>/root`) is this one's. A process that cannot be looked
+/// at (another user's) is not judged.
+fn shares_shared_memory(pid: u32, name: &str) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(cmdline) = std::fs::read(format!("/proc/{pid}/cmdline")) else {
+        return false;
+    };
+    let args: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
+    let named = args
+        .windows(2)
+        .any(|w| w[0] == b"--name" && w[1] == name.as_bytes())
+        || args
+            .iter()
+            .any(|a| *a == format!("--name={name}").as_bytes())
+        || (!args.iter().any(|a| a.starts_with(b"--name")) && crate::hosts::machine_name() == name);
+    let is_daemon = args.iter().any(|a| *a == b"host") && named;
+    if !is_daemon {
+        return false;
+    }
+    let id = |p: &str| std::fs::metadata(p).ok().map(|m| (m.dev(), m.ino()));
+    match (id("/dev/shm"), id(&format!("/proc/{pid}/root/dev/shm"))) {
+        (Some(a), Some(b)) => a == b,
+        _ => false,
+    }
+}
+
 /// Hosts reached and checked, before the run is prepared.
 pub struct Remote {
     cluster: Cluster,
@@ -125,22 +174,31 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
             hosts.push(h.clone());
         }
     }
-    let opts = Options {
-        mode: Mode::Orchestrator,
-        listen: vec![],
-        connect: if a.connect.is_empty() {
-            vec![session::default_endpoint()]
-        } else {
-            a.connect.clone()
-        },
-        auth: a.link.auth.clone(),
-        lease_ms: a.link.lease_ms,
+    // Without --connect: each host's daemon of this user on this machine (its private socket).
+    let connect = if a.connect.is_empty() {
+        hosts
+            .iter()
+            .map(|h| session::local_endpoint(h))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?
+    } else {
+        a.connect.clone()
     };
+    let opts = a.link.options(Mode::Orchestrator, vec![], connect);
+    crate::hosts::ignore_sigpipe();
     let cluster = Cluster::open(&opts).map_err(|e| e.to_string())?;
     let me = formation_net::identity::local();
-    cluster
+    let infos = cluster
         .handshake(&hosts, &me, session::REPLY_TIMEOUT)
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| why_missing(&opts, e))?;
+    for (h, i) in &infos {
+        if shares_shared_memory(i.pid, h) {
+            return Err(format!(
+                "host {h} is a daemon on this machine that shares this orchestrator's /dev/shm (pid {}): a run's iceoryx2 services have the same names on every host, so they would collide. Start that daemon with a /dev/shm and XDG_RUNTIME_DIR of its own and connect to its socket (docs/multi-host.md, \"One machine\"), or run without --hosts",
+                i.pid
+            ));
+        }
+    }
     let mut offsets = BTreeMap::new();
     for h in &hosts {
         let o = cluster

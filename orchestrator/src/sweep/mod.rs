@@ -188,8 +188,7 @@ fn run_one(
             dir,
             crate::record::Outputs {
                 trajectory: false,
-                mcap: false,
-                foxglove: None,
+                ..crate::record::Outputs::with(&[])
             },
         )
         .map_err(|e| format!("cannot write {}: {e}", dir.display()))
