@@ -251,7 +251,9 @@ pub struct Runtime {
     /// Default true (measured in docs/failures.md); without events nothing of it runs.
     pub rejoin_reference: bool,
     /// In whose controllers the generator is re-armed: `neighbours`, `itself` or `all`. Default
-    /// `neighbours` (measured in docs/failures.md).
+    /// `all`: in its own controller the re-armed generator also holds back D23's leader-relative
+    /// drive of the RBFNN until the reference is at the slot again, in the neighbours' it starts
+    /// their consensus errors at zero (crash sweeps measured in docs/failures.md).
     pub rejoin_reference_for: RejoinMembers,
     /// a_R: largest acceleration of the re-armed reference, m/s² (the generator's a_S; its limit
     /// is up at once: the quadrotor is flying). Default 1.0 (D19's a_S).
@@ -281,7 +283,7 @@ impl Default for Runtime {
             rejoin_resync: true,
             rejoin_reseed: true,
             rejoin_reference: true,
-            rejoin_reference_for: RejoinMembers::Neighbours,
+            rejoin_reference_for: RejoinMembers::All,
             rejoin_reference_accel_m_s2: 1.0,
             rejoin_reference_rate_1_s: 0.5,
             fallback_attitude_gain: 16.0,
