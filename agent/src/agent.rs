@@ -385,6 +385,17 @@ impl Agent {
         self.attitude.resync(&Vector3::from(own.rate));
     }
 
+    /// Re-seeds the RBFNN so that F-hat_iP at the quadrotor's position `p` and velocity `v` equals
+    /// `observed`, the external acceleration the failsafe observed while this controller was down
+    /// (`runtime.rejoin_reseed`, docs/failures.md): the smallest change of the weights, then the
+    /// projection of D15. Nothing for the no-RBFNN variant.
+    pub fn reseed(&mut self, p: [f64; 3], v: [f64; 3], observed: [f64; 3]) {
+        if self.p.variant != Variant::NoRbfnn {
+            self.nn.reseed(p, v, observed);
+            self.nn.project(self.p.gains.rbfnn.max_weight_norm);
+        }
+    }
+
     /// Computes the command of step k from the current attitude and rate in `own` and the delayed
     /// information, then advances the controller's internal states by dt.
     pub fn step(&mut self, own: &VehicleState) -> ControlCommand {
@@ -517,12 +528,25 @@ impl Agent {
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
             // The network learns from the same (shaped, D18) position error the law acts on.
-            let ep_nn = clip_norm(ep, pg.position_error_limit_m.unwrap_or(f64::INFINITY));
-            let drive = [
-                pg.nn_k_p * ep_nn[0] + pg.nn_k_v * ev[0],
-                pg.nn_k_p * ep_nn[1] + pg.nn_k_v * ev[1],
-                pg.nn_k_p * ep_nn[2] + pg.nn_k_v * ev[2],
-            ];
+            let shaped = pg.position_error_limit_m.unwrap_or(f64::INFINITY);
+            let ep_nn = clip_norm(ep, shaped);
+            let mut drive: [f64; 3] =
+                std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
+            // D23: the leader-relative errors of D11 drive the network too, once this agent's own
+            // start-up reference generator (D19) has brought its reference to the slot: the
+            // network does not integrate the shaped approach of the start-up.
+            let started = self.startup[0].is_none();
+            if self.p.leader_data && started && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0)
+            {
+                let lp = clip_norm(
+                    std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
+                    shaped,
+                );
+                for (k, d) in drive.iter_mut().enumerate() {
+                    *d += pg.nn_leader_k_p * lp[k]
+                        + pg.nn_leader_k_v * (me.v[k] - leader.v[k] - me.off_v[k]);
+                }
+            }
             self.nn
                 .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
         }

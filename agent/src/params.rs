@@ -49,6 +49,9 @@ pub struct AgentParams {
     /// A new or resumed controller re-synchronises its filters to the vehicle before its first
     /// command (`runtime.rejoin_resync`, [`crate::Agent::resync`]).
     pub rejoin_resync: bool,
+    /// A new or resumed controller re-seeds its RBFNN to the disturbance the failsafe observed
+    /// (`runtime.rejoin_reseed`, [`crate::Agent::reseed`]).
+    pub rejoin_reseed: bool,
     /// The gains of the reference generator re-armed for a member that comes back
     /// (`runtime.rejoin_reference`, docs/failures.md); `None`: off.
     pub rejoin_reference: Option<BlendGains>,
@@ -79,6 +82,7 @@ impl AgentParams {
             gains: s.controller.clone(),
             stale_steps: s.runtime.stale_steps(s.simulation.dt_s),
             rejoin_resync: s.runtime.rejoin_resync,
+            rejoin_reseed: s.runtime.rejoin_reseed,
             rejoin_reference: s.runtime.rejoin_reference.then_some(BlendGains {
                 accel: s.runtime.rejoin_reference_accel_m_s2,
                 jerk: f64::INFINITY, // unused: a re-armed generator starts with its limit up

@@ -118,6 +118,28 @@ impl Rbfnn {
         }
     }
 
+    /// Re-seeds the weights so that the output at (p, v) is `target`: per axis the smallest change
+    /// of W-hat_k that does it, W-hat_k += Psi_k (target_k - W-hat_k^T Psi_k) / ||Psi_k||² (an axis
+    /// whose Psi vanishes keeps its weights).
+    pub fn reseed(&mut self, p: [f64; 3], v: [f64; 3], target: [f64; 3]) {
+        let out = self.evaluate(p, v);
+        let l = self.l;
+        for ((w_row, psi_row), (t, o)) in self
+            .weights
+            .iter_mut()
+            .zip(&self.psi)
+            .zip(target.iter().zip(out))
+        {
+            let norm_sq: f64 = psi_row[..l].iter().map(|x| x * x).sum();
+            if norm_sq > f64::EPSILON {
+                let s = (t - o) / norm_sq;
+                for (w, psi) in w_row[..l].iter_mut().zip(&psi_row[..l]) {
+                    *w += psi * s;
+                }
+            }
+        }
+    }
+
     /// Projection onto ||W-hat_k|| <= `bound` for every axis (scales a weight vector that left the ball
     /// back onto its surface).
     pub fn project(&mut self, bound: f64) {
@@ -152,4 +174,24 @@ pub fn uniform(seed: u64, k: usize, j: usize) -> f64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 31;
     (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A re-seeded network outputs the target at the input it was re-seeded at, on every axis, and
+    /// the change is the smallest one: along Psi only.
+    #[test]
+    fn a_reseeded_network_outputs_the_target_at_its_input() {
+        let mut nn = Rbfnn::new(10, 5, 20.0, 2.0, 0.88, |k, j| 0.05 * uniform(7, k, j));
+        let (p, v) = ([1.0, 15.0, 5.0], [0.3, -0.8, 0.0]);
+        let before = nn.weight_norm();
+        nn.reseed(p, v, [0.5, 0.99, -0.2]);
+        let out = nn.evaluate(p, v);
+        for (o, t) in out.iter().zip([0.5, 0.99, -0.2]) {
+            assert!((o - t).abs() < 1e-12, "{out:?}");
+        }
+        assert!(nn.weight_norm() > before);
+    }
 }

@@ -41,9 +41,12 @@ pub struct Replayed {
 /// Rebuilds `agent` (already restored from the checkpoint of `plan.checkpoint`, or fresh) up to
 /// step `plan.rejoin_at`: replays the control of [checkpoint, down_from) and observes
 /// [max(down_from, rejoin_at - capacity), rejoin_at), then re-synchronises its filters to the
-/// vehicle's state of rejoin_at - 1 (`Agent::resync`, under `runtime.rejoin_resync`). `reference(k)` is the reference of step k,
+/// vehicle's state of rejoin_at - 1 (`Agent::resync`, under `runtime.rejoin_resync`) and re-seeds
+/// its RBFNN to the external acceleration the failsafe observed ([`observed_disturbance`],
+/// `Agent::reseed`, under `runtime.rejoin_reseed`). `reference(k)` is the reference of step k,
 /// `state(k, j)` the state quadrotor j had at step k, `recorded(k)` the thrust and torque command
-/// the agent sent at step k.
+/// quadrotor `agent` was flown with at step k: the agent's own before `down_from`, the held or
+/// failsafe command from then on.
 pub fn rebuild(
     agent: &mut Agent,
     plan: &Rejoin,
@@ -84,5 +87,95 @@ pub fn rebuild(
     if let Some(own) = last.filter(|_| agent.params().rejoin_resync) {
         agent.resync(&own);
     }
+    // Re-entry that has learned: the network starts from what the failsafe observed.
+    if let (Some(own), true) = (last, agent.params().rejoin_reseed) {
+        let p = agent.params();
+        let flown = |k: u64| (state(k, me), recorded(k).0);
+        if let Some(d) = observed_disturbance(
+            plan.down_from..plan.rejoin_at,
+            flown,
+            p.mass,
+            p.gravity,
+            p.dt,
+        ) {
+            agent.reseed(own.position, own.velocity, d);
+        }
+    }
     out
+}
+
+/// Rate of the disturbance observer a returning controller runs over its down window, 1/s: the
+/// failsafe's own (`plant/src/fallback.rs`, `DISTURBANCE_OBSERVER_RATE`), so that it reads the
+/// estimate the failsafe flew with at the return.
+pub const OBSERVED_DISTURBANCE_RATE: f64 = 10.0;
+
+/// The external acceleration quadrotor i met over `window` (m/s²), as the failsafe's observer
+/// estimates it: at every step k whose next state is in the window, the acceleration measured
+/// ((v_{k+1} - v_k) / dt) less the one its thrust T_k along its thrust axis at attitude A_k and
+/// gravity give, low-passed at [`OBSERVED_DISTURBANCE_RATE`] from the first measurement.
+/// `flown(k)` is the state of step k and the thrust it was flown with; `mass` the nominal mass
+/// (kg). None for a window of fewer than two steps.
+pub fn observed_disturbance(
+    window: std::ops::Range<u64>,
+    flown: impl Fn(u64) -> (VehicleState, f64),
+    mass: f64,
+    gravity: f64,
+    dt: f64,
+) -> Option<[f64; 3]> {
+    let gain = (OBSERVED_DISTURBANCE_RATE * dt).min(1.0);
+    let mut estimate: Option<[f64; 3]> = None;
+    for k in window.start..window.end.saturating_sub(1) {
+        let (x, thrust) = flown(k);
+        let (next, _) = flown(k + 1);
+        let [phi, theta, psi] = x.attitude;
+        let (sf, cf) = phi.sin_cos();
+        let (st, ct) = theta.sin_cos();
+        let (sp, cp) = psi.sin_cos();
+        let axis = [st * cp * cf + sp * sf, st * sp * cf - cp * sf, ct * cf];
+        let measured: [f64; 3] = std::array::from_fn(|a| {
+            let thrust_acc = axis[a] * thrust / mass - if a == 2 { gravity } else { 0.0 };
+            (next.velocity[a] - x.velocity[a]) / dt - thrust_acc
+        });
+        estimate = Some(match estimate {
+            None => measured,
+            Some(e) => std::array::from_fn(|a| e[a] + (measured[a] - e[a]) * gain),
+        });
+    }
+    estimate
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A quadrotor tilted by 0.1 rad in roll with hover thrust along its axis, accelerating at
+    /// exactly what its thrust gives plus a constant 0.7 m/s² along y: the observer reads 0.7 along
+    /// y and 0 elsewhere (to rounding), and nothing from a window of one step.
+    #[test]
+    fn the_observed_disturbance_is_the_acceleration_the_thrust_does_not_explain() {
+        let (m, g, dt) = (0.856, 9.81, 0.001);
+        let phi: f64 = 0.1;
+        let thrust = m * g / phi.cos();
+        // Thrust axis at roll phi (theta = psi = 0): [0, -sin phi, cos phi].
+        let acc = [
+            0.0,
+            -phi.sin() * thrust / m + 0.7,
+            phi.cos() * thrust / m - g,
+        ];
+        let state = |k: u64| VehicleState {
+            step: k,
+            attitude: [phi, 0.0, 0.0],
+            velocity: std::array::from_fn(|a| acc[a] * k as f64 * dt),
+            ..VehicleState::default()
+        };
+        let d = observed_disturbance(100..300, |k| (state(k), thrust), m, g, dt).unwrap();
+        assert!(
+            d[0].abs() < 1e-9 && (d[1] - 0.7).abs() < 1e-9 && d[2].abs() < 1e-9,
+            "{d:?}"
+        );
+        assert_eq!(
+            observed_disturbance(5..6, |k| (state(k), thrust), m, g, dt),
+            None
+        );
+    }
 }

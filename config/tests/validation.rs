@@ -2,8 +2,8 @@
 //! the error names the offending field and the right assumption.
 
 use formation_config::scenario::validate::{
-    validate, validate_event, ValidationError, A1, A2, A4, A5, CTRL, D11, EQ15, EQ35_50, EQ46_49,
-    FINITE, INDEX, MISSION, PHYS, SAT, SIM,
+    validate, validate_event, ValidationError, A1, A2, A4, A5, CTRL, D11, D23, EQ15, EQ35_50,
+    EQ46_49, FINITE, INDEX, MISSION, PHYS, SAT, SIM,
 };
 use formation_config::scenario::{Edge, PAPER_TOML};
 use formation_config::{Scenario, MAX_AGENTS};
@@ -993,6 +993,14 @@ rejects!(
     D11,
     |s| {
         s.controller.position.leader_position_gain = -1.0;
+    }
+);
+rejects!(
+    negative_leader_relative_rbfnn_drive_is_rejected_naming_d23,
+    "controller.position.nn_leader_k_v",
+    D23,
+    |s| {
+        s.controller.position.nn_leader_k_v = -0.3;
     }
 );
 rejects!(

@@ -62,8 +62,11 @@ fn wait_stepping(run: &RunningRun) {
     }
 }
 
+/// A warm restart is no worse than a cold one: with the slot failsafe both can stay under the
+/// formation's own error in that phase (then their peaks are equal), so the comparison is `<=`.
 #[test]
-fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_beats_a_cold_restart() {
+fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_is_no_worse_than_a_cold_restart(
+) {
     let dir = temp_dir("crash-warm");
     let s = scenario_with(
         &dir,
@@ -117,7 +120,7 @@ fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_beats_a
     let peak = |e: &serde_json::Value| e["peak_error_m"].as_f64().unwrap();
     assert!(
         warm_recovery <= cold["recovered_after_s"].as_f64().unwrap_or(f64::INFINITY)
-            && peak(warm) < peak(cold),
+            && peak(warm) <= peak(cold),
         "warm {warm} vs cold {cold}"
     );
     assert!(residue_of(&run).is_empty());

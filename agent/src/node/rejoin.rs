@@ -109,7 +109,7 @@ pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), Node
             f
         },
         |k, j| plan.state(k, j),
-        |k| plan.command(k),
+        |k| plan.flown_command(k),
     );
     // A realtime agent's commands depend on when its inputs arrived, which the replay from the
     // recorded states cannot reproduce: there the count is informative only.

@@ -209,6 +209,11 @@ pub struct RejoinFile {
     pub commands: Vec<(f64, [f64; 3])>,
     /// Every runtime event published so far, in order (the new process's timeline).
     pub events: Vec<RuntimeEvent>,
+    /// The (thrust, torque) quadrotor `agent` was flown with while its controller was down, steps
+    /// [down_from, rejoin_at): its last command held, then the failsafe's (docs/failures.md). With
+    /// `states`, what the returning controller reads the failsafe's observed disturbance from
+    /// (`runtime.rejoin_reseed`).
+    pub flown: Vec<(f64, [f64; 3])>,
 }
 
 impl RejoinFile {
@@ -220,6 +225,16 @@ impl RejoinFile {
     /// The agent's recorded command at step k (within [first, down_from)).
     pub fn command(&self, k: u64) -> (f64, [f64; 3]) {
         self.commands[(k - self.first) as usize]
+    }
+
+    /// What quadrotor `agent` was flown with at step k: its controller's recorded command before
+    /// `down_from`, the held or failsafe command from then to `rejoin_at`.
+    pub fn flown_command(&self, k: u64) -> (f64, [f64; 3]) {
+        if k < self.down_from {
+            self.command(k)
+        } else {
+            self.flown[(k - self.down_from) as usize]
+        }
     }
 }
 
@@ -269,9 +284,10 @@ pub fn decode_rejoin(
         && f.down_from <= f.rejoin_at
         && window.is_some_and(|w| Some(f.states.len()) == (w as usize).checked_mul(f.n))
         && f.commands.len() as u64 == f.down_from.saturating_sub(f.first)
+        && f.flown.len() as u64 == f.rejoin_at - f.down_from
         && f.checkpoint.is_none_or(|c| c < f.rejoin_at);
     if !consistent {
-        return Err("its window is inconsistent (agent, steps, states or commands)".into());
+        return Err("its window is inconsistent (agent, steps, states, commands or flown)".into());
     }
     Ok(f)
 }
@@ -375,6 +391,7 @@ mod tests {
             states: vec![VehicleState::default(); 8],
             commands: vec![(1.0, [0.0; 3]); 2],
             events: Vec::new(),
+            flown: vec![(2.0, [0.0; 3]); 2],
         };
         let good = encode_rejoin(55, &f).unwrap();
         assert_eq!(decode_rejoin(&good, 3, 55, 102).unwrap(), f);

@@ -236,6 +236,13 @@ pub struct Runtime {
     /// the vehicle's current attitude and rate before its first command (adaptive estimates and
     /// RBFNN weights are kept). Default true.
     pub rejoin_resync: bool,
+    /// A controller that comes back re-seeds its RBFNN before its first command so that its output
+    /// F-hat_iP at the quadrotor's state equals the external acceleration the failsafe observed
+    /// while it was down (read from the recorded states and the commands it was flown with, the
+    /// failsafe's disturbance observer run again at its rate; docs/failures.md, "Re-entry that has
+    /// learned"; D21): the smallest change of the weights that does it, then the projection of D15.
+    /// Default true; without events nothing of it runs.
+    pub rejoin_reseed: bool,
     /// A controller that comes back has the reference generator of D19 re-armed for its quadrotor
     /// in the controllers `rejoin_reference_for` names: the reference starts at the quadrotor's
     /// state where the failsafe left it and reaches its slot within `rejoin_reference_accel_m_s2`,
@@ -244,7 +251,9 @@ pub struct Runtime {
     /// Default true (measured in docs/failures.md); without events nothing of it runs.
     pub rejoin_reference: bool,
     /// In whose controllers the generator is re-armed: `neighbours`, `itself` or `all`. Default
-    /// `neighbours` (measured in docs/failures.md).
+    /// `all`: in its own controller the re-armed generator also holds back D23's leader-relative
+    /// drive of the RBFNN until the reference is at the slot again, in the neighbours' it starts
+    /// their consensus errors at zero (crash sweeps measured in docs/failures.md).
     pub rejoin_reference_for: RejoinMembers,
     /// a_R: largest acceleration of the re-armed reference, m/s² (the generator's a_S; its limit
     /// is up at once: the quadrotor is flying). Default 1.0 (D19's a_S).
@@ -272,8 +281,9 @@ impl Default for Runtime {
             hold_s: 0.2,
             fallback: Fallback::Slot,
             rejoin_resync: true,
+            rejoin_reseed: true,
             rejoin_reference: true,
-            rejoin_reference_for: RejoinMembers::Neighbours,
+            rejoin_reference_for: RejoinMembers::All,
             rejoin_reference_accel_m_s2: 1.0,
             rejoin_reference_rate_1_s: 0.5,
             fallback_attitude_gain: 16.0,

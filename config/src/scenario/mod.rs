@@ -362,6 +362,22 @@ pub struct PositionGains {
     /// Leader-relative position gain k_LP: U_iP gets -k_LP (P_i - P_d - Delta_i0) on the delayed leader
     /// broadcast, 1/s². Paper: 0. Ours: see docs/deviations.md (D11).
     pub leader_position_gain: f64,
+    /// Weight of the leader-relative position error P_i - P_d - Delta_i0 in the RBFNN update (15),
+    /// next to K_P e_iP: the drive becomes K_P e_iP + K_V e_iV + K_LP,nn (P_i - P_d - Delta_i0) +
+    /// K_LV,nn (V_i - P_d' - Delta_i0'), on the delayed leader broadcast D11 uses (dropped where D11 is,
+    /// `leader_broadcast = "pinned"` and b_i = 0), once the agent's own start-up reference generator
+    /// (D19) has finished. Paper: none (0, the default). Ours: 0.15 in `paper.toml`, see
+    /// docs/deviations.md (D23): D11 is the information of a small b_i, and with a b_i the error would
+    /// be in e_iP and so in the network's drive; without it the network learns only from the consensus
+    /// error, which carries the formation's common-mode error to an agent with b_i = 0 only through
+    /// its pinned neighbours.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub nn_leader_k_p: f64,
+    /// Weight of the leader-relative velocity error V_i - P_d' - Delta_i0' in the RBFNN update (15)
+    /// (D23), as K_V of (15). Paper: none (0, the default). Ours: 0.3 in
+    /// `paper.toml` (docs/tuning.md, section 10: 1.5-2x K_LP,nn keeps it out of the limit cycle).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub nn_leader_k_v: f64,
     /// Largest norm of the position errors the law (14) acts on: e_iP and the leader-relative
     /// P_i - P_d - Delta_i0 (D11) are scaled down to this norm before the gains k_P, k_LP apply, m
     /// (reference shaping, docs/deviations.md D18). Paper: none (absent, the default). Ours: 1.0 —
@@ -720,6 +736,10 @@ impl std::fmt::Display for LoadError {
 }
 
 impl std::error::Error for LoadError {}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
 
 fn default_startup_blend_jerk() -> f64 {
     2.0

@@ -88,6 +88,9 @@ pub const EQ15: &str =
 /// The leader-relative terms of the position law (docs/deviations.md, D11).
 pub const D11: &str =
     "D11: k_L and k_LP add damping and stiffness to every consensus mode, so they cannot be negative";
+/// D23: the RBFNN's leader-relative drive.
+pub const D23: &str =
+    "D23: the leader-relative drive of the RBFNN update (15) weighs an error, so it cannot be negative";
 /// The adaptive laws (46)-(49).
 pub const EQ46_49: &str =
     "eq. (46)-(49): adaptation rates and leakages are non-negative design constants";
@@ -717,6 +720,16 @@ fn check_position_and_filters(s: &Scenario, c: &mut Collector) {
         "controller.position.leader_position_gain",
         ctl.position.leader_position_gain,
         D11,
+    );
+    c.non_negative(
+        "controller.position.nn_leader_k_p",
+        ctl.position.nn_leader_k_p,
+        D23,
+    );
+    c.non_negative(
+        "controller.position.nn_leader_k_v",
+        ctl.position.nn_leader_k_v,
+        D23,
     );
     c.positive(
         "controller.position.max_horizontal_accel_m_s2",

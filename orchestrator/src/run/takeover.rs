@@ -499,6 +499,9 @@ impl Takeover {
                 .map(|k| self.history.command(k, i))
                 .collect(),
             events: self.published.clone(),
+            flown: (plan.down_from..plan.rejoin_at)
+                .map(|k| self.history.command(k, i))
+                .collect(),
         };
         let path = restart::rejoin_path(&run_dir, i);
         restart::write_rejoin(&path, self.scenario_hash, &file)
