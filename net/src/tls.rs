@@ -905,16 +905,23 @@ mod tests {
         )
     }
 
-    #[test]
-    fn the_quic_preflight_accepts_its_own_ca_and_names_a_certificate_of_another_ca_either_way() {
-        let d = scratch("preflight-quic");
-        let (a, b, x) = three_hosts(&d);
-        let (port, h) = serve_quic_once(&b, &b);
-        assert_eq!(preflight_quic("127.0.0.1", port, &a), Ok(()));
+    type Serve = fn(&Material, &Material) -> (u16, std::thread::JoinHandle<()>);
+    type Preflight = fn(&str, u16, &Material) -> Result<(), TlsRefusal>;
+
+    /// `preflight` against servers of `serve`: admitted with its own CA; a server of another CA
+    /// refused here, its certificate named; this host's certificate of another CA (trusting the
+    /// server's CA) refused there. The three hosts `three_hosts` made in `d`.
+    fn own_ca_admitted_and_another_refused_either_way(
+        d: &Path,
+        serve: Serve,
+        preflight: Preflight,
+    ) -> (Material, Material, Material) {
+        let (a, b, x) = three_hosts(d);
+        let (port, h) = serve(&b, &b);
+        assert_eq!(preflight("127.0.0.1", port, &a), Ok(()));
         h.join().unwrap();
-        // A server of another CA: refused here, its certificate named.
-        let (port, h) = serve_quic_once(&x, &x);
-        match preflight_quic("127.0.0.1", port, &a) {
+        let (port, h) = serve(&x, &x);
+        match preflight("127.0.0.1", port, &a) {
             Err(TlsRefusal::PeerCertificate { why, presented }) => {
                 assert!(why.contains("not signed by the CA"), "{why}");
                 assert!(presented.unwrap().contains("CN=x"));
@@ -922,17 +929,24 @@ mod tests {
             other => panic!("{other:?}"),
         }
         h.join().unwrap();
-        // This host's certificate of another CA (trusting the server's CA): refused there.
         let mixed = Material {
             ca_pem: b.ca_pem.clone(),
             ..x.clone()
         };
-        let (port, h) = serve_quic_once(&b, &b);
-        match preflight_quic("127.0.0.1", port, &mixed) {
+        let (port, h) = serve(&b, &b);
+        match preflight("127.0.0.1", port, &mixed) {
             Err(TlsRefusal::OwnCertificate(_)) => {}
             other => panic!("a client certificate of another CA must be refused: {other:?}"),
         }
         h.join().unwrap();
+        (a, b, x)
+    }
+
+    #[test]
+    fn the_quic_preflight_accepts_its_own_ca_and_names_a_certificate_of_another_ca_either_way() {
+        let d = scratch("preflight-quic");
+        let (a, _, _) =
+            own_ca_admitted_and_another_refused_either_way(&d, serve_quic_once, preflight_quic);
         // Nobody on the port: UDP has no refusal, the handshake goes unanswered.
         let port = std::net::UdpSocket::bind("127.0.0.1:0")
             .unwrap()
@@ -949,34 +963,7 @@ mod tests {
     #[test]
     fn the_preflight_accepts_its_own_ca_and_names_a_certificate_of_another_ca_either_way() {
         let d = scratch("preflight");
-        let (a, b, x) = three_hosts(&d);
-        let (port, h) = serve_once(&b, &b);
-        assert_eq!(preflight("127.0.0.1", port, &a), Ok(()));
-        h.join().unwrap();
-        // A server of another CA: refused here, its certificate named.
-        let (port, h) = serve_once(&x, &x);
-        match preflight("127.0.0.1", port, &a) {
-            Err(TlsRefusal::PeerCertificate { why, presented }) => {
-                assert!(why.contains("not signed by the CA"), "{why}");
-                assert!(presented.unwrap().contains("CN=x"));
-            }
-            other => panic!("{other:?}"),
-        }
-        h.join().unwrap();
-        // This host's certificate of another CA (trusting the server's CA): refused there.
-        let mixed = Material {
-            ca_pem: b.ca_pem.clone(),
-            ..x.clone()
-        };
-        let (port, h) = serve_once(&b, &b);
-        assert!(
-            matches!(
-                preflight("127.0.0.1", port, &mixed),
-                Err(TlsRefusal::OwnCertificate(_))
-            ),
-            "a client certificate of another CA must be refused by the server"
-        );
-        h.join().unwrap();
+        let (a, _, _) = own_ca_admitted_and_another_refused_either_way(&d, serve_once, preflight);
         // The name: a certificate not issued for the address connected to.
         let far = Issue {
             name: "far".into(),
