@@ -1364,6 +1364,61 @@ impl UdpRelay {
     }
 }
 
+/// The password of [`Hosts`]'s `--auth` file, which must never cross a link.
+const SECRET: &[u8] = b"tests-only-secret";
+
+/// A capture of an encrypted link: it carried the runs (over 100 kB), and none of `formation`
+/// (every key expression, the user name), `VehicleState`, `ControlCommand` or the password is
+/// readable in it.
+fn assert_no_plaintext(wire: &[u8], link: &str) {
+    assert!(
+        wire.len() > 100_000,
+        "the runs crossed the relay: {} bytes",
+        wire.len()
+    );
+    for plain in [
+        &b"formation"[..],
+        b"VehicleState",
+        b"ControlCommand",
+        SECRET,
+    ] {
+        assert!(
+            !contains(wire, plain),
+            "'{}' is readable on the {link} link",
+            String::from_utf8_lossy(plain)
+        );
+    }
+}
+
+/// Starts daemon h1 on `TRANSPORT/DAEMON_IP:7447` with `--tls` (its folder `h1`) and `--auth`;
+/// returns the arguments of a split run of `scenario` (agents 4-5 on h1) connecting to `connect`
+/// with the launcher's folder `a` and `--auth`.
+fn start_encrypted_split(
+    hosts: &mut Hosts,
+    dir: &Path,
+    transport: &str,
+    (daemon_ip, h1, a): (&str, &Path, &Path),
+    scenario: &[&str],
+    connect: &str,
+) -> Vec<String> {
+    let auth = hosts.auth.display().to_string();
+    let listen = format!("{transport}/{daemon_ip}:7447");
+    let h1 = h1.display().to_string();
+    hosts.start_daemon_with(
+        1,
+        dir,
+        &["--listen", &listen, "--tls", &h1, "--auth", &auth],
+        &[],
+    );
+    let a = a.display().to_string();
+    scenario
+        .iter()
+        .chain(&["--hosts", "h1", "--place", "4,5@h1"])
+        .chain(&["--connect", connect, "--tls", &a, "--auth", &auth])
+        .map(|s| s.to_string())
+        .collect()
+}
+
 /// How many split runs the QUIC test makes over one daemon: every one must complete, no retry
 /// (Zenoh's QUIC link has none of its TLS link's drops: docs/multi-host.md).
 const QUIC_RUNS: usize = 3;
@@ -1379,17 +1434,8 @@ fn a_quic_split_run_is_byte_identical_to_sim_run_after_run_and_its_datagrams_sho
     let mut hosts = Hosts::new(2, &dir);
     let (daemon_ip, relay_ip) = relay_addrs(&hosts);
     let (h1, a) = split_certificates(&dir, &daemon_ip, &relay_ip);
-    let s = |p: &Path| p.display().to_string();
-    let auth = s(&hosts.auth);
-    let secret: &[u8] = b"tests-only-secret";
     let scenario = ["paper", "--set", "simulation.duration_s=2"];
-    let listen = format!("quic/{daemon_ip}:7447");
-    hosts.start_daemon_with(
-        1,
-        &dir,
-        &["--listen", &listen, "--tls", &s(&h1), "--auth", &auth],
-        &[],
-    );
+    // The relay's port is known before the daemon listens: UDP needs no listener to bind to.
     let relay = UdpRelay::start(
         &hosts.names[0],
         &relay_ip,
@@ -1397,13 +1443,15 @@ fn a_quic_split_run_is_byte_identical_to_sim_run_after_run_and_its_datagrams_sho
         format!("{daemon_ip}:7447").parse().unwrap(),
     );
     let connect = format!("quic/{relay_ip}:{}", relay.port);
-    let a_tls = s(&a);
-    let args: Vec<&str> = scenario
-        .iter()
-        .chain(&["--hosts", "h1", "--place", "4,5@h1"])
-        .copied()
-        .chain(["--connect", &connect, "--tls", &a_tls, "--auth", &auth])
-        .collect();
+    let args = start_encrypted_split(
+        &mut hosts,
+        &dir,
+        "quic",
+        (&daemon_ip, &h1, &a),
+        &scenario,
+        &connect,
+    );
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     for run in 1..=QUIC_RUNS {
         let out = dir.join(format!("run-quic-{run}"));
         let (code, err, residue) = run_in_with(&hosts, &dir, &args, &out);
@@ -1426,24 +1474,7 @@ fn a_quic_split_run_is_byte_identical_to_sim_run_after_run_and_its_datagrams_sho
     for left in hosts.stop_daemons() {
         assert_no_residue("host h1", &left);
     }
-    let wire = relay.bytes();
-    assert!(
-        wire.len() > 100_000,
-        "the runs crossed the relay: {} bytes",
-        wire.len()
-    );
-    for plain in [
-        &b"formation"[..],
-        b"VehicleState",
-        b"ControlCommand",
-        secret,
-    ] {
-        assert!(
-            !contains(&wire, plain),
-            "'{}' is readable on the QUIC link",
-            String::from_utf8_lossy(plain)
-        );
-    }
+    assert_no_plaintext(&relay.bytes(), "QUIC");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -1458,20 +1489,10 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
     let mut hosts = Hosts::new(2, &dir);
     let (daemon_ip, relay_ip) = relay_addrs(&hosts);
     let (h1, a) = split_certificates(&dir, &daemon_ip, &relay_ip);
-    let s = |p: &Path| p.display().to_string();
-    let auth = s(&hosts.auth);
-    let secret: &[u8] = b"tests-only-secret";
+    let auth = hosts.auth.display().to_string();
     let scenario = ["paper", "--set", "simulation.duration_s=2"];
-    let place = ["--hosts", "h1", "--place", "4,5@h1"];
 
     // TLS (with a user and password inside it): byte-identical, and nothing readable on the wire.
-    let listen = format!("tls/{daemon_ip}:7447");
-    hosts.start_daemon_with(
-        1,
-        &dir,
-        &["--listen", &listen, "--tls", &s(&h1), "--auth", &auth],
-        &[],
-    );
     let relay = Relay::start(
         &hosts.names[0],
         &relay_ip,
@@ -1479,13 +1500,15 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
         format!("{daemon_ip}:7447").parse().unwrap(),
     );
     let connect = format!("tls/{relay_ip}:{}", relay.port);
-    let a_tls = s(&a);
-    let args: Vec<&str> = scenario
-        .iter()
-        .chain(&place)
-        .copied()
-        .chain(["--connect", &connect, "--tls", &a_tls, "--auth", &auth])
-        .collect();
+    let args = start_encrypted_split(
+        &mut hosts,
+        &dir,
+        "tls",
+        (&daemon_ip, &h1, &a),
+        &scenario,
+        &connect,
+    );
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     // Zenoh 1.10.2's TLS link can drop mid-run (docs/multi-host.md, the known problem of its
     // TLS link): such a run names its host as lost. Up to three tries for that cause alone; any
     // other failure fails at once.
@@ -1505,24 +1528,7 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
         assert_no_residue("host h1", &left);
     }
     formation_tests::assert_trajectory_is_sims(&out, &scenario, &dir.join("sim"));
-    let wire = relay.bytes();
-    assert!(
-        wire.len() > 100_000,
-        "the run crossed the relay: {} bytes",
-        wire.len()
-    );
-    for plain in [
-        &b"formation"[..],
-        b"VehicleState",
-        b"ControlCommand",
-        secret,
-    ] {
-        assert!(
-            !contains(&wire, plain),
-            "'{}' is readable on the TLS link",
-            String::from_utf8_lossy(plain)
-        );
-    }
+    assert_no_plaintext(&relay.bytes(), "TLS");
 
     // The control: the same run over TCP with a user and password shows keys and wire types in
     // clear (the password itself never crosses: Zenoh sends a keyed hash of it).
@@ -1537,7 +1543,7 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
     let connect = format!("tcp/{relay_ip}:{}", relay.port);
     let args: Vec<&str> = scenario
         .iter()
-        .chain(&place)
+        .chain(&["--hosts", "h1", "--place", "4,5@h1"])
         .copied()
         .chain(["--connect", &connect, "--auth", &auth])
         .collect();
@@ -1552,6 +1558,6 @@ fn a_tls_split_run_is_byte_identical_to_sim_and_its_link_shows_no_plaintext_unli
             String::from_utf8_lossy(plain)
         );
     }
-    assert!(!contains(&wire, secret), "the password never crosses");
+    assert!(!contains(&wire, SECRET), "the password never crosses");
     let _ = std::fs::remove_dir_all(&dir);
 }
