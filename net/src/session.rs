@@ -1,17 +1,19 @@
 //! Zenoh sessions of this project: which mode, which endpoints, credentials, threads.
 //!
 //! * Endpoints: `unixsock-stream/PATH` (a Unix socket), `tcp/HOST:PORT` (plaintext, with Zenoh
-//!   user/password authentication) and `tls/HOST:PORT` (mutual TLS, [`crate::tls`]).
+//!   user/password authentication), `tls/HOST:PORT` (mutual TLS over TCP, [`crate::tls`]) and
+//!   `quic/HOST:PORT` (QUIC over UDP: the same certificates and mutual TLS 1.3).
 //! * A daemon's default endpoint is a Unix socket named after it in its user's private runtime
 //!   folder ([`local_dir`]: `$XDG_RUNTIME_DIR/formation/`, else `/tmp/formation-<uid>/`, mode
 //!   0700, owned by that user, never a link): the kernel lets only that user (and root) connect.
 //!   An orchestrator or `formation hosts` of the same user finds it there by host name.
 //! * Every `tcp/` endpoint (loopback included) needs `--auth FILE`; every `tls/` endpoint needs
-//!   `--tls DIR`; a Unix socket in a folder others can enter needs `--auth`. The only exception:
+//!   `--tls DIR`, and so does every `quic/` endpoint; a Unix socket in a folder others can enter needs `--auth`. The only exception:
 //!   a run's telemetry export ([`Mode::Export`]) may listen on TCP loopback without `--auth`.
-//! * Before a TLS link is opened, a pre-flight handshake ([`crate::tls::preflight`]) checks the
-//!   peer's certificate against this host's CA alone and names whoever refused whom; after a
-//!   failure, [`diagnose`] tells an authentication failure from an unreachable endpoint.
+//! * Before a TLS or QUIC link is opened, a pre-flight handshake ([`crate::tls::preflight`],
+//!   [`crate::tls::preflight_quic`]) checks the peer's certificate against this host's CA alone
+//!   and names whoever refused whom; after a failure, [`diagnose`] tells an authentication
+//!   failure from an unreachable endpoint.
 //! * Multicast scouting is off: hosts are joined by explicit endpoints only.
 //! * Zenoh's runtimes default to six worker threads per process; on small machines
 //!   [`bound_threads`] caps each runtime at one worker unless `ZENOH_RUNTIME` is already set.
@@ -23,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use zenoh::Wait;
 
-/// Default port of `formation host --listen tcp/…` and `tls/…` in the docs' examples.
+/// Default port of `formation host --listen tcp/…`, `tls/…` and `quic/…` in the docs' examples.
 pub const DEFAULT_PORT: u16 = 7447;
 
 /// Extension of a daemon's socket in [`local_dir`].
@@ -113,14 +115,23 @@ pub enum Endpoint {
         /// Port.
         port: u16,
     },
+    /// `quic/HOST:PORT` (a UDP port).
+    Quic {
+        /// Host name or address (IPv6 in brackets).
+        host: String,
+        /// Port.
+        port: u16,
+    },
 }
 
 impl Endpoint {
-    /// Whether the endpoint is a TCP or TLS one on a loopback address.
+    /// Whether the endpoint is a TCP, TLS or QUIC one on a loopback address.
     pub fn is_loopback(&self) -> bool {
         let host = match self {
             Endpoint::Unix(_) => return false,
-            Endpoint::Tcp { host, .. } | Endpoint::Tls { host, .. } => host,
+            Endpoint::Tcp { host, .. }
+            | Endpoint::Tls { host, .. }
+            | Endpoint::Quic { host, .. } => host,
         };
         let host = host.trim_start_matches('[').trim_end_matches(']');
         host == "localhost"
@@ -147,7 +158,7 @@ pub enum OptionError {
         /// Whether it is listened on (else connected to).
         listening: bool,
     },
-    /// A `tls/` endpoint without `--tls`.
+    /// A `tls/` or `quic/` endpoint without `--tls`.
     NeedsTls(String),
     /// A Unix socket to listen on in a folder others may enter, without `--auth`.
     SharedSocket {
@@ -192,11 +203,11 @@ impl std::fmt::Display for OptionError {
         match self {
             OptionError::Endpoint { endpoint, why } => write!(
                 f,
-                "endpoint '{endpoint}': {why} (expected unixsock-stream/PATH, tcp/HOST:PORT or tls/HOST:PORT)"
+                "endpoint '{endpoint}': {why} (expected unixsock-stream/PATH, tcp/HOST:PORT, tls/HOST:PORT or quic/HOST:PORT)"
             ),
             OptionError::NeedsAuth { endpoint, listening } => write!(
                 f,
-                "{} {endpoint} requires authentication: pass --auth FILE (user:password lines, mode 0600), or use an encrypted tls/HOST:PORT endpoint with --tls DIR (mutual TLS); see docs/multi-host.md",
+                "{} {endpoint} requires authentication: pass --auth FILE (user:password lines, mode 0600), or use an encrypted tls/HOST:PORT or quic/HOST:PORT endpoint with --tls DIR (mutual TLS); see docs/multi-host.md",
                 if *listening { "listening on" } else { "connecting to" }
             ),
             OptionError::NeedsTls(ep) => write!(
@@ -304,8 +315,8 @@ fn bad_endpoint(ep: &str, why: &str) -> OptionError {
     }
 }
 
-/// Parses `unixsock-stream/PATH` (absolute, at most [`MAX_SOCKET_PATH`] bytes), `tcp/HOST:PORT`
-/// or `tls/HOST:PORT`.
+/// Parses `unixsock-stream/PATH` (absolute, at most [`MAX_SOCKET_PATH`] bytes), `tcp/HOST:PORT`,
+/// `tls/HOST:PORT` or `quic/HOST:PORT`.
 pub fn parse_endpoint(ep: &str) -> Result<Endpoint, OptionError> {
     if let Some(path) = ep.strip_prefix("unixsock-stream/") {
         let p = PathBuf::from(path);
@@ -320,13 +331,10 @@ pub fn parse_endpoint(ep: &str) -> Result<Endpoint, OptionError> {
         }
         return Ok(Endpoint::Unix(p));
     }
-    let (tls, rest) = if let Some(r) = ep.strip_prefix("tcp/") {
-        (false, r)
-    } else if let Some(r) = ep.strip_prefix("tls/") {
-        (true, r)
-    } else {
-        return Err(bad_endpoint(ep, "unknown transport"));
-    };
+    let (transport, rest) = ep
+        .split_once('/')
+        .filter(|(t, _)| ["tcp", "tls", "quic"].contains(t))
+        .ok_or_else(|| bad_endpoint(ep, "unknown transport"))?;
     let (host, port) = rest
         .rsplit_once(':')
         .ok_or_else(|| bad_endpoint(ep, "no port"))?;
@@ -337,10 +345,10 @@ pub fn parse_endpoint(ep: &str) -> Result<Endpoint, OptionError> {
         return Err(bad_endpoint(ep, "no host"));
     }
     let host = host.to_string();
-    Ok(if tls {
-        Endpoint::Tls { host, port }
-    } else {
-        Endpoint::Tcp { host, port }
+    Ok(match transport {
+        "tls" => Endpoint::Tls { host, port },
+        "quic" => Endpoint::Quic { host, port },
+        _ => Endpoint::Tcp { host, port },
     })
 }
 
@@ -448,7 +456,7 @@ impl Options {
                         });
                     }
                 }
-                Endpoint::Tls { .. } if tls.is_none() => {
+                Endpoint::Tls { .. } | Endpoint::Quic { .. } if tls.is_none() => {
                     return Err(OptionError::NeedsTls(ep.clone()))
                 }
                 Endpoint::Unix(path) if listening && self.auth.is_none() => {
@@ -523,6 +531,7 @@ impl Options {
         if let Some(m) = &tls {
             use base64::Engine;
             let b64 = |b: &[u8]| json(&base64::engine::general_purpose::STANDARD.encode(b));
+            // Zenoh's TLS and QUIC links both read this section.
             let k = "transport/link/tls";
             // The contents, not the paths: the files were read once, checked, without
             // following links; Zenoh never opens them.
@@ -561,25 +570,23 @@ impl Options {
         Ok(c)
     }
 
-    /// Opens the session. An orchestrator or client first checks every `tls/` endpoint it
-    /// connects to ([`tls::preflight`]): a certificate refused either way is an error naming the
-    /// endpoint (an endpoint that cannot be reached is left to the handshake, which names the
-    /// host missing).
+    /// Opens the session. An orchestrator or client first checks every `tls/` and `quic/`
+    /// endpoint it connects to ([`tls::preflight`], [`tls::preflight_quic`]): a certificate
+    /// refused either way is an error naming the endpoint (an endpoint that cannot be reached is
+    /// left to the handshake, which names the host missing).
     pub fn open(&self) -> Result<zenoh::Session, OptionError> {
         bound_threads();
         let c = self.config()?;
         if matches!(self.mode, Mode::Orchestrator | Mode::Client) {
             if let Some(m) = self.material()? {
                 for ep in &self.connect {
-                    if let Endpoint::Tls { host, port } = parse_endpoint(ep)? {
-                        match tls::preflight(&host, port, &m) {
-                            Ok(()) | Err(TlsRefusal::Unreachable(_)) => {}
-                            Err(r) => {
-                                return Err(OptionError::Link(LinkFailure {
-                                    endpoint: ep.clone(),
-                                    problem: LinkProblem::Tls(r),
-                                }))
-                            }
+                    match preflight(&parse_endpoint(ep)?, &m) {
+                        None | Some(TlsRefusal::Unreachable(_)) => {}
+                        Some(r) => {
+                            return Err(OptionError::Link(LinkFailure {
+                                endpoint: ep.clone(),
+                                problem: LinkProblem::Tls(r),
+                            }))
                         }
                     }
                 }
@@ -588,6 +595,16 @@ impl Options {
         zenoh::open(c)
             .wait()
             .map_err(|e| OptionError::Open(e.to_string()))
+    }
+}
+
+/// The pre-flight handshake of a `tls/` or `quic/` endpoint: why it is refused, if it is
+/// (`None` for other endpoints).
+fn preflight(ep: &Endpoint, m: &Material) -> Option<TlsRefusal> {
+    match ep {
+        Endpoint::Tls { host, port } => tls::preflight(host, *port, m).err(),
+        Endpoint::Quic { host, port } => tls::preflight_quic(host, *port, m).err(),
+        Endpoint::Unix(_) | Endpoint::Tcp { .. } => None,
     }
 }
 
@@ -635,9 +652,9 @@ pub fn diagnose(o: &Options, endpoint: &str) -> Option<LinkFailure> {
                 return fail(LinkProblem::Unreachable(e.to_string()));
             }
         }
-        Endpoint::Tls { host, port } => {
+        ep @ (Endpoint::Tls { .. } | Endpoint::Quic { .. }) => {
             let m = o.material().ok()??;
-            if let Err(r) = tls::preflight(&host, port, &m) {
+            if let Some(r) = preflight(&ep, &m) {
                 return fail(match r {
                     TlsRefusal::Unreachable(why) => LinkProblem::Unreachable(why),
                     r => LinkProblem::Tls(r),
@@ -751,7 +768,7 @@ mod tests {
     }
 
     #[test]
-    fn endpoints_of_the_three_transports_are_parsed_and_malformed_ones_named() {
+    fn endpoints_of_the_four_transports_are_parsed_and_malformed_ones_named() {
         let tcp = |h: &str, p| Endpoint::Tcp {
             host: h.into(),
             port: p,
@@ -772,6 +789,21 @@ mod tests {
             })
         );
         assert_eq!(
+            parse_endpoint("quic/[::1]:7447"),
+            Ok(Endpoint::Quic {
+                host: "[::1]".into(),
+                port: 7447
+            })
+        );
+        assert!(parse_endpoint("quic/localhost:7447").unwrap().is_loopback());
+        assert!(parse_endpoint("quic/10.0.0.2").is_err());
+        assert!(parse_endpoint("quic/:7447").is_err());
+        assert!(parse_endpoint("quic_datagram/10.0.0.2:7447").is_err());
+        assert!(parse_endpoint("udp/127.0.0.1:7447")
+            .unwrap_err()
+            .to_string()
+            .contains("quic/HOST:PORT"));
+        assert_eq!(
             parse_endpoint("unixsock-stream/run/b.sock"),
             Err(bad_endpoint(
                 "unixsock-stream/run/b.sock",
@@ -790,7 +822,7 @@ mod tests {
     }
 
     #[test]
-    fn every_tcp_endpoint_needs_auth_and_every_tls_endpoint_needs_certificates() {
+    fn every_tcp_endpoint_needs_auth_and_every_tls_or_quic_endpoint_needs_certificates() {
         for (l, c) in [
             (&["tcp/0.0.0.0:7447"][..], &[][..]),
             (&["tcp/127.0.0.1:7447"][..], &[][..]),
@@ -804,6 +836,14 @@ mod tests {
             .check()
             .unwrap_err();
         assert_eq!(e, OptionError::NeedsTls("tls/10.0.0.2:7447".into()));
+        for (l, c) in [
+            (&["quic/0.0.0.0:7447"][..], &[][..]),
+            (&[][..], &["quic/10.0.0.2:7447"][..]),
+        ] {
+            let e = opts(Mode::Daemon, l, c).check().unwrap_err();
+            assert!(matches!(e, OptionError::NeedsTls(_)), "{e}");
+            assert!(e.to_string().contains("--tls DIR"), "{e}");
+        }
         // The telemetry export alone may listen on loopback without credentials.
         assert!(opts(Mode::Export, &["tcp/127.0.0.1:7448"], &[])
             .check()
@@ -811,6 +851,69 @@ mod tests {
         assert!(opts(Mode::Export, &["tcp/0.0.0.0:7448"], &[])
             .check()
             .is_err());
+    }
+
+    #[test]
+    fn zenohs_own_quic_link_admits_its_ca_and_refuses_a_certificate_of_another_ca_either_way() {
+        use std::os::unix::fs::PermissionsExt;
+        let d = std::env::temp_dir().join(format!("fm-net-quic-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        let (ca1, ca2) = (d.join("ca1"), d.join("ca2"));
+        tls::init(&ca1).unwrap();
+        tls::init(&ca2).unwrap();
+        let host = |ca: &Path, name: &str| {
+            let what = tls::Issue {
+                name: name.into(),
+                addrs: vec!["127.0.0.1".parse().unwrap()],
+                dns: vec![],
+            };
+            tls::issue(ca, &what, &d.join(name)).unwrap();
+            d.join(name)
+        };
+        let (b, a, x, mixed) = (
+            host(&ca1, "b"),
+            host(&ca1, "a"),
+            host(&ca2, "x"),
+            host(&ca2, "m"),
+        );
+        // Trusting b's CA, presenting a certificate of another.
+        let ca = mixed.join(tls::CA_CERT);
+        std::fs::remove_file(&ca).unwrap();
+        std::fs::copy(ca1.join(tls::CA_CERT), &ca).unwrap();
+        std::fs::set_permissions(&ca, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")
+            .and_then(|s| s.local_addr())
+            .unwrap()
+            .port();
+        let ep = format!("quic/127.0.0.1:{port}");
+        let daemon = Options {
+            tls: Some(b),
+            ..opts(Mode::Daemon, &[&ep], &[])
+        };
+        let daemon = zenoh::open(daemon.config().unwrap())
+            .wait()
+            .expect("listens");
+        // Zenoh's link alone, without this crate's pre-flight: a client session opens only when
+        // both certificates are of one CA.
+        let client = |tls: &Path| {
+            let o = Options {
+                tls: Some(tls.to_path_buf()),
+                ..opts(Mode::Client, &[], &[&ep])
+            };
+            let mut c = o.config().unwrap();
+            c.insert_json5("connect/timeout_ms", "3000").unwrap();
+            zenoh::open(c).wait().map(|s| {
+                let _ = s.close().wait();
+            })
+        };
+        assert!(
+            client(&a).is_ok(),
+            "a certificate of the daemon's CA is admitted"
+        );
+        assert!(client(&x).is_err(), "a daemon of another CA is refused");
+        assert!(client(&mixed).is_err(), "a client of another CA is refused");
+        let _ = daemon.close().wait();
+        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]

@@ -1,7 +1,9 @@
 //! Mutual TLS between hosts (`tls/HOST:PORT` endpoints): the project's own certificate authority
 //! and one certificate per host, made by `formation certs` ([`init`], [`issue`]); the folder a host
-//! is given with `--tls DIR` ([`Material`]); and a pre-flight handshake ([`preflight`]) that names
-//! the peer and the reason when a certificate is refused, before Zenoh opens the link.
+//! is given with `--tls DIR` ([`Material`]); and a pre-flight handshake ([`preflight`] over TCP,
+//! [`preflight_quic`] over QUIC) that names the peer and the reason when a certificate is refused,
+//! before Zenoh opens the link. `quic/HOST:PORT` endpoints use the same folder: Zenoh's QUIC link
+//! reads the same TLS settings and runs TLS 1.3 inside QUIC (quinn).
 //!
 //! A host's folder holds three files, every one mode 0600 in an owner-only folder:
 //!
@@ -250,10 +252,7 @@ impl Material {
         &self.key_pem
     }
 
-    fn client_config(
-        &self,
-        seen: Arc<Mutex<Option<Vec<u8>>>>,
-    ) -> Result<rustls::ClientConfig, String> {
+    fn client_config(&self, seen: Arc<Mutex<Seen>>) -> Result<rustls::ClientConfig, String> {
         let provider = Arc::new(rustls::crypto::ring::default_provider());
         let mut roots = rustls::RootCertStore::empty();
         let ca_path = self.dir.join(CA_CERT);
@@ -284,12 +283,29 @@ impl Material {
     }
 }
 
+/// What [`Recording`] saw of the server: its certificate (DER) and why it was refused.
+#[derive(Debug, Default)]
+struct Seen {
+    cert: Option<Vec<u8>>,
+    refused: Option<rustls::Error>,
+}
+
+impl Seen {
+    /// The presented certificate, described.
+    fn presented(seen: &Mutex<Seen>) -> Option<String> {
+        seen.lock()
+            .ok()
+            .and_then(|s| s.cert.as_deref().map(describe_cert))
+    }
+}
+
 /// The standard WebPKI verification (only the CA of `ca.pem`, the endpoint's name), recording
-/// the certificate the peer presented so that a refusal can name it.
+/// the certificate the peer presented and the verdict so that a refusal can name them (QUIC
+/// reports a refusal as a bare TLS alert).
 #[derive(Debug)]
 struct Recording {
     inner: Arc<rustls::client::WebPkiServerVerifier>,
-    seen: Arc<Mutex<Option<Vec<u8>>>>,
+    seen: Arc<Mutex<Seen>>,
 }
 
 impl rustls::client::danger::ServerCertVerifier for Recording {
@@ -301,11 +317,18 @@ impl rustls::client::danger::ServerCertVerifier for Recording {
         ocsp_response: &[u8],
         now: UnixTime,
     ) -> Result<rustls::client::danger::ServerCertVerified, rustls::Error> {
+        let verdict = self.inner.verify_server_cert(
+            end_entity,
+            intermediates,
+            server_name,
+            ocsp_response,
+            now,
+        );
         if let Ok(mut s) = self.seen.lock() {
-            *s = Some(end_entity.to_vec());
+            s.cert = Some(end_entity.to_vec());
+            s.refused = verdict.as_ref().err().cloned();
         }
-        self.inner
-            .verify_server_cert(end_entity, intermediates, server_name, ocsp_response, now)
+        verdict
     }
 
     fn verify_tls12_signature(
@@ -431,30 +454,18 @@ fn io_refusal(e: &std::io::Error, presented: Option<String>) -> TlsRefusal {
 /// HOST), then a short wait for the server's verdict on this host's certificate. `Ok` when both
 /// sides accept; otherwise who refused whom and why. The link is closed (close_notify) after.
 pub fn preflight(host: &str, port: u16, m: &Material) -> Result<(), TlsRefusal> {
-    use std::net::ToSocketAddrs;
-    let seen = Arc::new(Mutex::new(None));
+    let seen = Arc::new(Mutex::new(Seen::default()));
     let cfg = m
         .client_config(seen.clone())
         .map_err(TlsRefusal::Handshake)?;
-    let bare = host.trim_start_matches('[').trim_end_matches(']');
-    let name = ServerName::try_from(bare.to_string())
-        .map_err(|e| TlsRefusal::Handshake(format!("'{bare}' is not a server name: {e}")))?;
-    let addr = (bare, port)
-        .to_socket_addrs()
-        .map_err(|e| TlsRefusal::Unreachable(e.to_string()))?
-        .next()
-        .ok_or_else(|| TlsRefusal::Unreachable(format!("'{bare}' has no address")))?;
+    let (name, addr) = resolve(host, port)?;
     let mut sock = std::net::TcpStream::connect_timeout(&addr, PREFLIGHT_TIMEOUT)
         .map_err(|e| TlsRefusal::Unreachable(e.to_string()))?;
     let _ = sock.set_read_timeout(Some(PREFLIGHT_TIMEOUT));
     let _ = sock.set_write_timeout(Some(PREFLIGHT_TIMEOUT));
     let mut conn = rustls::ClientConnection::new(Arc::new(cfg), name)
         .map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
-    let presented = || {
-        seen.lock()
-            .ok()
-            .and_then(|s| s.as_deref().map(describe_cert))
-    };
+    let presented = || Seen::presented(&seen);
     while conn.is_handshaking() {
         if let Err(e) = conn.complete_io(&mut sock) {
             return Err(io_refusal(&e, presented()));
@@ -483,6 +494,116 @@ pub fn preflight(host: &str, port: u16, m: &Material) -> Result<(), TlsRefusal> 
     };
     conn.send_close_notify();
     let _ = conn.write_tls(&mut sock);
+    verdict
+}
+
+/// The server name (checked against the certificate) and the first address of `host`.
+fn resolve(
+    host: &str,
+    port: u16,
+) -> Result<(ServerName<'static>, std::net::SocketAddr), TlsRefusal> {
+    use std::net::ToSocketAddrs;
+    let bare = host.trim_start_matches('[').trim_end_matches(']');
+    let name = ServerName::try_from(bare.to_string())
+        .map_err(|e| TlsRefusal::Handshake(format!("'{bare}' is not a server name: {e}")))?;
+    let addr = (bare, port)
+        .to_socket_addrs()
+        .map_err(|e| TlsRefusal::Unreachable(e.to_string()))?
+        .next()
+        .ok_or_else(|| TlsRefusal::Unreachable(format!("'{bare}' has no address")))?;
+    Ok((name, addr))
+}
+
+/// The ALPN protocol names a Zenoh 1.10 QUIC listener may agree to (its streamed and legacy
+/// ones, `zenoh-link-commons` `quic/utils.rs`). QUIC requires an agreed protocol, so the
+/// pre-flight offers them all; it opens no stream, whichever is agreed.
+const ZENOH_QUIC_ALPN: [&[u8]; 5] = [b"zenoh-ms-mr", b"zenoh-ms", b"zenoh-mr", b"zenoh", b"hq-29"];
+
+/// The TLS alert a QUIC CONNECTION_CLOSE carries (RFC 9001 §4.8: error codes 0x100 + alert), if
+/// it carries one.
+fn quic_alert(code: quinn::TransportErrorCode) -> Option<rustls::AlertDescription> {
+    let code = u64::from(code);
+    (0x100..0x200)
+        .contains(&code)
+        .then(|| rustls::AlertDescription::from((code - 0x100) as u8))
+}
+
+/// [`preflight`] for a `quic/HOST:PORT` endpoint: the same TLS 1.3 handshake (this host's
+/// certificate presented, the server's checked against `ca.pem` only and its name against HOST),
+/// carried by QUIC over UDP as Zenoh's QUIC link carries it (quinn, the library under that
+/// link), then the same wait for the server's verdict on this host's certificate. UDP has no
+/// refused connection: a peer that does not answer within [`PREFLIGHT_TIMEOUT`] is
+/// [`TlsRefusal::Unreachable`]. Runs on a thread of its own (quinn needs an async runtime, and
+/// the caller may be inside one).
+pub fn preflight_quic(host: &str, port: u16, m: &Material) -> Result<(), TlsRefusal> {
+    let seen = Arc::new(Mutex::new(Seen::default()));
+    let mut cfg = m
+        .client_config(seen.clone())
+        .map_err(TlsRefusal::Handshake)?;
+    cfg.alpn_protocols = ZENOH_QUIC_ALPN.iter().map(|p| p.to_vec()).collect();
+    let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(cfg)
+        .map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
+    let (name, addr) = resolve(host, port)?;
+    let name = name.to_str().into_owned();
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .map_err(|e| TlsRefusal::Handshake(format!("no runtime for QUIC: {e}")))?;
+        rt.block_on(quic_handshake(crypto, addr, name, seen))
+    })
+    .join()
+    .unwrap_or_else(|_| Err(TlsRefusal::Handshake("the QUIC pre-flight failed".into())))
+}
+
+async fn quic_handshake(
+    crypto: quinn::crypto::rustls::QuicClientConfig,
+    addr: std::net::SocketAddr,
+    name: String,
+    seen: Arc<Mutex<Seen>>,
+) -> Result<(), TlsRefusal> {
+    use quinn::ConnectionError as E;
+    let local: std::net::SocketAddr = if addr.is_ipv4() {
+        (std::net::Ipv4Addr::UNSPECIFIED, 0).into()
+    } else {
+        (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
+    };
+    let endpoint =
+        quinn::Endpoint::client(local).map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
+    let config = quinn::ClientConfig::new(Arc::new(crypto));
+    // Why a connection ended: this host refused the server (its verifier recorded why), the
+    // server refused this host (a TLS alert), or something else.
+    let refusal = |e: E| match e {
+        E::TransportError(t) => match seen.lock().ok().and_then(|mut s| s.refused.take()) {
+            Some(r) => refusal_of(&r, Seen::presented(&seen)),
+            None => TlsRefusal::Handshake(t.to_string()),
+        },
+        E::ConnectionClosed(c) => match quic_alert(c.error_code) {
+            Some(a) => refusal_of(&rustls::Error::AlertReceived(a), None),
+            None => TlsRefusal::Handshake(c.to_string()),
+        },
+        E::TimedOut => TlsRefusal::Unreachable("no QUIC answer".into()),
+        other => TlsRefusal::Handshake(other.to_string()),
+    };
+    let connecting = endpoint
+        .connect_with(config, addr, &name)
+        .map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
+    let conn = match tokio::time::timeout(PREFLIGHT_TIMEOUT, connecting).await {
+        Err(_) => {
+            return Err(TlsRefusal::Unreachable(format!(
+                "no QUIC answer within {PREFLIGHT_TIMEOUT:?}"
+            )))
+        }
+        Ok(Err(e)) => return Err(refusal(e)),
+        Ok(Ok(c)) => c,
+    };
+    // As over TCP: the server judges this host's certificate after the client's Finished.
+    let verdict = match tokio::time::timeout(PREFLIGHT_VERDICT, conn.closed()).await {
+        Err(_) => Ok(()),
+        Ok(e) => Err(refusal(e)),
+    };
+    conn.close(0u32.into(), b"pre-flight");
+    let _ = tokio::time::timeout(PREFLIGHT_VERDICT, endpoint.wait_idle()).await;
     verdict
 }
 
@@ -685,9 +806,9 @@ mod tests {
         let _ = std::fs::remove_dir_all(&d);
     }
 
-    /// A rustls server with `server`'s certificate that requires a client certificate of
-    /// `client_ca`'s CA; serves one handshake.
-    fn serve_once(server: &Material, client_ca: &Material) -> (u16, std::thread::JoinHandle<()>) {
+    /// A TLS 1.3 server configuration with `server`'s certificate that requires a client
+    /// certificate of `client_ca`'s CA.
+    fn server_config(server: &Material, client_ca: &Material) -> rustls::ServerConfig {
         let provider = Arc::new(rustls::crypto::ring::default_provider());
         let mut roots = rustls::RootCertStore::empty();
         for c in certs_of(Path::new("ca"), &client_ca.ca_pem).unwrap() {
@@ -699,7 +820,7 @@ mod tests {
         )
         .build()
         .unwrap();
-        let cfg = rustls::ServerConfig::builder_with_provider(provider)
+        rustls::ServerConfig::builder_with_provider(provider)
             .with_protocol_versions(&[&rustls::version::TLS13])
             .unwrap()
             .with_client_cert_verifier(verifier)
@@ -707,7 +828,13 @@ mod tests {
                 certs_of(Path::new("cert"), &server.cert_pem).unwrap(),
                 key_of(Path::new("key"), server.key_pem()).unwrap(),
             )
-            .unwrap();
+            .unwrap()
+    }
+
+    /// A rustls server with `server`'s certificate that requires a client certificate of
+    /// `client_ca`'s CA; serves one handshake.
+    fn serve_once(server: &Material, client_ca: &Material) -> (u16, std::thread::JoinHandle<()>) {
+        let cfg = server_config(server, client_ca);
         let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
         let port = l.local_addr().unwrap().port();
         let h = std::thread::spawn(move || {
@@ -727,9 +854,39 @@ mod tests {
         (port, h)
     }
 
-    #[test]
-    fn the_preflight_accepts_its_own_ca_and_names_a_certificate_of_another_ca_either_way() {
-        let d = scratch("preflight");
+    /// A QUIC server (quinn, as under Zenoh's QUIC link) on `server_config`, agreeing to one of
+    /// Zenoh's protocol names; serves one handshake and waits for the client to close.
+    fn serve_quic_once(
+        server: &Material,
+        client_ca: &Material,
+    ) -> (u16, std::thread::JoinHandle<()>) {
+        let mut cfg = server_config(server, client_ca);
+        cfg.alpn_protocols = vec![b"zenoh".to_vec()];
+        let crypto = quinn::crypto::rustls::QuicServerConfig::try_from(cfg).unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        let h = std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async move {
+                let config = quinn::ServerConfig::with_crypto(Arc::new(crypto));
+                let ep = quinn::Endpoint::server(config, ([127, 0, 0, 1], 0).into()).unwrap();
+                tx.send(ep.local_addr().unwrap().port()).unwrap();
+                if let Some(incoming) = ep.accept().await {
+                    if let Ok(c) = incoming.await {
+                        let _ = tokio::time::timeout(Duration::from_secs(5), c.closed()).await;
+                    }
+                }
+                let _ = tokio::time::timeout(Duration::from_secs(1), ep.wait_idle()).await;
+            })
+        });
+        (rx.recv().unwrap(), h)
+    }
+
+    /// Host folders of the pre-flight tests: `a` and `b` of one CA, `x` of another, all
+    /// certified for 127.0.0.1.
+    fn three_hosts(d: &Path) -> (Material, Material, Material) {
         let (ca1, ca2) = (d.join("ca1"), d.join("ca2"));
         init(&ca1).unwrap();
         init(&ca2).unwrap();
@@ -741,16 +898,29 @@ mod tests {
         issue(&ca1, &local("b"), &d.join("b")).unwrap();
         issue(&ca1, &local("a"), &d.join("a")).unwrap();
         issue(&ca2, &local("x"), &d.join("x")).unwrap();
-        let (a, b, x) = (
+        (
             Material::load(&d.join("a")).unwrap(),
             Material::load(&d.join("b")).unwrap(),
             Material::load(&d.join("x")).unwrap(),
-        );
-        let (port, h) = serve_once(&b, &b);
+        )
+    }
+
+    type Serve = fn(&Material, &Material) -> (u16, std::thread::JoinHandle<()>);
+    type Preflight = fn(&str, u16, &Material) -> Result<(), TlsRefusal>;
+
+    /// `preflight` against servers of `serve`: admitted with its own CA; a server of another CA
+    /// refused here, its certificate named; this host's certificate of another CA (trusting the
+    /// server's CA) refused there. The three hosts `three_hosts` made in `d`.
+    fn own_ca_admitted_and_another_refused_either_way(
+        d: &Path,
+        serve: Serve,
+        preflight: Preflight,
+    ) -> (Material, Material, Material) {
+        let (a, b, x) = three_hosts(d);
+        let (port, h) = serve(&b, &b);
         assert_eq!(preflight("127.0.0.1", port, &a), Ok(()));
         h.join().unwrap();
-        // A server of another CA: refused here, its certificate named.
-        let (port, h) = serve_once(&x, &x);
+        let (port, h) = serve(&x, &x);
         match preflight("127.0.0.1", port, &a) {
             Err(TlsRefusal::PeerCertificate { why, presented }) => {
                 assert!(why.contains("not signed by the CA"), "{why}");
@@ -759,27 +929,48 @@ mod tests {
             other => panic!("{other:?}"),
         }
         h.join().unwrap();
-        // This host's certificate of another CA (trusting the server's CA): refused there.
         let mixed = Material {
             ca_pem: b.ca_pem.clone(),
             ..x.clone()
         };
-        let (port, h) = serve_once(&b, &b);
-        assert!(
-            matches!(
-                preflight("127.0.0.1", port, &mixed),
-                Err(TlsRefusal::OwnCertificate(_))
-            ),
-            "a client certificate of another CA must be refused by the server"
-        );
+        let (port, h) = serve(&b, &b);
+        match preflight("127.0.0.1", port, &mixed) {
+            Err(TlsRefusal::OwnCertificate(_)) => {}
+            other => panic!("a client certificate of another CA must be refused: {other:?}"),
+        }
         h.join().unwrap();
+        (a, b, x)
+    }
+
+    #[test]
+    fn the_quic_preflight_accepts_its_own_ca_and_names_a_certificate_of_another_ca_either_way() {
+        let d = scratch("preflight-quic");
+        let (a, _, _) =
+            own_ca_admitted_and_another_refused_either_way(&d, serve_quic_once, preflight_quic);
+        // Nobody on the port: UDP has no refusal, the handshake goes unanswered.
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        assert!(matches!(
+            preflight_quic("127.0.0.1", port, &a),
+            Err(TlsRefusal::Unreachable(_))
+        ));
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn the_preflight_accepts_its_own_ca_and_names_a_certificate_of_another_ca_either_way() {
+        let d = scratch("preflight");
+        let (a, _, _) = own_ca_admitted_and_another_refused_either_way(&d, serve_once, preflight);
         // The name: a certificate not issued for the address connected to.
         let far = Issue {
             name: "far".into(),
             addrs: vec!["10.9.9.9".parse().unwrap()],
             dns: vec![],
         };
-        issue(&ca1, &far, &d.join("far")).unwrap();
+        issue(&d.join("ca1"), &far, &d.join("far")).unwrap();
         let far = Material::load(&d.join("far")).unwrap();
         let (port, h) = serve_once(&far, &far);
         let e = preflight("127.0.0.1", port, &a).unwrap_err().to_string();

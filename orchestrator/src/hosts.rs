@@ -20,11 +20,13 @@ pub struct LinkArgs {
     #[arg(long, value_name = "FILE")]
     pub auth: Option<PathBuf>,
     /// Folder with `ca.pem`, `cert.pem` and `key.pem` (`formation certs issue`): mutual TLS on
-    /// tls/HOST:PORT endpoints; a peer whose certificate this CA did not sign is refused.
+    /// tls/HOST:PORT and quic/HOST:PORT endpoints; a peer whose certificate this CA did not sign
+    /// is refused.
     #[arg(long, value_name = "DIR")]
     pub tls: Option<PathBuf>,
     /// Zenoh link lease, ms: a host whose link stays silent this long is declared lost (a killed
-    /// daemon is seen at once, its TCP link closes).
+    /// daemon is seen at once over a socket, TCP or TLS, whose link closes; over QUIC, which is
+    /// UDP, only when the lease runs out).
     #[arg(long, default_value_t = session::DEFAULT_LEASE_MS, value_name = "MS")]
     pub lease_ms: u64,
 }
@@ -46,8 +48,8 @@ impl LinkArgs {
 /// Arguments of `formation host`.
 #[derive(clap::Args, Debug)]
 pub struct HostArgs {
-    /// Endpoint to listen on (repeatable): tls/ADDR:PORT (with --tls), tcp/ADDR:PORT (with
-    /// --auth) or unixsock-stream/PATH. Default: a Unix socket named after the host in your
+    /// Endpoint to listen on (repeatable): tls/ADDR:PORT (TCP) or quic/ADDR:PORT (UDP) with
+    /// --tls, tcp/ADDR:PORT (with --auth) or unixsock-stream/PATH. Default: a Unix socket named after the host in your
     /// private runtime folder, which only your user can connect to.
     #[arg(long, value_name = "ENDPOINT")]
     pub listen: Vec<String>,

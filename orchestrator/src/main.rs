@@ -103,7 +103,7 @@ enum Command {
     )]
     Hosts(formation::hosts::HostsArgs),
     /// Make a certificate authority and per-host certificates for mutual TLS between hosts
-    /// (tls/HOST:PORT endpoints, --tls DIR; docs/multi-host.md).
+    /// (tls/HOST:PORT and quic/HOST:PORT endpoints, --tls DIR; docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation certs init --dir ~/formation-ca\n  formation certs issue --dir ~/formation-ca --name b --addr 10.0.0.2 --out b-tls\n  formation certs issue --dir ~/formation-ca --name a --out a-tls"

@@ -22,6 +22,15 @@ fn free_port() -> u16 {
         .port()
 }
 
+/// A UDP port of 127.0.0.1 free a moment ago (a `quic/` endpoint's).
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
 fn write_secret(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
     std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600)).unwrap();
@@ -84,7 +93,7 @@ fn a_wrong_password_is_reported_as_an_authentication_failure_naming_the_host() {
 }
 
 #[test]
-fn tcp_and_tls_endpoints_without_credentials_are_refused_naming_the_option() {
+fn tcp_tls_and_quic_endpoints_without_credentials_are_refused_naming_the_option() {
     let dir = temp_dir("transport-opts");
     let rt = runtime(&dir, 0o700);
     for (args, option) in [
@@ -96,6 +105,14 @@ fn tcp_and_tls_endpoints_without_credentials_are_refused_naming_the_option() {
         (&["host", "--listen", "tls/127.0.0.1:7447"][..], "--tls DIR"),
         (
             &["hosts", "--connect", "tls/127.0.0.1:7447"][..],
+            "--tls DIR",
+        ),
+        (
+            &["host", "--listen", "quic/127.0.0.1:7447"][..],
+            "--tls DIR",
+        ),
+        (
+            &["run", "--hosts", "b", "--connect", "quic/127.0.0.1:7447"][..],
             "--tls DIR",
         ),
         (
@@ -116,7 +133,19 @@ fn tcp_and_tls_endpoints_without_credentials_are_refused_naming_the_option() {
 
 #[test]
 fn a_certificate_of_another_ca_is_refused_and_named_either_way() {
-    let dir = temp_dir("transport-ca");
+    another_ca_is_refused_and_named("tls", free_port());
+}
+
+#[test]
+fn a_certificate_of_another_ca_is_refused_and_named_either_way_over_quic() {
+    another_ca_is_refused_and_named("quic", free_udp_port());
+}
+
+/// A daemon listening on `TRANSPORT/127.0.0.1:PORT` with certificates of one CA: listed with a
+/// certificate of its CA, refused (exit 2, the endpoint and the reason named) by an orchestrator
+/// of another CA, and refusing one that trusts its CA but presents a certificate of another.
+fn another_ca_is_refused_and_named(transport: &str, port: u16) {
+    let dir = temp_dir(&format!("transport-ca-{transport}"));
     let rt = runtime(&dir, 0o700);
     let s = |p: &Path| p.display().to_string();
     let certs = |args: &[&str]| {
@@ -163,7 +192,7 @@ fn a_certificate_of_another_ca_is_refused_and_named_either_way() {
     ]);
     std::fs::remove_file(mixed.join("ca.pem")).unwrap();
     std::fs::copy(ca1.join("ca.pem"), mixed.join("ca.pem")).unwrap();
-    let ep = format!("tls/127.0.0.1:{}", free_port());
+    let ep = format!("{transport}/127.0.0.1:{port}");
     let _d = Daemon::start(&rt, &["--name", &name, "--listen", &ep, "--tls", &s(&h)]);
     // Its own CA: listed.
     let o = formation_rt(&rt, &["hosts", "--connect", &ep, "--tls", &s(&a)]);

@@ -89,9 +89,10 @@ pub struct BenchArgs {
     /// `--n`; `--payload` sizes the ping-pong only).
     #[arg(long)]
     pub transports: Option<String>,
-    /// How the two hosts of the Zenoh cases are linked: `tcp` (loopback, user/password) or
-    /// `tls` (loopback, mutual TLS); the bench makes the credentials. Compare the two with
-    /// alternated invocations (docs/multi-host.md).
+    /// How the two hosts of the Zenoh cases are linked: `tcp` (loopback, user/password), `tls`
+    /// (loopback, mutual TLS over TCP) or `quic` (loopback, QUIC with the same mutual TLS); the
+    /// bench makes the credentials. Compare them with alternated invocations
+    /// (docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[arg(long, value_enum, default_value = "tcp")]
     pub zenoh_link: secure::ZenohLink,

@@ -43,7 +43,7 @@ pub struct PeerArgs {
     /// UDP port of the plant on 127.0.0.1.
     #[arg(long)]
     pub plant_port: Option<u16>,
-    /// Zenoh: the endpoint this peer listens on (`tcp/127.0.0.1:PORT` or `tls/127.0.0.1:PORT`).
+    /// Zenoh: the endpoint this peer listens on (`tcp/`, `tls/` or `quic/127.0.0.1:PORT`).
     #[arg(long)]
     pub endpoint: Option<String>,
     /// Zenoh over TCP: the `user:password` file.

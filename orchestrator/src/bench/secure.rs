@@ -1,7 +1,8 @@
 //! The credentials of the Zenoh cases of `formation bench` (`--zenoh-link`): every TCP endpoint
-//! needs a user and password and every TLS endpoint certificates (docs/multi-host.md), so the
-//! bench makes its own, for one invocation, in an owner-only scratch folder it removes after: a
-//! `user:password` file for `tcp`, a CA and the two hosts' certificate folders for `tls`.
+//! needs a user and password and every TLS or QUIC endpoint certificates (docs/multi-host.md), so
+//! the bench makes its own, for one invocation, in an owner-only scratch folder it removes after:
+//! a `user:password` file for `tcp`, a CA and the two hosts' certificate folders for `tls` and
+//! `quic`.
 
 use formation_net::bench::SPLIT_HOST;
 use formation_net::cluster::LAUNCHER;
@@ -14,16 +15,19 @@ use std::path::{Path, PathBuf};
 pub enum ZenohLink {
     /// TCP over loopback with Zenoh user/password authentication (plaintext).
     Tcp,
-    /// Mutual TLS over loopback (encrypted).
+    /// Mutual TLS over TCP on loopback (encrypted).
     Tls,
+    /// QUIC over UDP on loopback, with the same certificates and mutual TLS (encrypted).
+    Quic,
 }
 
 impl ZenohLink {
-    /// `tcp` or `tls`.
+    /// `tcp`, `tls` or `quic`.
     pub fn name(self) -> &'static str {
         match self {
             ZenohLink::Tcp => "tcp",
             ZenohLink::Tls => "tls",
+            ZenohLink::Quic => "quic",
         }
     }
 }
@@ -56,7 +60,7 @@ impl Secured {
                 std::io::Write::write_all(&mut f, format!("bench:{hex}\n").as_bytes())
                     .map_err(|e| format!("{}: {e}", s.auth_file().display()))?;
             }
-            ZenohLink::Tls => {
+            ZenohLink::Tls | ZenohLink::Quic => {
                 let ca = dir.join("ca");
                 tls::init(&ca).map_err(|e| e.to_string())?;
                 for name in [LAUNCHER, SPLIT_HOST] {
@@ -76,16 +80,26 @@ impl Secured {
         self.dir.join("auth")
     }
 
-    /// The endpoint on port `port` of 127.0.0.1.
-    pub fn endpoint(&self, port: u16) -> String {
-        format!("{}/127.0.0.1:{port}", self.link.name())
+    /// An endpoint of 127.0.0.1 on a port free a moment ago (a UDP port for `quic`, TCP
+    /// otherwise): the peer listens on it.
+    pub fn free_endpoint(&self) -> Result<String, String> {
+        let any = ("127.0.0.1", 0);
+        let port = match self.link {
+            ZenohLink::Quic => std::net::UdpSocket::bind(any).and_then(|s| s.local_addr()),
+            ZenohLink::Tcp | ZenohLink::Tls => {
+                std::net::TcpListener::bind(any).and_then(|l| l.local_addr())
+            }
+        }
+        .map(|a| a.port())
+        .map_err(|e| format!("no free port on 127.0.0.1: {e}"))?;
+        Ok(format!("{}/127.0.0.1:{port}", self.link.name()))
     }
 
     /// `(auth, tls)` of host `name` ([`LAUNCHER`] or [`SPLIT_HOST`]).
     pub fn of(&self, name: &str) -> (Option<PathBuf>, Option<PathBuf>) {
         match self.link {
             ZenohLink::Tcp => (Some(self.auth_file()), None),
-            ZenohLink::Tls => (None, Some(self.dir.join(name))),
+            ZenohLink::Tls | ZenohLink::Quic => (None, Some(self.dir.join(name))),
         }
     }
 

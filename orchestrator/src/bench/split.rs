@@ -9,14 +9,13 @@
 //! with `--user --map-root-user` when not root) with a fresh tmpfs on /dev/shm, and with its own
 //! runtime folder (`XDG_RUNTIME_DIR`: its iceoryx2 root and its run folders). No shared memory
 //! crosses between the two "hosts"; every cross-host message goes through the bridges and Zenoh
-//! over loopback, TCP with a user and password or mutual TLS (`--zenoh-link`, credentials made for
+//! over loopback, TCP with a user and password or mutual TLS over TCP or QUIC (`--zenoh-link`, credentials made for
 //! the bench: [`super::secure`]). They still share one kernel and its CPUs, and the link has no
 //! latency of its own.
 
 use super::lockstep::{self, row_as};
 use super::report::Row;
 use super::secure::Secured;
-use super::zenoh::free_port;
 use crate::run::step_timing::WARMUP_STEPS;
 use formation_net::bench::{SPLIT_AGENTS, SPLIT_HOST};
 use std::ffi::OsString;
@@ -171,7 +170,7 @@ pub fn run(seconds: f64, scratch: &Path, sec: &Secured) -> Result<Split, String>
 }
 
 fn run_in(exe: &Path, seconds: f64, dir: &Path, sec: &Secured) -> Result<Split, String> {
-    let endpoint = sec.endpoint(free_port()?);
+    let endpoint = sec.free_endpoint()?;
     let daemon = Daemon::start(exe, &endpoint, &sec.args(SPLIT_HOST), dir)?;
     let out = dir.join("run");
     let args: Vec<OsString> = [

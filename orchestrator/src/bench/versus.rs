@@ -15,7 +15,7 @@ pub const SPLIT_WAIT: &str = "split ";
 /// What a split run on one machine measures (in the JSON next to the figures).
 pub const MEASURES: &str = "one machine: the second host is a formation host daemon in its own \
      mount namespace (its own /dev/shm, no shared memory crosses), linked over Zenoh on \
-     loopback (TCP or TLS, `--zenoh-link`); both share one kernel and its CPUs, and the link adds no latency of its own";
+     loopback (TCP, TLS or QUIC, `--zenoh-link`); both share one kernel and its CPUs, and the link adds no latency of its own";
 
 /// `zenoh_split_vs_fan_out` of the JSON report.
 #[derive(Debug, Clone, Serialize)]

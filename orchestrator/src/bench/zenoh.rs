@@ -1,6 +1,6 @@
 //! The bare Zenoh cases of `formation bench --transports zenoh` (cargo feature `multihost`): this
 //! process is the launcher, one `formation bench-peer --transport zenoh` process the other host,
-//! linked over loopback (TCP or TLS, `--zenoh-link`) with the sessions, publishers and subscribers of a run across hosts
+//! linked over loopback (TCP, TLS or QUIC, `--zenoh-link`) with the sessions, publishers and subscribers of a run across hosts
 //! (`formation_net::bench`).
 //!
 //! * ping-pong: one message of the `--payload` sizes (default: the state down, the command up)
@@ -125,14 +125,6 @@ fn tag(prefix: &str, idx: usize) -> String {
     format!("{prefix}c{idx}")
 }
 
-/// A TCP port of 127.0.0.1 free a moment ago (the peer listens on it).
-pub fn free_port() -> Result<u16, String> {
-    std::net::TcpListener::bind(("127.0.0.1", 0))
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .map_err(|e| format!("no free port on 127.0.0.1: {e}"))
-}
-
 /// The step pattern of the paper's split placement.
 fn split_step() -> Result<StepPattern, String> {
     StepPattern::of(&zb::paper_split(), zb::SPLIT_HOST)
@@ -141,7 +133,7 @@ fn split_step() -> Result<StepPattern, String> {
 /// Measures bare Zenoh case number `idx`; its row (`n`: 1 for ping-pong, the split run's N for
 /// the fan-out; sizes: the frames' for the fan-out).
 pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern, sec: &Secured) -> Result<Row, String> {
-    let endpoint = sec.endpoint(free_port()?);
+    let endpoint = sec.free_endpoint()?;
     let (body, expect, sizes, n) = match pattern {
         Pattern::PingPong => (Body::Filler(ctx.sizes.down), None, ctx.sizes, 1),
         Pattern::FanOut => {

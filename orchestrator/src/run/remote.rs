@@ -41,8 +41,8 @@ pub struct PlaceArgs {
     /// stay on this machine.
     #[arg(long, value_name = "IDS@HOST")]
     pub place: Vec<String>,
-    /// Endpoint of a host's daemon (repeatable): tls/ADDR:PORT (with --tls), tcp/ADDR:PORT (with
-    /// --auth) or unixsock-stream/PATH. Default: each --hosts daemon of yours on this machine
+    /// Endpoint of a host's daemon (repeatable): tls/ADDR:PORT or quic/ADDR:PORT (with --tls),
+    /// tcp/ADDR:PORT (with --auth) or unixsock-stream/PATH. Default: each --hosts daemon of yours on this machine
     /// (its socket in your private runtime folder).
     #[arg(long, value_name = "ENDPOINT")]
     pub connect: Vec<String>,
