@@ -221,3 +221,16 @@ pub fn wait_until_listening(
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
 }
+
+/// A fresh empty folder `<group>/<pid>-<tag>` beside the built binaries, outside /tmp: tests
+/// whose daemons run in mount namespaces with a /tmp of their own need a folder both sides see.
+pub fn work_dir_beside_binaries(group: &str, tag: &str) -> PathBuf {
+    let d = bin("formation")
+        .parent()
+        .expect("a binary lives in a folder")
+        .join(group)
+        .join(format!("{}-{tag}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("can create a folder beside the binaries");
+    d
+}

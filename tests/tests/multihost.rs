@@ -71,14 +71,7 @@ fn ip(args: &[&str]) {
 
 /// A folder for the test's files outside /tmp (each namespace has its own /tmp).
 fn work_dir(tag: &str) -> PathBuf {
-    let d = bin("formation")
-        .parent()
-        .unwrap()
-        .join("multihost-tests")
-        .join(format!("{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    formation_tests::work_dir_beside_binaries("multihost-tests", tag)
 }
 
 /// Two or more namespaces "hosts", star-linked to the first; removed (with their daemons) on drop,

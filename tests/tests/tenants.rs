@@ -57,14 +57,7 @@ fn available(test: &str) -> bool {
 
 /// A folder for the test's files outside /tmp (the daemon has its own /tmp).
 fn work_dir(tag: &str) -> PathBuf {
-    let d = bin("formation")
-        .parent()
-        .unwrap()
-        .join("tenant-tests")
-        .join(format!("{}-{tag}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    formation_tests::work_dir_beside_binaries("tenant-tests", tag)
 }
 
 /// A daemon `t1` in its own mount namespace on a loopback port, killed on drop.
