@@ -303,8 +303,8 @@ impl LiveRos2 {
     pub fn finish(self) {
         let s = self.publisher.finish();
         eprintln!(
-            "ros2: published {} of {} output steps ({} dropped by the full queue, {} DDS writes refused)",
-            s.published, s.offered, s.dropped, s.writes_refused
+            "ros2: published {} of {} output steps ({} while nobody read any topic, {} dropped by the full queue, {} DDS writes refused)",
+            s.published, s.offered, s.unheard, s.dropped, s.writes_refused
         );
     }
 }

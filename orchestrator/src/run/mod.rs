@@ -289,9 +289,16 @@ pub fn main(args: RunArgs) -> ExitCode {
         placement::Slot::none()
     };
     let layout = placement::Placement::resolve(&pin, args.realtime, &allowed, slot.index);
-    // `--pin auto` in lockstep: the CPUs are sampled first (governor::START_WINDOW).
-    let (pins, adapt) =
-        governor::decide_start(layout, placement::Placement::adapts(&pin, args.realtime));
+    // Lockstep: the CPUs are sampled first (governor::START_WINDOW).
+    let adapts = match (
+        args.realtime,
+        placement::Placement::adapts(&pin, args.realtime),
+    ) {
+        (true, _) => governor::Adapts::Nothing,
+        (false, true) => governor::Adapts::SchedulingAndPinning,
+        (false, false) => governor::Adapts::Scheduling,
+    };
+    let (pins, adapt) = governor::decide_start(layout, adapts, &allowed);
     // Held until the run's iceoryx2 files are removed below; if this process dies, the last role
     // process to exit removes them (formation_config::node::members).
     let membership = match Membership::create(&out, &prefix) {
@@ -406,10 +413,11 @@ fn run(
     remote: Option<std::rc::Rc<remote::RemoteRun>>,
     export: Option<export::Opened>,
 ) -> Result<(Outcome, crate::record::Summary), String> {
-    if !mode.realtime {
-        // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
-        // under SCHED_BATCH: a woken process waits for the running one to block instead of
-        // preempting it (see formation_config::node::sched::batch_policy).
+    if !mode.realtime && pins.quiet() {
+        // Lockstep on a quiet machine: this thread, the CSV writer and every role process (they
+        // inherit it) run under SCHED_BATCH: a woken process waits for the running one to block
+        // instead of preempting it (see formation_config::node::sched::batch_policy). Beside other
+        // work they do not (governor: the role processes then preempt it).
         if let Err(e) = formation_config::node::sched::batch_policy() {
             eprintln!("warning: {e}; running under the normal policy");
         }
