@@ -24,23 +24,10 @@ pub const BAG_METADATA: &str = "metadata.yaml";
 /// The scene of scenario `s`: graph edges (0-based, sorted), agents linked to the leader, target
 /// radius.
 pub fn scene_of(s: &Scenario) -> Scene {
-    let mut edges: Vec<(usize, usize)> = s
-        .graph
-        .edges
-        .iter()
-        .map(|e| {
-            let (a, b) = (e.a - 1, e.b - 1);
-            (a.min(b), a.max(b))
-        })
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
     Scene {
         n_agents: s.n_agents(),
-        edges,
-        leader_links: (0..s.n_agents())
-            .filter(|&i| s.graph.leader_weights.get(i).is_some_and(|&b| b > 0.0))
-            .collect(),
+        edges: formation_config::view::edges(s),
+        leader_links: formation_config::view::leader_links(s),
         target_radius_m: s.metrics.target_radius_m,
     }
 }
@@ -106,15 +93,11 @@ impl Frames {
         );
         let timeline = &self.timeline;
         self.links.clear();
-        self.links.extend(self.edges.iter().map(|&(a, b)| {
-            if !timeline.link_up(a, b, step) {
-                LinkState::Down
-            } else if timeline.delivered(a, b, step) && timeline.delivered(b, a, step) {
-                LinkState::Up
-            } else {
-                LinkState::Stale
-            }
-        }));
+        self.links.extend(
+            self.edges
+                .iter()
+                .map(|&(a, b)| LinkState::at(timeline, a, b, step)),
+        );
         Frame {
             time_ns: step * self.dt_ns,
             p_d,
