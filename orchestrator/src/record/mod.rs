@@ -17,8 +17,17 @@ pub mod recovery;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod separation;
+pub(crate) mod sink;
 pub mod summary;
 pub mod table;
+
+/// What `--foxglove` says in a build without the cargo feature `foxglove`.
+pub const NO_FOXGLOVE: &str =
+    "--foxglove: this build has no Foxglove view (build the orchestrator with its default feature `foxglove`)";
+
+/// What `--ros2` and `--record rosbag2` say in a build without the cargo feature `ros2`.
+pub const NO_ROS2: &str =
+    "--ros2, --record rosbag2: this build has no ROS 2 view (build the orchestrator with its default feature `ros2`)";
 
 pub use metrics::Divergence;
 pub use summary::Summary;
@@ -151,7 +160,7 @@ impl Recorder {
             .transpose()?;
         #[cfg(not(feature = "foxglove"))]
         if outputs.foxglove.is_some() {
-            return Err(std::io::Error::other(crate::cli::NO_FOXGLOVE));
+            return Err(std::io::Error::other(NO_FOXGLOVE));
         }
         #[cfg(feature = "ros2")]
         let (live_ros2, rosbag2) = {
@@ -170,22 +179,24 @@ impl Recorder {
         };
         #[cfg(not(feature = "ros2"))]
         if outputs.ros2.is_some() || outputs.rosbag2 {
-            return Err(std::io::Error::other(crate::cli::NO_ROS2));
+            return Err(std::io::Error::other(NO_ROS2));
         }
-        let mcap = outputs
-            .mcap
-            .then(|| mcap::McapSink::create(&mcap_path, s, variant))
-            .transpose()?;
-        let csv = if outputs.trajectory || mcap.is_some() || outputs.rosbag2 {
-            let files = csv::Files {
-                trajectory: outputs.trajectory.then_some(csv_path.as_path()),
-                mcap,
-                #[cfg(feature = "ros2")]
-                rosbag2,
-            };
-            Some(csv::TrajectoryWriter::create(files, s)?)
-        } else {
+        // The file outputs, in the order the writer thread writes them.
+        let mut sinks: Vec<Box<dyn sink::Sink>> = Vec::new();
+        if outputs.trajectory {
+            sinks.push(Box::new(csv::RowWriter::create(&csv_path, s)?));
+        }
+        if outputs.mcap {
+            sinks.push(Box::new(mcap::McapSink::create(&mcap_path, s, variant)?));
+        }
+        #[cfg(feature = "ros2")]
+        if let Some(bag) = rosbag2 {
+            sinks.push(Box::new(bag));
+        }
+        let csv = if sinks.is_empty() {
             None
+        } else {
+            Some(csv::TrajectoryWriter::create(sinks)?)
         };
         Ok(Recorder {
             csv,

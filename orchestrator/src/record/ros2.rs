@@ -4,7 +4,7 @@
 //! `--ros2` publishes the same messages live on DDS from those steps, through a bounded queue that
 //! never holds the run back (a full queue drops the step, counted).
 
-use super::csv::StepRows;
+use super::sink::{Sink, StepRows};
 use formation_config::protocol::wire::PlantTruth;
 use formation_config::scenario::events::{Event, Timeline};
 use formation_config::Scenario;
@@ -117,7 +117,7 @@ fn dt_ns(s: &Scenario) -> u64 {
 /// The `/formation/events` text of an injection line and its step (`None`: a rejection): the
 /// JSON of `run.mcap`'s `/events`.
 pub fn event_text(line: &serde_json::Value) -> Option<(u64, String)> {
-    super::mcap::event_message(line).map(|(step, e)| (step, e.to_string()))
+    super::sink::event_message(line).map(|(step, e)| (step, e.to_string()))
 }
 
 /// `--record rosbag2`: the recording, written on the recorder's writer thread.
@@ -189,6 +189,20 @@ impl BagSink {
             &self.dir.join(BAG_METADATA),
             metadata.as_bytes(),
         )
+    }
+}
+
+impl Sink for BagSink {
+    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+        self.write_step(rows)
+    }
+
+    fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        self.write_event(line)
+    }
+
+    fn finish(self: Box<Self>) -> std::io::Result<()> {
+        BagSink::finish(*self)
     }
 }
 
