@@ -24,6 +24,7 @@ mod peer;
 mod plan;
 mod procs;
 mod report;
+mod row;
 #[cfg(feature = "multihost")]
 mod secure;
 mod sock;
@@ -269,7 +270,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         budget,
         allowed: &allowed,
     };
-    let mut rounds: Vec<Vec<report::Row>> = Vec::new();
+    let mut rounds: Vec<Vec<row::Row>> = Vec::new();
     let mut failures = 0;
     for round in 1..=args.rounds {
         if procs::aborted() {
@@ -325,7 +326,7 @@ fn run_round(
     first: usize,
     inputs: &[PlanInput],
     args: &BenchArgs,
-    rows: &mut Vec<report::Row>,
+    rows: &mut Vec<row::Row>,
 ) -> usize {
     let mut failures = 0;
     for (k, input) in inputs.iter().enumerate() {
@@ -347,12 +348,7 @@ fn run_round(
 /// The Zenoh cases of one round, case numbers from `first`: ping-pong, then the split step's
 /// fan-out and the split lockstep run, one after the other; returns the number that failed.
 #[cfg(feature = "multihost")]
-fn run_zenoh(
-    ctx: &case::Ctx,
-    first: usize,
-    args: &BenchArgs,
-    rows: &mut Vec<report::Row>,
-) -> usize {
+fn run_zenoh(ctx: &case::Ctx, first: usize, args: &BenchArgs, rows: &mut Vec<row::Row>) -> usize {
     let seconds = args.seconds;
     let link = args.zenoh_link;
     let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
@@ -422,7 +418,7 @@ fn run_zenoh(
 
 /// Without Zenoh nothing runs (`--transports zenoh` is refused by [`validate`]).
 #[cfg(not(feature = "multihost"))]
-fn run_zenoh(_: &case::Ctx, _: usize, _: &BenchArgs, _: &mut Vec<report::Row>) -> usize {
+fn run_zenoh(_: &case::Ctx, _: usize, _: &BenchArgs, _: &mut Vec<row::Row>) -> usize {
     0
 }
 
@@ -431,7 +427,7 @@ fn run_cases(
     ctx: &case::Ctx,
     cases: &[(usize, &plan::Case)],
     first: usize,
-    rows: &mut Vec<report::Row>,
+    rows: &mut Vec<row::Row>,
 ) -> usize {
     let mut failures = 0;
     for &(idx, c) in cases {
@@ -451,7 +447,7 @@ fn run_cases(
                 failures += 1;
             }
             Ok(h) => {
-                let row = report::Row::new(c, ctx.sizes, &h);
+                let row = row::Row::new(c, ctx.sizes, &h);
                 eprintln!(
                     "  {what}: p50 {:.1} µs ({} samples)",
                     row.p50_us, row.samples
@@ -469,7 +465,7 @@ fn run_cases(
 }
 
 /// Runs the lockstep case with `n` agents; returns 1 if it failed.
-fn run_lockstep(n: usize, seconds: f64, rows: &mut Vec<report::Row>) -> usize {
+fn run_lockstep(n: usize, seconds: f64, rows: &mut Vec<row::Row>) -> usize {
     let what = format!("lockstep (formation run) n={n}");
     let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
     let failed = match lockstep::run(n, seconds, &scratch) {
