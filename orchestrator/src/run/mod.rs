@@ -578,11 +578,14 @@ fn run(
     };
     tracing::info!(recorded, outcome = ?outcome, "run ending");
     drop(governor_thread);
+    // The export ends first, while the plant still holds the last steps it has not read.
+    if let Some(report) = export.map(|e| e.finish(recorded)) {
+        recorder.set_export(report);
+    }
     ports.stop(recorded);
     recorder.add_events(live.injections.changes());
     drop(live);
     spawn::stop_all(&mut children.0, STOP_GRACE);
-    drop(export);
     drop(ports);
     drop(services);
     drop(node);
