@@ -14,16 +14,12 @@ import threading
 import time
 
 import formation_client.net as fnet
+from net_common import first_run
 
 endpoint = sys.argv[1]
 deadline = time.monotonic() + 150
 with fnet.connect(endpoint, retry_s=60) as net:
-    info = None
-    while info is None and time.monotonic() < deadline:
-        runs = net.runs(timeout=1.0)
-        info = runs[0] if runs else None
-    if info is None:
-        sys.exit("no run answered formation/*/info")
+    info = first_run(net, deadline)
     run_id, n, steps = info["run_id"], info["n_agents"], info["steps"]
     states = net.states(run_id)
     end = {}
