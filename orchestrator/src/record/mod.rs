@@ -103,6 +103,7 @@ pub struct Recorder {
     mode: &'static str,
     dt: f64,
     timing: Option<serde_json::Value>,
+    export: Option<serde_json::Value>,
     /// Per-step worst formation error and violations, for the events' recovery.
     series: recovery::Series,
     /// The scenario's events and graph.
@@ -208,6 +209,7 @@ impl Recorder {
             mode,
             dt: s.simulation.dt_s,
             timing: None,
+            export: None,
             series: recovery::Series::with_capacity(
                 s.n_steps() as usize,
                 s.metrics.safety_distance_m,
@@ -289,6 +291,11 @@ impl Recorder {
         self.timing = Some(timing);
     }
 
+    /// Sets the `export` object of `summary.json` (runs with `--zenoh-listen`).
+    pub fn set_export(&mut self, export: serde_json::Value) {
+        self.export = Some(export);
+    }
+
     /// Checkpoints refused per agent (damaged, another agent's or run's): restarted cold.
     pub fn set_checkpoints_refused(&mut self, refused: Vec<u32>) {
         self.checkpoints_refused = refused;
@@ -352,6 +359,7 @@ impl Recorder {
             wall_time_s,
         );
         summary.timing = self.timing.take();
+        summary.export = self.export.take();
         let marks = recovery::marks(&self.events, &self.runtime_events, &self.incidents, self.dt);
         summary.events = self.series.measure(&marks, self.dt);
         if !self.timeline.is_empty() {

@@ -10,6 +10,7 @@ mod cleanup;
 mod driver;
 pub mod export;
 mod governor;
+pub mod host_probe;
 pub(crate) mod injections;
 pub(crate) mod placement;
 mod proc_load;
@@ -19,6 +20,7 @@ pub(crate) mod remote;
 #[cfg(not(feature = "multihost"))]
 #[path = "remote_off.rs"]
 pub(crate) mod remote;
+pub mod rt;
 mod services;
 mod spawn;
 pub(crate) mod step_timing;
@@ -59,15 +61,14 @@ pub struct RunArgs {
     /// Realtime mode with `--wait spin-block`: busy-poll time before blocking, µs.
     #[arg(long, default_value_t = 20, value_parser = crate::cli::whole_number::<u32>, allow_negative_numbers = true)]
     pub spin_us: u32,
-    /// Realtime mode: run plant and agents under SCHED_FIFO at this priority (1..=99; needs
-    /// CAP_SYS_NICE; 0, the default: normal policy).
-    #[arg(
-        long,
-        default_value_t = 0,
-        value_parser = clap::value_parser!(u32).range(0..=99),
-        allow_negative_numbers = true
-    )]
-    pub rt_priority: u32,
+    /// Realtime mode: the scheduling of plant and agents. `auto` (default): SCHED_FIFO at
+    /// priority 10 when this process is allowed to (CAP_SYS_NICE in its effective set, as root
+    /// has, or RLIMIT_RTPRIO >= 10: checked) and the plant blocks (`--wait block`: never a busy
+    /// loop at a realtime priority), the normal policy otherwise; `P` (1..=99): SCHED_FIFO at P
+    /// (refused with `--wait spin-block`; the normal policy when not allowed); `0`: the normal
+    /// policy. The run says which it got. See docs/realtime.md, "Scheduling".
+    #[arg(long, default_value = "auto", value_name = "auto|P", value_parser = rt::parse)]
+    pub rt_priority: rt::Requested,
     /// CPU placement of plant and agents: `auto` (lockstep: the automatic layout, plant on the
     /// first CPU this process may use with 4/5 of an even share of the agents, spread over the
     /// order, the other agents round-robin over the other CPUs; not pinned while other programs
@@ -202,11 +203,31 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(cli::EXIT_INVALID);
         }
     };
+    // Realtime: SCHED_FIFO or not, decided once here and said (exit 2 for a busy loop at a
+    // realtime priority); lockstep runs never use it.
+    let rt_priority = if args.realtime {
+        match rt::decide(
+            args.rt_priority,
+            args.wait == timing::WaitMode::SpinBlock,
+            rt::Privilege::of_this_process(),
+        ) {
+            Ok(s) => {
+                eprintln!("formation run: plant and agents under {s}");
+                s.priority
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(cli::EXIT_INVALID);
+            }
+        }
+    } else {
+        0
+    };
     let mode = Mode {
         realtime: args.realtime,
         wait: args.wait,
         spin_us: args.spin_us,
-        rt_priority: args.rt_priority,
+        rt_priority,
         // The bridges and the export take one observer slot of every service each.
         observers: args.observers
             + usize::from(remote.is_some())
@@ -468,6 +489,13 @@ fn run(
         rejoin_at: None,
         members: None,
     };
+    // Realtime: the host's own timer noise just before the run, under the plant's scheduling, on
+    // a thread that keeps the normal nice value the orchestrator gives up below.
+    let prober = mode
+        .realtime
+        .then(|| host_probe::Prober::start(mode.rt_priority))
+        .and_then(|p| p.map_err(|e| eprintln!("warning: {e}")).ok());
+    let probed_before = prober.as_ref().and_then(host_probe::Prober::measure);
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(pins.spawn(governor::Place::Plant, |cpu| {
         spawn::spawn(&exe, Role::Plant, "plant".into(), &child_args(None), cpu)
@@ -586,11 +614,15 @@ fn run(
     };
     tracing::info!(recorded, outcome = ?outcome, "run ending");
     drop(governor_thread);
+    // The export ends first, while the plant still holds the last steps it has not read.
+    if let Some(report) = export.map(|e| e.finish(recorded)) {
+        recorder.set_export(report);
+    }
     ports.stop(recorded);
     recorder.add_events(live.injections.changes());
     drop(live);
     spawn::stop_all(&mut children.0, STOP_GRACE);
-    drop(export);
+    let probed_after = prober.as_ref().and_then(host_probe::Prober::measure);
     drop(ports);
     drop(services);
     drop(node);
@@ -613,6 +645,9 @@ fn run(
                     t["clocks"] = r.clocks_json();
                 }
                 timing::warn_over_tau_m(&t);
+                if let (Some(b), Some(a)) = (probed_before, probed_after) {
+                    t["host_probe"] = timing::host_probe_json(&b, &a, &t);
+                }
                 recorder.set_timing(t)
             }
             Err(e) => eprintln!("warning: no timing statistics: {e}"),
