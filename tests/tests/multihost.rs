@@ -1167,6 +1167,56 @@ fn a_host_lost_while_another_hosts_takeover_is_under_way_is_taken_over_in_its_tu
 }
 
 #[test]
+fn a_stopped_remote_agent_is_named_stopped_with_its_host_when_the_run_stalls() {
+    if !available("a_stopped_remote_agent_is_named_stopped_with_its_host_when_the_run_stalls") {
+        return;
+    }
+    let dir = work_dir("stopped-remote");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let args = [
+        "--set",
+        "simulation.duration_s=60",
+        "--stall-timeout-ms",
+        "1000",
+    ];
+    let mut run = spawn_split_paper_run(&hosts, &residue, &args, &out, &err_path, None);
+    let t0 = Instant::now();
+    let csv = out.join("trajectory.csv");
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 1 << 20 {
+        assert!(t0.elapsed() < START_BOUND, "the run did not fly");
+        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    let start = err
+        .lines()
+        .find(|l| l.contains("formation run: id"))
+        .unwrap();
+    let pid = formation_tests::run::start_line_pids(start)[5];
+    // Agent 4, on h1 (same pid namespace: the namespaces split network and mounts only).
+    // SAFETY: kill(2) with SIGSTOP on a process of this test's run.
+    unsafe { libc::kill(pid as libc::pid_t, libc::SIGSTOP) };
+    let st = run.wait().unwrap();
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    assert_eq!(st.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "agent 4 (--agent 3) on h1 (pid {pid} on host h1) made no progress for"
+        )) && err.contains("(stopped)"),
+        "the stopped remote agent is named with its host: {err}"
+    );
+    assert_no_residue(
+        "the launcher",
+        &std::fs::read_to_string(&residue).unwrap_or_default(),
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn a_host_lost_at_launch_under_on_failure_has_its_agents_started_afresh_here_lockstep() {
     if !available(
         "a_host_lost_at_launch_under_on_failure_has_its_agents_started_afresh_here_lockstep",
