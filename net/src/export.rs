@@ -414,7 +414,7 @@ impl Export {
     }
 
     /// Undeclares the info queryable, then closes the session (publishers are undeclared before,
-    /// with their writers): nothing of this session is declared while it closes.
+    /// with their writers): nothing of this Zenoh session is declared while it closes.
     fn close(&mut self) {
         if let Some(q) = self.queryable.take() {
             let _ = q.undeclare().wait();
