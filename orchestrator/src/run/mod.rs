@@ -75,8 +75,10 @@ pub struct RunArgs {
     /// keep one of these CPUs busy, checked before the start and every 500 ms; realtime: not
     /// pinned), `always` (the automatic layout whatever the load, also in realtime), `off`, or a
     /// CPU list such as `0,1` or `0-3` (plant on the first, agent i on the CPU i + 1 places
-    /// further, round-robin; whatever the load). Leader and orchestrator are never pinned. See
-    /// docs/runtime.md, "Cost of a step".
+    /// further, round-robin; whatever the load). Leader and orchestrator are never pinned. In
+    /// lockstep, beside other work, plant and agents also leave SCHED_BATCH for SCHED_OTHER at
+    /// nice -10 under every placement. See docs/runtime.md, "Cost of a step" and "Pinning and
+    /// scheduling beside other work".
     #[arg(long, default_value = "auto", value_name = "auto|always|off|CPUS")]
     pub pin: String,
     /// Outside observers the run makes room for: K spare subscribers / listeners on every service
