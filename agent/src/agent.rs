@@ -46,6 +46,9 @@ pub struct Agent {
     /// Per member (as `startup`): the step it came back at whose re-entry generator is armed
     /// (`runtime.rejoin_reference`; 0: none yet).
     rearmed: Vec<u64>,
+    /// Per neighbour (in `p.neighbours` order): the step the plant took it down from after its
+    /// process was lost ([`Agent::taken_down`]), if it was.
+    lost_from: Vec<Option<u64>>,
 }
 
 /// The share an agent sends its neighbours for its state `s`.
@@ -101,6 +104,7 @@ impl Agent {
             startup: vec![None; n_nb + 1],
             startup_set: false,
             rearmed: vec![0; n_nb + 1],
+            lost_from: vec![None; n_nb],
             p,
         }
     }
@@ -274,18 +278,30 @@ impl Agent {
     }
 
     /// True when everything the control of step k needs has been observed: the own state of k and the
-    /// own, neighbour and leader information of the delayed step.
+    /// own, neighbour and leader information of the delayed step. A neighbour whose process was
+    /// lost and taken down from step f ([`Agent::taken_down`]) is not waited for at steps before
+    /// f: its shares of them went out before its commands or were lost with it (a host that dies
+    /// or goes silent takes what it had in flight along), and the control uses its newest share
+    /// delivered instead.
     pub fn ready(&self, step: u64) -> bool {
         let kd = self.delayed_step(step);
         self.own.has(step)
             && self.own.has(kd)
             && self.leader.has(kd)
             && self.offsets.iter().all(|h| h.has(kd))
-            && self
-                .neighbours
-                .iter()
-                .enumerate()
-                .all(|(idx, h)| self.usable_step(idx, kd).is_none_or(|m| h.has(m)))
+            && self.neighbours.iter().enumerate().all(|(idx, h)| {
+                self.usable_step(idx, kd)
+                    .is_none_or(|m| h.has(m) || self.lost_from[idx].is_some_and(|f| m < f))
+            })
+    }
+
+    /// Agent `j`'s process was lost and the plant took it down from step `from` (a runtime
+    /// `EVENT_DOWN`, never a timeline event: a process killed on the timeline sends its last share
+    /// first). Nothing for an agent that is not a neighbour.
+    pub fn taken_down(&mut self, j: usize, from: u64) {
+        if let Some(idx) = self.p.neighbours.iter().position(|n| n.0 == j) {
+            self.lost_from[idx] = Some(from);
+        }
     }
 
     /// The delays the control of step k applies, in steps: `(injected, effective)`. Injected:
@@ -598,5 +614,66 @@ impl Agent {
                 e2: at.e2.into(),
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod lost_neighbour_tests {
+    use super::*;
+    use formation_config::protocol::messages::{RuntimeEvent, EVENT_ANY, EVENT_DOWN};
+
+    /// Agent `me` of the paper scenario fed every input of steps 0..=k, less neighbour `j`'s
+    /// shares from step `gap` on.
+    fn fed(me: usize, j: usize, k: u64, gap: u64) -> Agent {
+        let s = Scenario::paper();
+        let mut a = Agent::new(&s, me, Variant::Proposed);
+        for step in 0..=k {
+            a.observe_reference(&ReferenceFrame {
+                step,
+                n_agents: s.n_agents() as u32,
+                ..ReferenceFrame::default()
+            });
+            a.observe_own(&VehicleState {
+                step,
+                agent: me as u32,
+                ..VehicleState::default()
+            });
+            for &(n, _) in &a.p.neighbours.clone() {
+                if n != j || step < gap {
+                    a.observe_neighbour(&share_of(&VehicleState {
+                        step,
+                        agent: n as u32,
+                        ..VehicleState::default()
+                    }));
+                }
+            }
+        }
+        a
+    }
+
+    #[test]
+    fn a_neighbour_lost_with_its_host_is_not_waited_for_at_the_steps_before_its_take_down() {
+        let (me, j) = (2, 3);
+        let mut a = fed(me, j, 200, 150);
+        // Taken down from 151: its share of 150 was lost in flight.
+        RuntimeEvent {
+            step: 151,
+            kind: EVENT_DOWN,
+            agent: j as u32,
+            other: EVENT_ANY,
+            ..RuntimeEvent::default()
+        }
+        .apply(a.timeline_mut());
+        assert!(
+            a.delayed_step(200) >= 150,
+            "the control of 200 needs its share of 150"
+        );
+        assert!(
+            !a.ready(200),
+            "the share of 150 is awaited until the take-down is known"
+        );
+        a.taken_down(j, 151);
+        assert!(a.ready(200), "not awaited once its process is known lost");
+        a.taken_down(99, 151);
     }
 }

@@ -429,6 +429,7 @@ impl Daemon {
                 agent,
                 signal,
             } => self.signal(&run_id, agent, signal).map(|_| ok(None)),
+            Request::Stopped { run_id, agent } => self.stopped(&run_id, agent),
             Request::Checkpoint { run_id, agent } => self.checkpoint(&run_id, agent),
             Request::Replan {
                 run_id,
@@ -750,6 +751,19 @@ impl Daemon {
         // SAFETY: kill(2) on our own unreaped child.
         unsafe { libc::kill(c.id() as libc::pid_t, signal) };
         Ok(())
+    }
+
+    fn stopped(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
+        let r = self.run(run_id)?;
+        let c = r
+            .children
+            .get(&agent)
+            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+        let stopped = formation_config::node::process::is_stopped(c.id());
+        Ok(proto::frame(
+            &Reply::Ok { pid: Some(c.id()) },
+            &[u8::from(stopped)],
+        ))
     }
 
     fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {

@@ -182,6 +182,14 @@ pub enum Request {
         /// Signal number: only SIGSTOP and SIGCONT are accepted.
         signal: i32,
     },
+    /// Whether the agent's process is stopped (SIGSTOP, a debugger: state `T` or `t` in its
+    /// `/proc/<pid>/stat`): the reply carries one byte, 1 if it is, 0 if not.
+    Stopped {
+        /// Run id.
+        run_id: String,
+        /// 0-based agent.
+        agent: usize,
+    },
     /// The agent's latest checkpoint file (the reply carries its bytes).
     Checkpoint {
         /// Run id.
@@ -219,6 +227,7 @@ impl Request {
             Request::Spawn { run_id, .. }
             | Request::Kill { run_id, .. }
             | Request::Signal { run_id, .. }
+            | Request::Stopped { run_id, .. }
             | Request::Checkpoint { run_id, .. }
             | Request::Replan { run_id, .. }
             | Request::Report { run_id }

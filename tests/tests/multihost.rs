@@ -19,6 +19,11 @@ use std::time::{Duration, Instant};
 
 static NEXT: AtomicUsize = AtomicUsize::new(0);
 
+/// Longest wait for a daemon to listen or a run to start its processes: a bound on a failure
+/// only, wide enough for a 2-core machine whose cores other programs keep busy (a nice-10 test
+/// beside two CPU-bound loops at nice 0 gets about a tenth of a core).
+const START_BOUND: Duration = Duration::from_secs(120);
+
 /// Why these tests cannot run here, if they cannot.
 fn unavailable() -> Option<String> {
     // SAFETY: geteuid has no preconditions.
@@ -202,7 +207,7 @@ exec "$@""#
             &mut child,
             &log,
             &format!("daemon {h}"),
-            Duration::from_secs(20),
+            START_BOUND,
         );
         self.daemons.push(child);
     }
@@ -654,6 +659,9 @@ enum KillAt {
     After(Duration),
     /// Once agent 4 on the second host has written its checkpoint of this step (or a later one).
     Checkpoint(u64),
+    /// Once the run's `trajectory.csv` holds this many bytes (its writer flushes 1 MiB at a time,
+    /// some hundreds of the paper scenario's steps).
+    Written(u64),
 }
 
 /// Starts `formation run paper --hosts h1 --place 4,5@h1 ARGS` (with credentials, output `out`)
@@ -686,6 +694,12 @@ fn spawn_split_paper_run(
 }
 
 fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostHost {
+    run_and_lose_the_remote_host(tag, args, at, false)
+}
+
+/// [`run_and_kill_the_remote_daemon`], or with `link_down` its link taken down instead (the
+/// daemon and its agents live on, silent, until the lease declares the host lost).
+fn run_and_lose_the_remote_host(tag: &str, args: &[&str], at: KillAt, link_down: bool) -> LostHost {
     let dir = work_dir(tag);
     let mut hosts = Hosts::new(2, &dir);
     hosts.start_daemon(1, &dir, &[]);
@@ -700,10 +714,7 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
         if let Some(l) = err.lines().find(|l| l.contains("formation run: id")) {
             break l.to_string();
         }
-        assert!(
-            t0.elapsed() < Duration::from_secs(30),
-            "the run did not start: {err}"
-        );
+        assert!(t0.elapsed() < START_BOUND, "the run did not start: {err}");
         std::thread::sleep(Duration::from_millis(50));
     };
     // `...; pids P L A1 A2 A3 A4 A5; agents ...`: plant, leader, then the agents in order.
@@ -711,6 +722,17 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
     assert_eq!(pids.len(), 7, "plant, leader and 5 agents: {start_line}");
     match at {
         KillAt::After(d) => std::thread::sleep(d),
+        KillAt::Written(bytes) => {
+            let csv = out.join("trajectory.csv");
+            while std::fs::metadata(&csv).map_or(0, |m| m.len()) < bytes {
+                assert!(
+                    t0.elapsed() < Duration::from_secs(120),
+                    "the run wrote no {bytes} bytes of trajectory.csv"
+                );
+                assert!(run.try_wait().unwrap().is_none(), "the run ended early");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
         KillAt::Checkpoint(k) => {
             let log = dir.join("daemon-1.log");
             while remote_checkpoint_step(hosts.daemons[0].id(), &log).is_none_or(|s| s < k) {
@@ -723,11 +745,17 @@ fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostH
             }
         }
     }
-    let mut daemon = hosts.daemons.remove(0);
     let killed = Instant::now();
-    // SAFETY: kill(2) on our own child.
-    unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGKILL) };
-    let _ = daemon.wait();
+    if link_down {
+        // The launcher's end of the veth pair to h1 (`Hosts::new`: fm<k>a1 in fm<k>h0).
+        let veth = hosts.names[0].replace("h0", "a1");
+        ip(&["-n", &hosts.names[0], "link", "set", &veth, "down"]);
+    } else {
+        let mut daemon = hosts.daemons.remove(0);
+        // SAFETY: kill(2) on our own child.
+        unsafe { libc::kill(daemon.id() as libc::pid_t, libc::SIGKILL) };
+        let _ = daemon.wait();
+    }
     let mut named_after = None;
     let st = loop {
         if named_after.is_none()
@@ -774,6 +802,11 @@ fn a_killed_host_daemon_under_restart_never_is_named_at_once_and_the_run_stops_c
     assert!(
         r.err.contains("lost with host h1"),
         "the lost host is named: {}",
+        r.err
+    );
+    assert!(
+        r.err.contains("host h1 held agents 4, 5"),
+        "every agent lost with it is named: {}",
         r.err
     );
     // Named and stopped well within the lease (a killed daemon's TCP link closes at once).
@@ -896,6 +929,317 @@ fn a_killed_host_daemon_under_on_failure_has_its_agents_taken_over_warm_here_and
     assert_no_residue("the launcher", &r.residue);
     formation_tests::host::assert_gone(&r.remote_pids);
     let _ = std::fs::remove_dir_all(&r.dir);
+}
+
+/// Sim time between two checkpoints in the runs whose host is lost before the first one, s: far
+/// beyond the step the loss falls at.
+const LATE_FIRST_CHECKPOINT_S: &str = "runtime.checkpoint_every_s=5";
+
+/// Asserts that a run whose host h1 (agents 4 and 5) was lost under on-failure took both agents
+/// over here (cold where no checkpoint had come yet) and completed: exit 0, both named, both on the
+/// launcher at the end with one restart each, one `host_lost` event each, nothing left behind.
+/// Returns the step each was down from.
+fn assert_taken_over_here(r: &LostHost) -> Vec<u64> {
+    assert_eq!(r.code, Some(0), "{}", r.err);
+    let named = r.err.contains("its agents 4, 5 are taken over on local")
+        || r.err.contains("host h1 held agents 4, 5");
+    assert!(
+        named,
+        "the lost host and both its agents are named: {}",
+        r.err
+    );
+    let mut down = Vec::new();
+    for a in [4, 5] {
+        let line = r
+            .err
+            .lines()
+            .find(|l| l.contains(&format!("formation run: agent {a} taken over at step")))
+            .unwrap_or_else(|| panic!("agent {a} is taken over: {}", r.err));
+        // Cold where no checkpoint had come from h1 (the agents checkpoint step 0 at once, and
+        // their daemon forwards it within some tens of ms), else warm from it.
+        assert!(
+            line.contains("(cold") || line.contains("(warm"),
+            "agent {a}: {line}"
+        );
+        down.push(
+            line.split("down from step ")
+                .nth(1)
+                .and_then(|x| x.trim_end_matches(')').parse().ok())
+                .unwrap_or(0),
+        );
+    }
+    let s = formation_tests::summary(&r.out);
+    for (i, a) in s["agents"].as_array().unwrap().iter().enumerate() {
+        assert_eq!(a["host"], "local", "agent {} ends on the launcher", i + 1);
+        assert_eq!(a["restarts"], u64::from(i >= 3), "agent {}", i + 1);
+    }
+    let lost: Vec<u64> = s["events"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["kind"] == "host_lost")
+        .filter_map(|e| e["agent"].as_u64())
+        .collect();
+    assert_eq!(lost.len(), 2, "one event per agent lost: {}", s["events"]);
+    assert!(lost.contains(&4) && lost.contains(&5), "{lost:?}");
+    assert_no_residue("the launcher", &r.residue);
+    formation_tests::host::assert_gone(&r.remote_pids);
+    eprintln!(
+        "taken over from steps {down:?}; run ended {:.0} ms after the kill",
+        r.ended_after.as_secs_f64() * 1e3
+    );
+    down
+}
+
+/// A host lost as the run starts (its daemon SIGKILLed as soon as every process is started, before
+/// or at the first step): its agents start afresh here from the scenario's initial state.
+fn host_lost_at_launch(tag: &str, realtime: bool) {
+    let mut args = vec![
+        "--set",
+        "simulation.duration_s=3",
+        "--restart",
+        "on-failure",
+    ];
+    if realtime {
+        args.push("--realtime");
+    }
+    let r = run_and_kill_the_remote_daemon(tag, &args, KillAt::After(Duration::ZERO));
+    assert_taken_over_here(&r);
+    let _ = std::fs::remove_dir_all(&r.dir);
+}
+
+/// A host lost before its agents' first periodic checkpoint (only the one of step 0 exists): they are
+/// taken over here, warm from step 0 when it had been forwarded, else cold.
+fn host_lost_before_the_first_checkpoint(tag: &str, realtime: bool) {
+    let mut args = vec![
+        "--set",
+        "simulation.duration_s=8",
+        "--set",
+        LATE_FIRST_CHECKPOINT_S,
+        "--restart",
+        "on-failure",
+    ];
+    if realtime {
+        args.push("--realtime");
+    }
+    let r = run_and_kill_the_remote_daemon(tag, &args, KillAt::Written(1 << 20));
+    for d in assert_taken_over_here(&r) {
+        assert!(
+            d > 0 && d < 5000,
+            "down from step {d}: mid-run, before step 5000"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&r.dir);
+}
+
+#[test]
+fn a_host_whose_link_goes_down_early_is_taken_over_here_after_its_lease() {
+    if !available("a_host_whose_link_goes_down_early_is_taken_over_here_after_its_lease") {
+        return;
+    }
+    let r = run_and_lose_the_remote_host(
+        "lost-link",
+        &[
+            "--set",
+            "simulation.duration_s=8",
+            "--set",
+            LATE_FIRST_CHECKPOINT_S,
+            "--restart",
+            "on-failure",
+        ],
+        KillAt::Written(1 << 20),
+        true,
+    );
+    for d in assert_taken_over_here(&r) {
+        assert!(d > 0 && d < 5000, "down from step {d}");
+    }
+    let _ = std::fs::remove_dir_all(&r.dir);
+}
+
+#[test]
+fn a_host_lost_while_another_hosts_takeover_is_under_way_is_taken_over_in_its_turn() {
+    if !available("a_host_lost_while_another_hosts_takeover_is_under_way_is_taken_over_in_its_turn")
+    {
+        return;
+    }
+    let dir = work_dir("lost-two");
+    let mut hosts = Hosts::new(3, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    hosts.start_daemon(2, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let mut v: Vec<String> = [
+        "run",
+        "paper",
+        "--set",
+        "simulation.duration_s=8",
+        "--restart",
+        "on-failure",
+        "--hosts",
+        "h1,h2",
+        "--place",
+        "4@h1",
+        "--place",
+        "5@h2",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    v.extend(hosts.connect_args());
+    v.extend(["--auth".to_string(), hosts.auth.display().to_string()]);
+    v.extend(["--out".to_string(), out.display().to_string()]);
+    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+    let mut run = hosts
+        .command(0, Some(&residue), &refs)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .expect("formation run starts");
+    let t0 = Instant::now();
+    let csv = out.join("trajectory.csv");
+    // Mid-run, after the first checkpoints (the first MiB of trajectory.csv is some hundreds of
+    // steps; wait for several).
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 4 << 20 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the run did not fly"
+        );
+        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // h1 first; h2 while agent 4's takeover is under way (its successor is started tens of
+    // steps after the take-down and says hello some hundreds of ms later).
+    let mut d1 = hosts.daemons.remove(0);
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(d1.id() as libc::pid_t, libc::SIGKILL) };
+    let _ = d1.wait();
+    let t_kill = Instant::now();
+    while !std::fs::read_to_string(&err_path)
+        .unwrap_or_default()
+        .contains("host h1 lost")
+    {
+        assert!(
+            t_kill.elapsed() < Duration::from_secs(10),
+            "h1's loss is not named"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let mut d2 = hosts.daemons.remove(0);
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(d2.id() as libc::pid_t, libc::SIGKILL) };
+    let _ = d2.wait();
+    let st = run.wait().unwrap();
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    assert_eq!(st.code(), Some(0), "{err}");
+    for (a, h) in [(4, "h1"), (5, "h2")] {
+        assert!(
+            err.contains(&format!(
+                "host {h} lost; its agents {a} are taken over on local"
+            )),
+            "{h} and agent {a} named: {err}"
+        );
+        assert!(
+            err.contains(&format!("formation run: agent {a} taken over at step")),
+            "agent {a} taken over: {err}"
+        );
+    }
+    let s = formation_tests::summary(&out);
+    for (i, a) in s["agents"].as_array().unwrap().iter().enumerate() {
+        assert_eq!(a["host"], "local", "agent {} ends on the launcher", i + 1);
+    }
+    assert_no_residue(
+        "the launcher",
+        &std::fs::read_to_string(&residue).unwrap_or_default(),
+    );
+    eprintln!("two hosts lost one after the other, stderr:\n{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_stopped_remote_agent_is_named_stopped_with_its_host_when_the_run_stalls() {
+    if !available("a_stopped_remote_agent_is_named_stopped_with_its_host_when_the_run_stalls") {
+        return;
+    }
+    let dir = work_dir("stopped-remote");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let args = [
+        "--set",
+        "simulation.duration_s=60",
+        "--stall-timeout-ms",
+        "1000",
+    ];
+    let mut run = spawn_split_paper_run(&hosts, &residue, &args, &out, &err_path, None);
+    let t0 = Instant::now();
+    let csv = out.join("trajectory.csv");
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 1 << 20 {
+        assert!(t0.elapsed() < START_BOUND, "the run did not fly");
+        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    let start = err
+        .lines()
+        .find(|l| l.contains("formation run: id"))
+        .unwrap();
+    let pid = formation_tests::run::start_line_pids(start)[5];
+    // Agent 4, on h1 (same pid namespace: the namespaces split network and mounts only).
+    // SAFETY: kill(2) with SIGSTOP on a process of this test's run.
+    unsafe { libc::kill(pid as libc::pid_t, libc::SIGSTOP) };
+    let st = run.wait().unwrap();
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    assert_eq!(st.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!(
+            "agent 4 (--agent 3) on h1 (pid {pid} on host h1) made no progress for"
+        )) && err.contains("(stopped)"),
+        "the stopped remote agent is named with its host: {err}"
+    );
+    assert_no_residue(
+        "the launcher",
+        &std::fs::read_to_string(&residue).unwrap_or_default(),
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_host_lost_at_launch_under_on_failure_has_its_agents_started_afresh_here_lockstep() {
+    if !available(
+        "a_host_lost_at_launch_under_on_failure_has_its_agents_started_afresh_here_lockstep",
+    ) {
+        return;
+    }
+    host_lost_at_launch("lost-launch", false);
+}
+
+#[test]
+fn a_host_lost_at_launch_under_on_failure_has_its_agents_started_afresh_here_realtime() {
+    if !available(
+        "a_host_lost_at_launch_under_on_failure_has_its_agents_started_afresh_here_realtime",
+    ) {
+        return;
+    }
+    host_lost_at_launch("lost-launch-rt", true);
+}
+
+#[test]
+fn a_host_lost_before_its_first_periodic_checkpoint_is_taken_over_here_lockstep() {
+    if !available("a_host_lost_before_its_first_periodic_checkpoint_is_taken_over_here_lockstep") {
+        return;
+    }
+    host_lost_before_the_first_checkpoint("lost-early", false);
+}
+
+#[test]
+fn a_host_lost_before_its_first_periodic_checkpoint_is_taken_over_here_realtime() {
+    if !available("a_host_lost_before_its_first_periodic_checkpoint_is_taken_over_here_realtime") {
+        return;
+    }
+    host_lost_before_the_first_checkpoint("lost-early-rt", true);
 }
 
 /// Runs `formation run ARGS --out OUT` in the launcher namespace without any host (one machine);

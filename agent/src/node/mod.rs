@@ -16,7 +16,7 @@ use crate::Agent;
 use formation_config::node::boot::{boot, hello};
 use formation_config::node::error::NodeError;
 use formation_config::node::ports::{poke, send};
-use formation_config::protocol::messages::{Role, CONTROL_STOP};
+use formation_config::protocol::messages::{Role, CONTROL_STOP, EVENT_DOWN};
 use formation_config::protocol::pacing::{CHILD_WAIT, HOUSEKEEPING_EVERY};
 use formation_config::protocol::wire::{DelayInjection, NeighbourState, VehicleState};
 
@@ -113,6 +113,9 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
             }
             while let Some(e) = ports.events.receive()? {
                 e.apply(agent.timeline_mut());
+                if e.kind == EVENT_DOWN {
+                    agent.taken_down(e.agent as usize, e.step);
+                }
             }
             while let Some(r) = ports.reference.receive()? {
                 if local_mission.is_none() {

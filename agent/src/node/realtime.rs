@@ -59,6 +59,8 @@ pub fn run(
     let mut refs: VecDeque<ReferenceFrame> = VecDeque::with_capacity(128);
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut latest: Option<VehicleState> = None;
+    // The newest step whose command went out.
+    let mut answered: Option<u64> = None;
     let mut sampler = Sampler::new(&b.scenario, i);
     let dt_ns = (b.scenario.simulation.dt_s * 1e9).round() as u64;
     let tau_m_ns = (b.scenario.simulation.max_delay_s * 1e9).round() as u64;
@@ -83,15 +85,30 @@ pub fn run(
             }
         }
         while let Some(s) = ports.state.receive()? {
+            if answered.is_some_and(|a| s.step <= a) {
+                // The warm-up's states of step 0 again (`WARMUP_RESEND` in the plant): answered
+                // already; its share goes out again for a neighbour that started after it went.
+                if s.step == 0 {
+                    let mut share = crate::agent::share_of(&s);
+                    share.sent_ns = now_ns();
+                    send(&ports.share_out, share)?;
+                    ports.neighbours_wake.iter().for_each(poke);
+                }
+                continue;
+            }
             if s.sent_ns != 0 {
                 m.state_hop.record(now_ns().saturating_sub(s.sent_ns));
             }
-            if latest.replace(*s).is_some() {
+            if latest.replace(*s).is_some_and(|l| l.step != s.step) {
                 // A newer state replaces one not answered yet: only the newest is answered.
                 m.skipped += 1;
             }
-            if !agent.has_own(s.step) {
-                let mut share = agent.observe_own(&s);
+            if !agent.has_own(s.step) || s.step == 0 {
+                let mut share = if agent.has_own(s.step) {
+                    crate::agent::share_of(&s)
+                } else {
+                    agent.observe_own(&s)
+                };
                 share.sent_ns = now_ns();
                 send(&ports.share_out, share)?;
                 if s.step == 0 {
@@ -129,6 +146,7 @@ pub fn run(
                 m.over_tau_m += u64::from(effective * dt_ns > tau_m_ns);
                 cmd.sent_ns = t1;
                 send(&ports.command, cmd)?;
+                answered = Some(k);
                 poke(&ports.plant_wake);
                 if sampler.due_once(k) {
                     let latency = std::time::Duration::from_nanos(t1 - t0);

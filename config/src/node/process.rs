@@ -88,3 +88,29 @@ impl Lifeline {
         None
     }
 }
+
+/// Whether a `/proc/<pid>/stat` line says the process is stopped (state `T`, SIGSTOP, or `t`, a
+/// debugger): the state follows the parenthesised command name.
+pub fn stat_says_stopped(stat: &str) -> bool {
+    stat.rsplit_once(')')
+        .and_then(|(_, rest)| rest.split_whitespace().next())
+        .is_some_and(|st| st == "T" || st == "t")
+}
+
+/// Whether process `pid` of this machine is stopped ([`stat_says_stopped`]; false if it is gone).
+pub fn is_stopped(pid: u32) -> bool {
+    stat_says_stopped(&std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default())
+}
+
+#[cfg(test)]
+mod stat_tests {
+    use super::stat_says_stopped;
+
+    #[test]
+    fn a_stopped_process_is_told_by_its_state_after_the_command_name() {
+        assert!(stat_says_stopped("1234 (fm-agent-4) T 1 2 3"));
+        assert!(stat_says_stopped("1234 (a) b) t 1"));
+        assert!(!stat_says_stopped("1234 (fm T x) S 1 2"));
+        assert!(!stat_says_stopped(""));
+    }
+}

@@ -8,7 +8,7 @@ use formation_config::node::ports::{
     notifier, poke, publisher, slice_subscriber, subscriber, Input, Output, RunNode, Sub, Svc, Wake,
 };
 use formation_config::protocol::messages::{
-    Hello, RunControl, RunProgress, StepEntry, CONTROL_STOP,
+    Hello, Role, RunControl, RunProgress, StepEntry, CONTROL_STOP,
 };
 use formation_config::protocol::services;
 use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
@@ -113,9 +113,13 @@ fn supervise(
     if interrupted.load(Ordering::SeqCst) {
         return Some(Outcome::Interrupted);
     }
-    let mut death =
-        spawn::check_indexed(children).map(|(idx, line)| (idx, line, false, since_check));
-    if let (None, Some((i, quiet))) = (&death, silent) {
+    // Every child found dead now (the agents of a lost host die together), then a silent or
+    // stopped one.
+    let mut deaths: Vec<(usize, String, bool, Duration)> =
+        std::iter::from_fn(|| spawn::check_indexed(children))
+            .map(|(idx, line)| (idx, line, false, since_check))
+            .collect();
+    if let (true, Some((i, quiet))) = (deaths.is_empty(), silent) {
         let c = &mut children[FIRST_AGENT + i];
         let line = format!(
             "{} (pid {}) sent no command for {} ms{}",
@@ -125,74 +129,89 @@ fn supervise(
             if c.is_stopped() { " (stopped)" } else { "" }
         );
         c.kill_and_reap();
-        death = Some((FIRST_AGENT + i, line, true, quiet));
+        deaths.push((FIRST_AGENT + i, line, true, quiet));
     }
-    if death.is_none() {
-        if let Some(limit) = stall.filter(|l| since_progress >= *l) {
-            let hung = (0..children.len()).find(|&idx| {
-                let expected = idx >= 2 && takeover.expects_gone(idx - 2);
-                !expected && children[idx].is_stopped()
-            });
-            match hung {
-                Some(idx) => {
-                    let line = format!(
-                        "{} (pid {}) made no progress for {} ms (stopped)",
-                        children[idx].label,
-                        children[idx].pid(),
-                        since_progress.as_millis()
-                    );
-                    children[idx].kill_and_reap();
-                    death = Some((idx, line, true, limit));
-                }
-                None => {
-                    let line = format!(
-                        "the run made no progress for {} ms at step {recorded} and no role process is stopped; stopping the run",
-                        since_progress.as_millis()
-                    );
-                    eprintln!("error: {line}");
-                    return Some(Outcome::Died(line));
-                }
+    let still = takeover.still_for(since_progress);
+    if let Some(limit) = stall
+        .map(|l| takeover.stall_limit(l))
+        .filter(|l| deaths.is_empty() && still >= *l)
+    {
+        let hung = (0..children.len()).find(|&idx| {
+            let expected = idx >= 2 && takeover.expects_gone(idx - 2);
+            !expected && children[idx].is_stopped()
+        });
+        match hung {
+            Some(idx) => {
+                let line = format!(
+                    "{} (pid {}{}) made no progress for {} ms (stopped)",
+                    children[idx].label,
+                    children[idx].pid(),
+                    children[idx]
+                        .host()
+                        .map(|h| format!(" on host {h}"))
+                        .unwrap_or_default(),
+                    still.as_millis()
+                );
+                children[idx].kill_and_reap();
+                deaths.push((idx, line, true, limit));
+            }
+            None => {
+                let line = format!(
+                    "the run made no progress for {} ms at step {recorded} and no role process is stopped; stopping the run",
+                    still.as_millis()
+                );
+                eprintln!("error: {line}");
+                return Some(Outcome::Died(line));
             }
         }
     }
-    let (idx, line, hung, seen) = death?;
-    match takeover.on_death(idx, line, hung, seen, recorded, node, children) {
-        Ok(()) => None,
-        Err(line) => {
+    for (idx, line, hung, seen) in deaths {
+        if let Err(line) = takeover.on_death(idx, line, hung, seen, recorded, node, children) {
             // Said at once, before the other processes are stopped (which takes up to STOP_GRACE).
             eprintln!("error: {line}");
-            Some(Outcome::Died(line))
+            return Some(Outcome::Died(line));
         }
     }
+    None
 }
 
-/// Watches children and Ctrl-C; returns the reason to stop, if any.
-fn watch(children: &mut [RoleProcess], interrupted: &AtomicBool) -> Option<Outcome> {
-    if interrupted.load(Ordering::SeqCst) {
-        return Some(Outcome::Interrupted);
-    }
-    spawn::check(children).map(|d| {
-        // Said at once, before the other processes are stopped (which takes up to STOP_GRACE).
-        let line = format!("{d}; stopping the run");
-        eprintln!("error: {line}");
-        Outcome::Died(line)
-    })
-}
-
-/// Waits until plant, leader and the N agents have created their ports.
+/// Waits until plant, leader and the N agents have created their ports. An agent lost with its
+/// host meanwhile is started afresh here under on-failure (`Takeover::on_death_at_start`) and its
+/// hello awaited; any other death stops the run. Returns the measured start-up (from `launched`).
 pub fn wait_for_hellos(
     ports: &Ports,
     n: usize,
     children: &mut [RoleProcess],
     interrupted: &AtomicBool,
-) -> Result<(), Outcome> {
+    takeover: &mut super::takeover::Takeover,
+    node: &RunNode,
+) -> Result<Duration, Outcome> {
     let start = Instant::now();
-    let mut seen = 0;
-    while seen < n + 2 {
-        if let Some(o) = watch(children, interrupted) {
-            return Err(o);
+    // Plant, leader, then the agents.
+    let mut ready = vec![false; n + 2];
+    // Agents started afresh: only their new process's hello counts (the lost one's may still be
+    // queued).
+    let mut relaunched = vec![false; n + 2];
+    while ready.iter().any(|r| !r) {
+        if interrupted.load(Ordering::SeqCst) {
+            return Err(Outcome::Interrupted);
+        }
+        while let Some((idx, line)) = spawn::check_indexed(children) {
+            match takeover.on_death_at_start(idx, line, node, children) {
+                Ok(Some(i)) => {
+                    ready[FIRST_AGENT + i] = false;
+                    relaunched[FIRST_AGENT + i] = true;
+                }
+                Ok(None) => {}
+                Err(line) => {
+                    // Said at once, before the other processes are stopped (up to STOP_GRACE).
+                    eprintln!("error: {line}");
+                    return Err(Outcome::Died(line));
+                }
+            }
         }
         if start.elapsed() > START_TIMEOUT {
+            let seen = ready.iter().filter(|r| **r).count();
             return Err(Outcome::Failed(format!(
                 "only {seen} of {} role processes were ready after {} s",
                 n + 2,
@@ -203,11 +222,24 @@ pub fn wait_for_hellos(
             .wake
             .wait(SUPERVISE_EVERY)
             .map_err(|e| Outcome::Failed(e.to_string()))?;
-        while let Ok(Some(_)) = ports.hello.receive() {
-            seen += 1;
+        while let Ok(Some(h)) = ports.hello.receive() {
+            let idx = match h.role {
+                r if r == Role::Plant as u32 => Some(0),
+                r if r == Role::Leader as u32 => Some(1),
+                r if r == Role::Agent as u32 => Some(FIRST_AGENT + h.agent as usize),
+                _ => None,
+            };
+            let idx =
+                idx.filter(|&k| k < ready.len() && (!relaunched[k] || children[k].pid() == h.pid));
+            if let Some(r) = idx.and_then(|k| ready.get_mut(k)) {
+                *r = true;
+                if h.role == Role::Agent as u32 {
+                    takeover.on_hello_at_start(h.agent as usize);
+                }
+            }
         }
     }
-    Ok(())
+    Ok(start.elapsed())
 }
 
 /// Drives the run to its end (or divergence, interruption, failure); returns the outcome and the

@@ -518,7 +518,9 @@ fn run(
             });
     }
     // Every child is started (they keep the normal priority): from here on the orchestrator records
-    // behind the plant, with slack, and yields the CPU to plant and agents when they wake up.
+    // behind the plant, with slack, and yields the CPU to plant and agents when they wake up; the
+    // successors of a takeover are started at the priority the others were.
+    spawn::keep_launch_priority();
     formation_config::node::sched::background_thread();
     let mut pinned = pins.describe(n);
     // Stopped once the steps are over (or when the run returns on an error).
@@ -593,9 +595,19 @@ fn run(
     // The wall time of the run is that of its steps: from every role process ready (after any
     // start-up) to the last step recorded.
     let mut wall = Duration::ZERO;
-    let (outcome, recorded) = match driver::wait_for_hellos(&ports, n, &mut children.0, interrupted)
-    {
-        Ok(()) => {
+    let (outcome, recorded) = match driver::wait_for_hellos(
+        &ports,
+        n,
+        &mut children.0,
+        interrupted,
+        &mut takeover,
+        &node,
+    ) {
+        Ok(startup) => {
+            takeover.set_startup(startup);
+            // An agent started afresh meanwhile: `formation ps` lists its new process.
+            live.registration
+                .follow_processes(children.0.iter().map(|c| (c.pid(), c.host())));
             let start = Instant::now();
             let result = driver::drive(
                 &ports,

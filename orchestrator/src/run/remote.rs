@@ -249,6 +249,7 @@ impl Remote {
             bridge: RefCell::new(None),
             lease: self.lease,
             moved: RefCell::new(BTreeMap::new()),
+            lost: RefCell::new(BTreeMap::new()),
             offsets: self.offsets,
         };
         for h in self.hosts.iter().filter(|h| !run.colocated.contains(h)) {
@@ -276,6 +277,8 @@ pub struct RemoteRun {
     /// Agents moved off a lost host whose takeover has not restored a checkpoint yet: the host
     /// they were lost with.
     moved: RefCell<BTreeMap<usize, String>>,
+    /// Every host taken over, with the agents it held then.
+    lost: RefCell<BTreeMap<String, Vec<usize>>>,
     offsets: BTreeMap<String, Offset>,
     /// Hosts sharing this orchestrator's `/dev/shm` (`formation_net::colocate`): prepared after
     /// the services exist, never bridged.
@@ -561,6 +564,15 @@ impl RemoteRun {
         self.lease
     }
 
+    /// The agents (0-based) `host` held when it was lost: those it held when it was taken over,
+    /// or (not taken over) those it holds.
+    pub fn agents_lost_with(&self, host: &str) -> Vec<usize> {
+        match self.lost.borrow().get(host) {
+            Some(v) => v.clone(),
+            None => self.placement.borrow().agents_on(host),
+        }
+    }
+
     /// When `host`'s daemon was seen to go, if it was.
     pub fn lost_at(&self, host: &str) -> Option<Instant> {
         self.cluster.lost(host)
@@ -586,7 +598,15 @@ impl RemoteRun {
                 run_id: self.run_id.clone(),
                 agent_hosts: self.placement_for(h, &next).agent_hosts,
             };
-            match self.cluster.request(h, &req, &[], session::REPLY_TIMEOUT)? {
+            // A host lost as well (before or while it is asked) is taken over in its turn.
+            let lost = || self.cluster.lost(h).is_some();
+            let answer =
+                (!lost()).then(|| self.cluster.request(h, &req, &[], session::REPLY_TIMEOUT));
+            let Some(answer) = answer.filter(|_| !lost()) else {
+                tracing::warn!(host = h.as_str(), lost = host, "not re-planned: lost too");
+                continue;
+            };
+            match answer? {
                 (Reply::Ok { .. }, _) => {}
                 (Reply::Refused(why), _) => {
                     return Err(format!(
@@ -599,6 +619,9 @@ impl RemoteRun {
         for &i in &moved {
             m.insert(i, host.to_string());
         }
+        self.lost
+            .borrow_mut()
+            .insert(host.to_string(), moved.clone());
         *self.placement.borrow_mut() = next;
         Ok(Some(moved))
     }
@@ -636,6 +659,10 @@ fn write_checkpoint(run_dir: &Path, agent: usize, bytes: &[u8]) -> Result<(), St
     formation_config::node::files::write_atomic(&p, bytes)
         .map_err(|e| format!("{}: {e}", p.display()))
 }
+
+/// Longest wait for a daemon to say whether an agent is stopped: asked only once a run has made no
+/// progress for its stall timeout, when the run is about to be stopped or the agent replaced.
+const STOPPED_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// An agent process on another host.
 struct RemoteAgent {
@@ -690,6 +717,28 @@ impl RemoteProcess for RemoteAgent {
                 self.agent + 1,
                 self.host
             );
+        }
+    }
+
+    fn is_stopped(&self) -> bool {
+        if self.cluster.lost(&self.host).is_some() {
+            return false;
+        }
+        let req = Request::Stopped {
+            run_id: self.run_id.clone(),
+            agent: self.agent,
+        };
+        match self.cluster.request(&self.host, &req, &[], STOPPED_TIMEOUT) {
+            Ok((Reply::Ok { .. }, bytes)) => bytes.first() == Some(&1),
+            Ok((Reply::Refused(_), _)) => false,
+            Err(e) => {
+                tracing::warn!(
+                    "cannot ask host {} about agent {}: {e}",
+                    self.host,
+                    self.agent + 1
+                );
+                false
+            }
         }
     }
 

@@ -99,6 +99,10 @@ impl RemoteRun {
         match *self {}
     }
     /// Unreachable.
+    pub fn agents_lost_with(&self, _: &str) -> Vec<usize> {
+        match *self {}
+    }
+    /// Unreachable.
     pub fn lease(&self) -> Duration {
         match *self {}
     }

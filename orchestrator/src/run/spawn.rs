@@ -6,7 +6,53 @@ use formation_config::protocol::messages::Role;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc::{self, Sender, SyncSender};
+use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
+
+/// A command to start and where its child goes.
+type ForkRequest = (Command, SyncSender<std::io::Result<Child>>);
+
+/// The thread that starts the role processes once the orchestrator's own thread runs at
+/// `BACKGROUND_NICE` ([`keep_launch_priority`]).
+static FORKER: OnceLock<Mutex<Sender<ForkRequest>>> = OnceLock::new();
+
+/// From now on the role processes (the successors of a takeover) are started by a thread that
+/// keeps the calling thread's priority: on Linux the nice value is per thread and a child inherits
+/// its forking thread's, so a successor forked by the orchestrator's thread after
+/// `sched::background_thread` would run `BACKGROUND_NICE` below the agents it flies beside (and
+/// start, rebuild and compute ten times slower than them on a busy machine). Call it before the
+/// priority is lowered; once.
+pub fn keep_launch_priority() {
+    let (tx, rx) = mpsc::channel::<ForkRequest>();
+    let started = std::thread::Builder::new()
+        .name("fm-forker".into())
+        .spawn(move || {
+            for (mut cmd, back) in rx {
+                let _ = back.send(cmd.spawn());
+            }
+        });
+    if started.is_ok() {
+        let _ = FORKER.set(Mutex::new(tx));
+    }
+}
+
+/// Starts `cmd` from the thread of the launch priority if there is one, else from this thread.
+fn start(mut cmd: Command) -> std::io::Result<Child> {
+    let Some(tx) = FORKER.get() else {
+        return cmd.spawn();
+    };
+    let (back, child) = mpsc::sync_channel(1);
+    let sent = tx
+        .lock()
+        .map_err(|_| std::io::Error::other("the forker thread panicked"))?;
+    sent.send((cmd, back))
+        .map_err(|_| std::io::Error::other("the forker thread is gone"))?;
+    drop(sent);
+    child
+        .recv()
+        .map_err(|_| std::io::Error::other("the forker thread is gone"))?
+}
 
 /// The executable the role processes are started from: the running `formation` itself, whose hidden
 /// subcommand `formation node <role> ...` runs a role (one install, no second binary to find).
@@ -27,6 +73,8 @@ pub trait RemoteProcess {
     fn signal(&self, signal: i32);
     /// How it ended, once its daemon reported its exit (or the host was lost).
     fn try_wait(&mut self) -> Option<String>;
+    /// Whether it is stopped (SIGSTOP, a debugger), as its daemon sees it.
+    fn is_stopped(&self) -> bool;
 }
 
 enum Proc {
@@ -124,17 +172,13 @@ impl RoleProcess {
     }
 
     /// Whether the process is stopped (state `T` in /proc/<pid>/stat: SIGSTOP, a debugger); a
-    /// remote process is never seen stopped here.
+    /// remote process as its daemon sees it (not stopped if its daemon does not answer).
     pub fn is_stopped(&self) -> bool {
-        if self.host().is_some() {
-            return false;
+        match &self.proc {
+            Proc::Local(c, None) => formation_config::node::process::is_stopped(c.id()),
+            Proc::Remote(p, None) => p.is_stopped(),
+            _ => false,
         }
-        let stat =
-            std::fs::read_to_string(format!("/proc/{}/stat", self.pid())).unwrap_or_default();
-        // The state follows the parenthesised command name.
-        stat.rsplit_once(')')
-            .and_then(|(_, rest)| rest.split_whitespace().next())
-            .is_some_and(|st| st == "T" || st == "t")
     }
 }
 
@@ -167,9 +211,7 @@ pub fn spawn(
             Ok(())
         });
     }
-    let child = cmd
-        .spawn()
-        .map_err(|e| format!("cannot start {label} ({}): {e}", exe.display()))?;
+    let child = start(cmd).map_err(|e| format!("cannot start {label} ({}): {e}", exe.display()))?;
     Ok(RoleProcess {
         label,
         proc: Proc::Local(child, None),

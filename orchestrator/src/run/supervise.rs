@@ -30,6 +30,9 @@ pub enum Action {
     TakeDown(usize),
     /// Tell every process that agent i's new process takes over at `step` (published ahead).
     Announce(RuntimeEvent),
+    /// Start a fresh process for agent i from the scenario's initial state, as at launch: it was
+    /// lost before the run's first step, so there is nothing to rebuild.
+    Relaunch(usize),
     /// Stop the run with this message (exit 1).
     Fail(String),
 }
@@ -104,6 +107,28 @@ impl Supervisor {
     /// Whether agent i's process is expected to be gone (killed or stopped by the timeline).
     pub fn expects_gone(&self, i: usize) -> bool {
         matches!(self.slots[i], Slot::Parked(_))
+    }
+
+    /// Whether a takeover is under way: an agent is taken down or its successor has been started
+    /// and has not said hello yet.
+    pub fn taking_over(&self) -> bool {
+        self.slots
+            .iter()
+            .any(|s| matches!(s, Slot::Dead | Slot::Down { .. } | Slot::Spawned { .. }))
+    }
+
+    /// Agent i's process was lost (with its host) before the run's first step, when nothing of it
+    /// is to be rebuilt (`line` names it): under the policy a fresh process starts from the
+    /// scenario's initial state ([`Action::Relaunch`], a restart like any other), otherwise the
+    /// run stops.
+    pub fn on_lost_at_start(&mut self, i: usize, line: &str) -> Action {
+        match self.decide_restart(i, line) {
+            Action::TakeDown(i) => {
+                self.slots[i] = Slot::Running;
+                Action::Relaunch(i)
+            }
+            other => other,
+        }
     }
 
     /// Steps 0..recorded are recorded.
@@ -340,6 +365,51 @@ mod tests {
         assert!(
             matches!(s.on_death(1, "agent 2 was killed"), Some(Action::Fail(m)) if m.contains("max_restarts"))
         );
+    }
+
+    #[test]
+    fn an_agent_lost_before_the_first_step_is_relaunched_fresh_under_the_policy_and_counted() {
+        let never = Runtime::default();
+        let mut s = Supervisor::new(5, Timeline::new(&[], 0.001), never, 68);
+        assert!(matches!(
+            s.on_lost_at_start(3, "agent 4 was lost with host b"),
+            Action::Fail(m) if m.contains("agent 4")
+        ));
+        let rt = Runtime {
+            restart: RestartPolicy::OnFailure,
+            max_restarts: 1,
+            ..Runtime::default()
+        };
+        let mut s = Supervisor::new(5, Timeline::new(&[], 0.001), rt, 68);
+        assert_eq!(s.on_lost_at_start(3, "lost"), Action::Relaunch(3));
+        assert_eq!(s.on_lost_at_start(4, "lost"), Action::Relaunch(4));
+        assert!(
+            !s.taking_over(),
+            "a relaunched agent runs from the first step on"
+        );
+        assert_eq!(s.restarts(), &[0, 0, 0, 1, 1]);
+        // Its later death goes the usual way, and the count applies.
+        assert!(
+            matches!(s.on_death(3, "died"), Some(Action::Fail(m)) if m.contains("max_restarts"))
+        );
+    }
+
+    #[test]
+    fn a_takeover_is_under_way_from_the_death_to_the_successors_hello() {
+        let rt = Runtime {
+            restart: RestartPolicy::OnFailure,
+            ..Runtime::default()
+        };
+        let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
+        assert!(!s.taking_over());
+        s.on_death(1, "died");
+        assert!(s.taking_over(), "dead, not taken down yet");
+        s.on_taken_down(1, 100, 90);
+        assert!(s.taking_over(), "down");
+        assert_eq!(s.on_recorded(158).len(), 1);
+        assert!(s.taking_over(), "successor started");
+        s.on_hello(1);
+        assert!(!s.taking_over(), "joined");
     }
 
     #[test]

@@ -81,6 +81,11 @@ pub struct Takeover {
     /// every command in one is its agent's own until it is taken down; realtime: a command with
     /// its send stamp, not the plant's fallback).
     last_seen: Vec<Option<Instant>>,
+    /// When the supervision last acted (a death handled, a take-down seen, a successor started or
+    /// joined): a stall is counted from it or from the last step recorded, whichever is later.
+    last_action: Instant,
+    /// The run's measured start-up: from the launch of its processes to every hello.
+    startup: Option<Duration>,
     /// What happened, in order.
     pub incidents: Vec<Incident>,
 }
@@ -132,6 +137,8 @@ impl Takeover {
             scenario_hash: restart::scenario_hash(scenario.to_toml_string().as_bytes()),
             checkpoints_refused: vec![0; n],
             last_seen: vec![None; n],
+            last_action: Instant::now(),
+            startup: None,
             on_failure: scenario.runtime.restart == RestartPolicy::OnFailure,
             incidents: Vec::new(),
         })
@@ -261,23 +268,9 @@ impl Takeover {
                 "{line}; stopping the run (plant and leader are not restarted)"
             ));
         };
-        // A remote agent lost with its host (its daemon's liveliness token vanished): under
-        // on-failure the host's agents move here first, whatever the supervisor decides for this
-        // one (it may be parked for a timeline crash, whose successor starts here then).
-        let lost = self.remote.as_ref().and_then(|r| {
-            let h = children[idx].host()?;
-            r.lost_at(h).map(|t| (h.to_string(), t))
-        });
-        if let (Some((host, _)), Some(r), true) = (&lost, &self.remote, self.on_failure) {
-            if let Some(moved) = r.take_over_host(host)? {
-                let ids: Vec<String> = moved.iter().map(|a| (a + 1).to_string()).collect();
-                eprintln!(
-                    "error: host {host} lost; its agents {} are taken over on {} (runtime.restart = on-failure)",
-                    ids.join(", "),
-                    super::remote::TAKEOVER_HOST
-                );
-            }
-        }
+        self.last_action = Instant::now();
+        let lost = self.lost_host(idx, children)?;
+        let line = self.naming_the_host(line, &lost);
         match self.supervisor.on_death(i, &line) {
             None => Ok(()),
             Some(Action::Fail(m)) => Err(format!("{m}; stopping the run")),
@@ -331,6 +324,117 @@ impl Takeover {
         }
     }
 
+    /// The host child `idx` was lost with, if it was, and when; under on-failure that host's
+    /// agents move here first (once per host), whatever the supervisor decides for this one (it
+    /// may be parked for a timeline crash, whose successor starts here then). `Err`: the move
+    /// failed and the run must stop.
+    fn lost_host(
+        &mut self,
+        idx: usize,
+        children: &[RoleProcess],
+    ) -> Result<Option<(String, Instant)>, String> {
+        let lost = self.remote.as_ref().and_then(|r| {
+            let h = children[idx].host()?;
+            r.lost_at(h).map(|t| (h.to_string(), t))
+        });
+        if let (Some((host, _)), Some(r), true) = (&lost, &self.remote, self.on_failure) {
+            if let Some(moved) = r.take_over_host(host)? {
+                eprintln!(
+                    "error: host {host} lost; its agents {} are taken over on {} (runtime.restart = on-failure)",
+                    ids(&moved),
+                    super::remote::TAKEOVER_HOST
+                );
+            }
+        }
+        Ok(lost)
+    }
+
+    /// `line` naming, for an agent lost with its host, every agent lost with it.
+    fn naming_the_host(&self, line: String, lost: &Option<(String, Instant)>) -> String {
+        match (lost, &self.remote) {
+            (Some((host, _)), Some(r)) => {
+                let all = r.agents_lost_with(host);
+                format!(
+                    "{line}; host {host} held agent{} {}",
+                    if all.len() == 1 { "" } else { "s" },
+                    ids(&all)
+                )
+            }
+            _ => line,
+        }
+    }
+
+    /// Before the run's first step (not every process has said hello): child `idx` exited or died
+    /// (`line` naming it). An agent lost with its host is started afresh here under on-failure
+    /// (from the scenario's initial state: it has computed nothing yet); `Ok(Some(i))`: agent i
+    /// was, and its hello is awaited again. `Err` with the line to print: the run must stop.
+    pub fn on_death_at_start(
+        &mut self,
+        idx: usize,
+        line: String,
+        node: &RunNode,
+        children: &mut [RoleProcess],
+    ) -> Result<Option<usize>, String> {
+        let Some(i) = idx.checked_sub(FIRST_AGENT) else {
+            return Err(format!("{line}; stopping the run"));
+        };
+        let lost = self.lost_host(idx, children)?;
+        let line = self.naming_the_host(line, &lost);
+        let Some((host, at)) = lost else {
+            return Err(format!("{line}; stopping the run"));
+        };
+        match self.supervisor.on_lost_at_start(i, &line) {
+            Action::Relaunch(i) => {
+                eprintln!(
+                    "error: {line}; starting it afresh on {}",
+                    super::remote::TAKEOVER_HOST
+                );
+                self.incidents.push(Incident {
+                    kind: "host_lost",
+                    host: Some(host),
+                    agent: i,
+                    down_from: Some(0),
+                    rejoin_at: Some(0),
+                    detected_after_ms: Some(0.0),
+                    restarted_after_ms: None,
+                    started: at,
+                });
+                self.carry(Action::Relaunch(i), 0, node, children)?;
+                Ok(Some(i))
+            }
+            Action::Fail(m) => Err(format!("{m}; stopping the run")),
+            other => Err(format!("{line}: unexpected {other:?}; stopping the run")),
+        }
+    }
+
+    /// Agent i's process said hello before the run's first step.
+    pub fn on_hello_at_start(&mut self, i: usize) {
+        if let Some(inc) = self
+            .incidents
+            .iter_mut()
+            .rev()
+            .find(|x| x.agent == i && x.restarted_after_ms.is_none())
+        {
+            inc.restarted_after_ms = Some(inc.started.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+
+    /// The run's start-up was measured: `d` from the launch of its processes to every hello.
+    pub fn set_startup(&mut self, d: Duration) {
+        self.startup = Some(d);
+    }
+
+    /// How long the run has been still as a stall counts it: since the later of the last step
+    /// recorded (`since_progress` ago) and the supervision's last action.
+    pub fn still_for(&self, since_progress: Duration) -> Duration {
+        since_progress.min(self.last_action.elapsed())
+    }
+
+    /// The stall limit now ([`stall_limit`]).
+    pub fn stall_limit(&self, base: Duration) -> Duration {
+        stall_limit(base, self.supervisor.taking_over(), self.startup)
+    }
+
     /// Whether agent i's process is stopped or gone on purpose (a timeline hang or crash).
     pub fn expects_gone(&self, i: usize) -> bool {
         self.supervisor.expects_gone(i)
@@ -343,7 +447,27 @@ impl Takeover {
         node: &RunNode,
         children: &mut [RoleProcess],
     ) -> Result<(), String> {
+        self.last_action = Instant::now();
         match a {
+            Action::Relaunch(i) => {
+                children[FIRST_AGENT + i].kill_and_reap();
+                node.try_cleanup_dead_nodes();
+                let args = ChildArgs {
+                    agent: Some(i),
+                    ..self.args.clone()
+                };
+                let label = format!("agent {} (--agent {i})", i + 1);
+                let child = self.pins.spawn(super::governor::Place::Agent(i), |cpu| {
+                    spawn::spawn(&self.exe, Role::Agent, label, &args, cpu)
+                })?;
+                eprintln!(
+                    "formation run: agent {} taken over at step 0 (t = 0.000 s) by pid {} (cold, from the initial state: lost before the first step)",
+                    i + 1,
+                    child.pid()
+                );
+                children[FIRST_AGENT + i] = child;
+                Ok(())
+            }
             Action::Kill(i) | Action::Stop(i) => {
                 let stop = matches!(a, Action::Stop(_));
                 let c = &mut children[FIRST_AGENT + i];
@@ -574,6 +698,30 @@ pub fn stall_timeout_with(rt: &Runtime, lease: Option<Duration>) -> Option<Durat
     Some(lease.map_or(t, |l| t.max(l + STALL_BEYOND_LEASE)))
 }
 
+/// Start-ups of the run (from the launch of its processes to every hello, as measured) a takeover
+/// may take before a run that is still is called stalled: a successor is one process where the
+/// launch started all of them, but it also rebuilds from the recorded steps; on a machine that
+/// starts processes slowly (load, a slow disk) both are slow alike.
+pub const TAKEOVER_STARTUPS: u32 = 4;
+
+/// The stall limit: `base` ([`stall_timeout_with`]), or while a takeover is under way at least
+/// [`TAKEOVER_STARTUPS`] times the run's measured start-up (`None`: not measured yet).
+pub fn stall_limit(base: Duration, taking_over: bool, startup: Option<Duration>) -> Duration {
+    match (taking_over, startup) {
+        (true, Some(s)) => base.max(s * TAKEOVER_STARTUPS),
+        _ => base,
+    }
+}
+
+/// `4, 5` for agents 3 and 4 (0-based).
+fn ids(agents: &[usize]) -> String {
+    agents
+        .iter()
+        .map(|a| (a + 1).to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 impl Takeover {
     /// The stall timeout of this run ([`stall_timeout_with`] its hosts' lease).
     pub fn stall_timeout(&self, rt: &Runtime) -> Option<Duration> {
@@ -615,6 +763,24 @@ mod tests {
             None,
             "disabled stays off"
         );
+    }
+
+    #[test]
+    fn a_takeover_may_take_a_multiple_of_the_measured_start_up_before_a_stall_is_called() {
+        let ms = Duration::from_millis;
+        assert_eq!(stall_limit(ms(4000), false, Some(ms(3000))), ms(4000));
+        assert_eq!(stall_limit(ms(4000), true, None), ms(4000), "floor");
+        assert_eq!(
+            stall_limit(ms(4000), true, Some(ms(200))),
+            ms(4000),
+            "floor"
+        );
+        assert_eq!(
+            stall_limit(ms(4000), true, Some(ms(3000))),
+            ms(3000) * TAKEOVER_STARTUPS,
+            "a slow machine"
+        );
+        assert_eq!(ids(&[3, 4]), "4, 5");
     }
 
     #[test]

@@ -29,6 +29,11 @@ use formation_config::protocol::pacing::{ACK_EVERY, CHILD_WAIT};
 use formation_config::protocol::wire::{ControlCommand, FaultInjection};
 use std::time::Duration;
 
+/// How often the states of step 0 go out again while the warm-up waits for a command (a lost
+/// agent's successor needs them): a tenth of a second, far above a warm-up's usual length (every
+/// process answers within milliseconds once started), far below the stall timeout.
+const WARMUP_RESEND: Duration = Duration::from_millis(100);
+
 /// What the plant measures.
 struct Meters {
     /// State of step k published -> command of step k received, per agent.
@@ -139,12 +144,20 @@ impl Loop<'_> {
         if steps == 0 {
             return Ok(());
         }
-        // Warm-up step 0: no deadline.
+        // Warm-up step 0: no deadline. While it lasts, the states of step 0 go out again every
+        // WARMUP_RESEND: an agent process started after they went out (the successor of one lost
+        // with its host at step 0) gets its own, and its neighbours answer with their shares of
+        // step 0 again (an agent answers each step once).
         self.publish_states()?;
+        let mut sent = std::time::Instant::now();
         while !self.all_in() {
             self.drain()?;
             if !self.all_in() {
                 self.check()?;
+                if sent.elapsed() >= WARMUP_RESEND {
+                    self.publish_states()?;
+                    sent = std::time::Instant::now();
+                }
                 self.ports.wake.wait(CHILD_WAIT)?;
             }
         }
