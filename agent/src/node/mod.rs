@@ -46,7 +46,7 @@ pub fn run(args: formation_config::node::args::ChildArgs) -> Result<(), NodeErro
     let _greeting = hello(&b.node, Role::Agent, i as u32)?;
     let mut checkpoints = rejoin::Checkpoints::new(&b, i, start);
     if b.args.realtime {
-        return realtime::run(&b, i, agent, &ports, &mut checkpoints);
+        return realtime::run(&b, i, agent, &ports, &mut checkpoints, local_mission);
     }
     let mut local_reference = formation_config::protocol::wire::ReferenceFrame::default();
     let mut delays = neighbour_delay::NeighbourDelays::new(&b.scenario, &neighbours);

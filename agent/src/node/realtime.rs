@@ -13,7 +13,10 @@
 //! It checkpoints as in lockstep (`super::rejoin::Checkpoints`), so that under `--restart
 //! on-failure` a process replacing a dead one restores the newest checkpoint, replays the recorded
 //! steps up to the one the orchestrator had recorded at the death, and then answers the newest
-//! states it gets (it cannot replay the steps it missed on the wall clock).
+//! states it gets (it cannot replay the steps it missed on the wall clock). The leader's frames
+//! of the steps before its first wake-up went out before it subscribed: it computes those from
+//! the mission itself (`local_mission`, what the leader computes) until the leader's stream
+//! reaches its step, so a successor started during the warm-up of step 0 is ready for step 0.
 
 use super::ports::Ports;
 use super::rejoin::Checkpoints;
@@ -51,6 +54,7 @@ pub fn run(
     mut agent: Agent,
     ports: &Ports,
     checkpoints: &mut Checkpoints,
+    local_mission: Option<formation_leader::Mission>,
 ) -> Result<(), NodeError> {
     if let Some(w) = formation_config::node::sched::realtime_setup(b.args.rt_priority) {
         eprintln!("warning: {w}");
@@ -59,6 +63,9 @@ pub fn run(
     let mut refs: VecDeque<ReferenceFrame> = VecDeque::with_capacity(128);
     let mut pending_delays: Vec<DelayInjection> = Vec::new();
     let mut latest: Option<VehicleState> = None;
+    // A successor: the newest step whose reference it observed (from the mission or the leader).
+    let mut referenced: Option<u64> = None;
+    let mut local_reference = ReferenceFrame::default();
     // The newest step whose command went out.
     let mut answered: Option<u64> = None;
     let mut sampler = Sampler::new(&b.scenario, i);
@@ -120,10 +127,30 @@ pub fn run(
         if let Some(s) = latest {
             let k = s.step;
             while refs.front().is_some_and(|r| r.step <= k) {
-                if let Some(r) = refs.pop_front() {
-                    agent.observe_reference(&r);
-                    sampler.observe_reference(&r);
+                match refs.pop_front() {
+                    // Computed from the mission already (a successor).
+                    Some(r) if referenced.is_some_and(|s| r.step <= s) => {}
+                    Some(r) => {
+                        referenced = Some(r.step);
+                        agent.observe_reference(&r);
+                        sampler.observe_reference(&r);
+                    }
+                    None => {}
                 }
+            }
+            if let Some(m) = local_mission
+                .as_ref()
+                .filter(|_| referenced.is_none_or(|r| r < k))
+            {
+                // The leader's frame of k went out before this process subscribed.
+                m.reference(
+                    k,
+                    k as f64 * b.scenario.simulation.dt_s,
+                    &mut local_reference,
+                );
+                referenced = Some(k);
+                agent.observe_reference(&local_reference);
+                sampler.observe_reference(&local_reference);
             }
             pending_delays.retain(|d| {
                 if d.step <= k {
