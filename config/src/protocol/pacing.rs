@@ -36,8 +36,35 @@ pub const REFERENCE_BUFFER: usize = (LEADER_LEAD + PLANT_LEAD + 4 * ACK_EVERY) a
 /// Subscriber buffer of the per-step records (plant -> orchestrator), by the same argument for the plant.
 pub const STEPS_BUFFER: usize = (2 * PLANT_LEAD + 4 * ACK_EVERY) as usize;
 /// Subscriber buffer of the per-step records in realtime mode, where the plant does not wait for
-/// the recorder: one second of steps at 1 kHz.
-pub const REALTIME_STEPS_BUFFER: usize = 1024;
+/// the recorder: four seconds of steps at 1 kHz, what the orchestrator may spend away from the
+/// records while it starts a successor (it writes the successor's rebuild file and forks) on a
+/// machine two CPU-bound programs keep busy (one second overflowed there: `record of step 6313
+/// while expecting 6234`). Capped by [`REALTIME_STEPS_BYTES`] for large formations, never below
+/// [`REALTIME_STEPS_MIN`].
+pub const REALTIME_STEPS_BUFFER: usize = 4096;
+/// Shared memory the realtime step-record buffer may take, bytes (64 MiB): 4096 records up to
+/// about 30 agents (a record of N entries takes N `StepEntry`).
+pub const REALTIME_STEPS_BYTES: usize = 64 << 20;
+/// Least realtime step-record buffer whatever N: one second of steps at 1 kHz.
+pub const REALTIME_STEPS_MIN: usize = 1024;
+
+/// The realtime step-record buffer of a run of `n` agents whose entries take `entry` bytes each:
+/// [`REALTIME_STEPS_BUFFER`] records, fewer where they would take more than
+/// [`REALTIME_STEPS_BYTES`], never fewer than [`REALTIME_STEPS_MIN`].
+pub const fn realtime_steps_buffer(n: usize, entry: usize) -> usize {
+    let per_record = if n * entry == 0 { 1 } else { n * entry };
+    let fit = REALTIME_STEPS_BYTES / per_record;
+    let capped = if fit < REALTIME_STEPS_BUFFER {
+        fit
+    } else {
+        REALTIME_STEPS_BUFFER
+    };
+    if capped < REALTIME_STEPS_MIN {
+        REALTIME_STEPS_MIN
+    } else {
+        capped
+    }
+}
 /// Subscriber buffer of the per-agent state, share and command services.
 pub const LOCKSTEP_BUFFER: usize = 8;
 /// Subscriber buffer of the injection and control services.

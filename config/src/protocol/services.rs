@@ -13,7 +13,7 @@
 use super::layout::WireLayout;
 use super::messages::{Hello, InjectRequest, RunControl, RunProgress, RuntimeEvent, StepEntry};
 use super::pacing::{
-    CONTROL_BUFFER, LOCKSTEP_BUFFER, REALTIME_STEPS_BUFFER, REFERENCE_BUFFER, STEPS_BUFFER,
+    realtime_steps_buffer, CONTROL_BUFFER, LOCKSTEP_BUFFER, REFERENCE_BUFFER, STEPS_BUFFER,
 };
 use super::wire::{
     AgentTelemetry, ControlCommand, DelayInjection, FaultInjection, NeighbourState, ReferenceFrame,
@@ -445,7 +445,7 @@ pub static STEPS: Topic<StepEntry, Slice> = Topic {
     doc: "each step's truth and command of every quadrotor (N entries), for the recorder",
     limits: |s| {
         let buffer = if s.realtime {
-            REALTIME_STEPS_BUFFER
+            realtime_steps_buffer(s.n, core::mem::size_of::<StepEntry>())
         } else {
             STEPS_BUFFER
         };
@@ -687,8 +687,14 @@ mod tests {
         let lock = STEPS.limits(&Sizing::run(5, false)).buffer;
         let rt = STEPS.limits(&Sizing::run(5, true)).buffer;
         assert_eq!(lock, STEPS_BUFFER);
-        assert_eq!(rt, REALTIME_STEPS_BUFFER);
+        assert_eq!(rt, crate::protocol::pacing::REALTIME_STEPS_BUFFER);
         assert!(rt > lock);
+        // A large formation keeps the buffer within its byte budget, never under one second.
+        let big = STEPS.limits(&Sizing::run(128, true)).buffer;
+        let bytes = big * 128 * core::mem::size_of::<StepEntry>();
+        assert!(big >= crate::protocol::pacing::REALTIME_STEPS_MIN);
+        assert!(bytes <= crate::protocol::pacing::REALTIME_STEPS_BYTES || big == 1024);
+        assert!(big < rt);
     }
 
     #[cfg(feature = "ipc")]

@@ -517,11 +517,15 @@ fn run(
                 })?,
             });
     }
-    // Every child is started (they keep the normal priority): from here on the orchestrator records
-    // behind the plant, with slack, and yields the CPU to plant and agents when they wake up; the
-    // successors of a takeover are started at the priority the others were.
+    // Every child is started (they keep the normal priority): from here on a lockstep orchestrator
+    // records behind the plant, with slack, and yields the CPU to plant and agents when they wake
+    // up; the successors of a takeover are started at the priority the others were. A realtime
+    // plant does not wait for the recorder: there the orchestrator keeps its priority, or a busy
+    // machine would leave it behind the wall clock until the step records overflow.
     spawn::keep_launch_priority();
-    formation_config::node::sched::background_thread();
+    if !mode.realtime {
+        formation_config::node::sched::background_thread();
+    }
     let mut pinned = pins.describe(n);
     // Stopped once the steps are over (or when the run returns on an error).
     let governor_thread =
