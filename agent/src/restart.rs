@@ -16,6 +16,8 @@ pub struct Rejoin {
     pub down_from: u64,
     /// First step the new process computes.
     pub rejoin_at: u64,
+    /// First step whose recorded states the caller holds: the rebuild reads none before it.
+    pub recorded_from: u64,
 }
 
 impl Rejoin {
@@ -23,10 +25,21 @@ impl Rejoin {
     pub fn first_needed(&self, capacity: u64) -> u64 {
         let refill = self.rejoin_at.saturating_sub(capacity);
         match self.checkpoint {
-            Some(s) => s.min(refill),
+            Some(s) => shares_before(s, capacity).min(refill),
             None => refill,
         }
     }
+}
+
+/// The first step whose neighbour shares a checkpoint of step `s` may lack, for histories of
+/// `capacity` steps: a process writes its checkpoint before the control of s with the shares it
+/// has read by then, and a neighbour's share of a step before s may come in later (in lockstep
+/// the neighbour sends it when it gets its own state, possibly after this agent's state of s
+/// went out; the control of s does not need it when the delay reaches further back). The dead
+/// process then used it at a later step, so the rebuild observes again the shares of
+/// [s - capacity + 1, s) (each at its own slot: one already held is stored again unchanged).
+pub fn shares_before(s: u64, capacity: u64) -> u64 {
+    s.saturating_sub(capacity.saturating_sub(1))
 }
 
 /// What the rebuild found: how many replayed commands matched the recorded ones.
@@ -39,7 +52,8 @@ pub struct Replayed {
 }
 
 /// Rebuilds `agent` (already restored from the checkpoint of `plan.checkpoint`, or fresh) up to
-/// step `plan.rejoin_at`: replays the control of [checkpoint, down_from) and observes
+/// step `plan.rejoin_at`: observes the neighbour shares the checkpoint may lack
+/// ([`shares_before`]), replays the control of [checkpoint, down_from) and observes
 /// [max(down_from, rejoin_at - capacity), rejoin_at), then re-synchronises its filters to the
 /// vehicle's state of rejoin_at - 1 (`Agent::resync`, under `runtime.rejoin_resync`) and re-seeds
 /// its RBFNN to the external acceleration the failsafe observed ([`observed_disturbance`],
@@ -69,6 +83,11 @@ pub fn rebuild(
     };
     let mut out = Replayed::default();
     if let Some(s) = plan.checkpoint {
+        for k in shares_before(s, capacity).max(plan.recorded_from)..s {
+            for &j in &neighbours {
+                agent.observe_neighbour(&crate::agent::share_of(&state(k, j)));
+            }
+        }
         for k in s..plan.down_from {
             let own = observe(agent, k);
             let cmd = agent.step(&own);
@@ -147,6 +166,89 @@ pub fn observed_disturbance(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::agent::share_of;
+    use formation_config::scenario::Scenario;
+    use formation_config::Variant;
+
+    /// Quadrotor j's state at step k: every quadrotor moving, each differently.
+    fn moving(k: u64, j: usize) -> VehicleState {
+        let t = k as f64 * 0.001;
+        VehicleState {
+            step: k,
+            t,
+            agent: j as u32,
+            position: [
+                j as f64 + 0.3 * t,
+                0.5 * j as f64 - 0.2 * t * t,
+                1.0 + 0.1 * t,
+            ],
+            velocity: [0.3, -0.4 * t, 0.1 + 0.01 * j as f64],
+            ..VehicleState::default()
+        }
+    }
+
+    fn reference(k: u64) -> ReferenceFrame {
+        ReferenceFrame {
+            step: k,
+            t: k as f64 * 0.001,
+            n_agents: 5,
+            p_d: [0.1 * k as f64 * 0.001, 0.0, 1.0],
+            ..ReferenceFrame::default()
+        }
+    }
+
+    #[test]
+    fn a_share_that_came_in_after_the_checkpoint_was_written_is_in_the_rebuilt_controller() {
+        let sc = Scenario::paper();
+        let me = 3;
+        let mut live = Agent::new(&sc, me, Variant::Proposed);
+        let nb: Vec<usize> = live.neighbour_ids().collect();
+        let late = nb[0];
+        // Checkpoint at s; the late neighbour's share of s - 1 comes in after the control of s
+        // (which does not need it: its delay reaches further back), before that of s + 1.
+        let (s, down) = (300u64, 420u64);
+        let mut checkpoint = None;
+        let mut commands = Vec::new();
+        for k in 0..down {
+            if k == s {
+                assert!(
+                    live.delayed_step(s) < s - 1,
+                    "the control of s needs no share of s - 1"
+                );
+                checkpoint = Some(live.checkpoint().unwrap());
+            }
+            if k == s + 1 {
+                live.observe_neighbour(&share_of(&moving(s - 1, late)));
+            }
+            live.observe_reference(&reference(k));
+            let own = moving(k, me);
+            live.observe_own(&own);
+            for &j in &nb {
+                if !(j == late && k == s - 1) {
+                    live.observe_neighbour(&share_of(&moving(k, j)));
+                }
+            }
+            let c = live.step(&own);
+            commands.push((c.thrust_n, c.torque_nm));
+        }
+        let mut successor = Agent::new(&sc, me, Variant::Proposed);
+        successor.restore(&checkpoint.unwrap()).unwrap();
+        let plan = Rejoin {
+            checkpoint: Some(s),
+            down_from: down,
+            rejoin_at: down + 1,
+            recorded_from: 0,
+        };
+        let replayed = rebuild(&mut successor, &plan, reference, moving, |k| {
+            commands[k.min(down - 1) as usize]
+        });
+        assert_eq!(replayed.steps, down - s);
+        assert_eq!(
+            replayed.mismatches, 0,
+            "the replay computes every command the live controller computed"
+        );
+        assert!(plan.first_needed(live.history_capacity() as u64) < s - 1);
+    }
 
     /// A quadrotor tilted by 0.1 rad in roll with hover thrust along its axis, accelerating at
     /// exactly what its thrust gives plus a constant 0.7 m/s² along y: the observer reads 0.7 along

@@ -139,6 +139,7 @@ impl ClosedLoop {
             checkpoint,
             down_from: w.from,
             rejoin_at: k,
+            recorded_from: self.history.oldest(),
         };
         let mission = &self.mission;
         let dt = self.dt;

@@ -102,6 +102,7 @@ pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), Node
             checkpoint,
             down_from: plan.down_from,
             rejoin_at: r,
+            recorded_from: plan.first,
         },
         |k| {
             let mut f = ReferenceFrame::default();

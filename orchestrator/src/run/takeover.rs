@@ -604,6 +604,7 @@ impl Takeover {
             checkpoint,
             down_from: plan.down_from,
             rejoin_at: plan.rejoin_at,
+            recorded_from: self.history.oldest(),
         };
         let first = window
             .first_needed(self.capacity as u64)
