@@ -48,6 +48,20 @@ pub struct Agent {
     rearmed: Vec<u64>,
 }
 
+/// Whether the leader-relative RBFNN drive (D23) acts: the agent's own start-up generator (D19)
+/// is over (`offset` `None`), or its remaining offset |e| is at or below `gate` (m,
+/// `nn_leader_gate_m`; `None`: only once the generator is over).
+pub fn drive_gate_open(offset: Option<crate::startup::Slot>, gate: Option<f64>) -> bool {
+    match (offset, gate) {
+        (None, _) => true,
+        (Some(_), None) => false,
+        (Some(e), Some(g)) => {
+            let [x, y, z] = e[0];
+            (x * x + y * y + z * z).sqrt() <= g
+        }
+    }
+}
+
 /// The share an agent sends its neighbours for its state `s`.
 pub fn share_of(s: &VehicleState) -> NeighbourState {
     NeighbourState {
@@ -533,9 +547,16 @@ impl Agent {
             let mut drive: [f64; 3] =
                 std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
             // D23: the leader-relative errors of D11 drive the network too, once this agent's own
-            // start-up reference generator (D19) has brought its reference to the slot: the
-            // network does not integrate the shaped approach of the start-up.
-            let started = self.startup[0].is_none();
+            // start-up reference generator (D19) has brought its reference to the slot, or within
+            // nn_leader_gate_m of it: the network does not integrate the shaped approach of the
+            // start-up.
+            // A controller that has come back (rearmed[0] > 0) gates with the re-entry gate.
+            let gate = if self.rearmed[0] > 0 {
+                self.p.rejoin_drive_gate
+            } else {
+                pg.nn_leader_gate_m
+            };
+            let started = drive_gate_open(self.startup[0].and_then(|b| b.offset()), gate);
             if self.p.leader_data && started && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0)
             {
                 let lp = clip_norm(
@@ -598,5 +619,24 @@ impl Agent {
                 e2: at.e2.into(),
             },
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::drive_gate_open;
+
+    /// D23's gate: open once the generator is over whatever the threshold; while it runs, open only
+    /// with a threshold, and then exactly when |e| is at or below it (e' and e'' do not count).
+    #[test]
+    fn the_leader_relative_drive_opens_within_the_gate_or_once_the_generator_is_over() {
+        let at = |e: [f64; 3]| Some([e, [0.3, 0.0, 0.0], [1.0, 0.0, 0.0]]);
+        assert!(drive_gate_open(None, None));
+        assert!(drive_gate_open(None, Some(0.05)));
+        assert!(!drive_gate_open(at([1e-9, 0.0, 0.0]), None));
+        assert!(drive_gate_open(at([0.03, 0.04, 0.0]), Some(0.05)));
+        assert!(!drive_gate_open(at([0.03, 0.04, 1e-3]), Some(0.05)));
+        assert!(!drive_gate_open(at([2.0, 0.0, -5.0]), Some(0.05)));
+        assert!(drive_gate_open(at([0.0; 3]), Some(0.0)));
     }
 }
