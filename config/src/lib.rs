@@ -1,4 +1,4 @@
-//! The contract every formation process shares, in three layers:
+//! The contract every formation process shares, in three layers, and what every view draws alike:
 //!
 //! * [`scenario`]: the scenario model (TOML schema, unknown fields rejected, the paper scenario
 //!   embedded as the default), its validation against the paper's assumptions, the communication
@@ -7,6 +7,8 @@
 //!   table (each service's name, message type, limits, publishers and subscribers, declared once)
 //!   and the pacing constants of the lockstep protocol. With the `ipc` feature the messages are
 //!   iceoryx2 `ZeroCopySend` types.
+//! * [`view`]: what every view of a run draws alike (agent colours, edge states, attitudes as
+//!   quaternions), for the Foxglove scene, the ROS 2 markers and the figures.
 //! * [`node`] (feature `node`): the plumbing of a role process — iceoryx2 nodes under a run prefix,
 //!   ports opened from the service table, process boot, scheduling, clock, logging, histograms.
 //!
@@ -16,6 +18,7 @@
 
 pub mod protocol;
 pub mod scenario;
+pub mod view;
 
 #[cfg(feature = "node")]
 pub mod node;

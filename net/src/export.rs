@@ -15,6 +15,7 @@
 //! | `formation/<run>/reference` | `ReferenceFrame` of every step | `formation.v1.ReferenceFrame` |
 //! | `formation/<run>/events` | `RuntimeEvent` (crash, hang, link, loss, takeover, ...) | `formation.v1.RuntimeEvent` |
 //! | `formation/<run>/telemetry/<agent>` | `AgentTelemetry` of agent `<agent>` (1-based), latest | `formation.v1.AgentTelemetry` |
+//! | `formation/<run>/end` | JSON [`EndReport`], once, after the run's last step | `application/json` |
 //!
 //! Payloads are the `#[repr(C)]` bytes the iceoryx2 services carry (little endian, layout in the
 //! info); the encoding is `application/octet-stream` with the wire type name as its schema. The
@@ -27,6 +28,15 @@
 //! away loses samples, it never holds the lockstep back. Each sample carries its step, so a
 //! reader sees what it lost. A key no reader subscribes to (Zenoh's matching status) is not put
 //! at all: without readers the export only drains its queues.
+//!
+//! The end of a run ([`Export::finish`], before the role processes are stopped, bounded by
+//! [`END_BOUND`]): the export catches up with the last step recorded (it may lag behind a run
+//! that ends while it is starved), puts `formation/<run>/end` (JSON, [`EndReport`]) and keeps its
+//! session open until no reader subscribes any more (a reader that has its last step leaves) or
+//! the bound is over; then it undeclares its publishers and closes. What it could not read
+//! (steps overwritten in its iceoryx2 queue while it was starved) is counted in
+//! [`EndReport::steps_missed`]; what Zenoh dropped on the way to a slow reader only the reader
+//! sees (each payload carries its step).
 
 use crate::bridge::{wire_bytes, wire_slice_bytes};
 use crate::session::{Mode, Options};
@@ -50,6 +60,20 @@ use zenoh::Wait;
 /// Longest the export thread sleeps without a wake-up (it then drains anyway and checks whether
 /// it must stop): a run that stands still (waiting for its processes) costs one wake-up per period.
 pub const IDLE_WAKE: Duration = Duration::from_millis(100);
+
+/// Longest the end of an export takes ([`Export::finish`]): catching up with the run's last step,
+/// then waiting for the readers to leave. 2 s: a reader that keeps up has its last sample a few
+/// ms after the run's last step (measured in docs/measurements.md); a reader that stays
+/// subscribed (a dashboard) holds the run's exit by this bound, not more.
+pub const END_BOUND: Duration = Duration::from_millis(2000);
+
+/// How often [`Export::finish`] looks whether the export caught up and whether readers are left:
+/// 1 ms, small against [`END_BOUND`] and against a reader's own latency.
+const END_POLL: Duration = Duration::from_millis(1);
+
+/// Topic of the end marker: `formation/<run>/end` carries the [`EndReport`] as JSON once, at the
+/// end of the run.
+pub const END_TOPIC: &str = "end";
 
 /// The `format` of the info reply.
 pub const INFO_FORMAT: &str = "formation-zenoh-info/1";
@@ -259,25 +283,152 @@ pub struct Stats {
     pub wakes: AtomicU64,
     /// Info queries answered.
     pub queries: AtomicU64,
+    /// Step records read from the run (and put when a reader subscribes).
+    pub steps_read: AtomicU64,
+    /// One past the highest step read (0: none yet).
+    pub next_step: AtomicU64,
+    /// Steps the export never read: overwritten in its iceoryx2 queue while it was starved (gaps
+    /// in the steps it read).
+    pub steps_missed: AtomicU64,
 }
 
-/// A running export; stopped (after a last drain) and joined on drop.
+/// Steps lost between two step records read one after the other: the gap between `next` (one
+/// past the step read before, 0 at the start) and `step`, the step just read.
+pub fn steps_skipped(next: u64, step: u64) -> u64 {
+    step.saturating_sub(next)
+}
+
+/// Whether the export has read every step a run recorded: `next_step` is one past the highest
+/// step it read, `recorded` the number of steps the run recorded (its steps are 0..recorded).
+pub fn caught_up(next_step: u64, recorded: u64) -> bool {
+    next_step >= recorded
+}
+
+/// How the end of an export went ([`Export::finish`]); `summary.json` `export` and the end marker
+/// `formation/<run>/end`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EndReport {
+    /// Steps the run recorded (its steps are 0..recorded).
+    pub recorded: u64,
+    /// Step records the export read and put (to every reader subscribed then).
+    pub steps_exported: u64,
+    /// Steps the export never read (its iceoryx2 queue overflowed while it was starved): no reader
+    /// got them.
+    pub steps_missed: u64,
+    /// One past the last step exported (`recorded` when it caught up).
+    pub next_step: u64,
+    /// Whether it read every step up to the last recorded one within the bound.
+    pub caught_up: bool,
+    /// Time from the run's last step to the export's last put, ms.
+    pub drain_ms: f64,
+    /// Time from then until no reader subscribed any more (or the bound), ms.
+    pub linger_ms: f64,
+    /// Whether readers were still subscribed when the bound ended the export.
+    pub readers_left: bool,
+    /// The bound of both, ms ([`END_BOUND`]).
+    pub bound_ms: f64,
+}
+
+impl EndReport {
+    /// One line for the run's stderr.
+    pub fn line(&self) -> String {
+        format!(
+            "export: {} of {} steps put{}, {} missed by the export (its queue overflowed); drained in {:.0} ms, {} after {:.0} ms (bound {:.0} ms)",
+            self.steps_exported,
+            self.recorded,
+            if self.caught_up { "" } else { " (not caught up within the bound)" },
+            self.steps_missed,
+            self.drain_ms,
+            if self.readers_left { "readers still subscribed" } else { "no reader left" },
+            self.linger_ms,
+            self.bound_ms
+        )
+    }
+}
+
+/// A running export; [`Export::finish`] ends it with the run; dropped without it (a run that
+/// returns on an error), it is stopped after a last drain and closed.
 pub struct Export {
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    /// Set by [`Export::finish`]: the thread polls every [`END_POLL`] instead of sleeping.
+    finishing: Arc<AtomicBool>,
+    thread: Option<JoinHandle<Writers>>,
     /// Its counters.
     pub stats: Arc<Stats>,
-    _queryable: zenoh::query::Queryable<()>,
+    queryable: Option<zenoh::query::Queryable<()>>,
     session: zenoh::Session,
+    run_id: String,
+}
+
+impl Export {
+    /// Ends the export with a run that recorded `recorded` steps (call it before the role
+    /// processes stop: their queued samples go with them): waits until the export has read step
+    /// `recorded - 1` (or the bound), stops its thread after a last drain, puts the end marker and
+    /// waits until no reader subscribes (or the bound); then closes. Bounded by [`END_BOUND`].
+    pub fn finish(mut self, recorded: u64) -> EndReport {
+        let start = std::time::Instant::now();
+        self.finishing.store(true, Ordering::SeqCst);
+        while !caught_up(self.stats.next_step.load(Ordering::SeqCst), recorded)
+            && start.elapsed() < END_BOUND
+        {
+            std::thread::sleep(END_POLL);
+        }
+        let writers = self.stop_thread();
+        let drain = start.elapsed();
+        let next_step = self.stats.next_step.load(Ordering::SeqCst);
+        let mut report = EndReport {
+            recorded,
+            steps_exported: self.stats.steps_read.load(Ordering::SeqCst),
+            steps_missed: self.stats.steps_missed.load(Ordering::SeqCst)
+                + recorded.saturating_sub(next_step),
+            next_step,
+            caught_up: caught_up(next_step, recorded),
+            drain_ms: drain.as_secs_f64() * 1e3,
+            linger_ms: 0.0,
+            readers_left: false,
+            bound_ms: END_BOUND.as_secs_f64() * 1e3,
+        };
+        if let Some(w) = &writers {
+            let end = serde_json::to_vec(&report).expect("JSON of plain values");
+            let _ = self
+                .session
+                .put(key(&self.run_id, END_TOPIC, None), end)
+                .encoding(Encoding::APPLICATION_JSON)
+                .congestion_control(CongestionControl::Block)
+                .wait();
+            while w.any_reader() && start.elapsed() < END_BOUND {
+                std::thread::sleep(END_POLL);
+            }
+            report.readers_left = w.any_reader();
+        }
+        report.linger_ms = (start.elapsed() - drain).as_secs_f64() * 1e3;
+        drop(writers);
+        self.close();
+        report
+    }
+
+    /// Stops the thread after its last drain; its publishers (`None` if it panicked).
+    fn stop_thread(&mut self) -> Option<Writers> {
+        self.stop.store(true, Ordering::SeqCst);
+        self.thread.take().and_then(|t| t.join().ok())
+    }
+
+    /// Undeclares the info queryable, then closes the session (publishers are undeclared before,
+    /// with their writers): nothing of this Zenoh session is declared while it closes.
+    fn close(&mut self) {
+        if let Some(q) = self.queryable.take() {
+            let _ = q.undeclare().wait();
+        }
+        let _ = self.session.close().wait();
+    }
 }
 
 impl Drop for Export {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+        if self.thread.is_some() {
+            drop(self.stop_thread());
         }
-        let _ = self.session.close().wait();
+        self.close();
     }
 }
 
@@ -357,6 +508,15 @@ struct Writers {
 }
 
 impl Writers {
+    /// Whether any reader subscribes to any key of the run.
+    fn any_reader(&self) -> bool {
+        self.states
+            .iter()
+            .chain(&self.telemetry)
+            .chain([&self.steps, &self.reference, &self.events])
+            .any(Out::wanted)
+    }
+
     /// One publisher per key of [`exported`], in its order.
     fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, String> {
         let [state, steps, reference, events, telemetry] = exported();
@@ -388,6 +548,15 @@ fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
         .map_err(|e| format!("export: {}: {e:?}", services::STEPS.pattern))?
     {
         let entries: &[StepEntry] = s.payload();
+        if let Some(first) = entries.first() {
+            let step = first.truth.state.step;
+            let next = stats.next_step.load(Ordering::Relaxed);
+            stats
+                .steps_missed
+                .fetch_add(steps_skipped(next, step), Ordering::Relaxed);
+            stats.next_step.store(next.max(step + 1), Ordering::SeqCst);
+            stats.steps_read.fetch_add(1, Ordering::Relaxed);
+        }
         for (entry, p) in entries.iter().zip(&w.states) {
             p.put(wire_bytes(&entry.truth.state), stats);
         }
@@ -462,20 +631,28 @@ impl Listening {
             stats,
         } = self;
         let stop = Arc::new(AtomicBool::new(false));
+        let finishing = Arc::new(AtomicBool::new(false));
+        let run_id = cfg.facts.run_id.clone();
         let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
         let thread = {
-            let (stop, stats) = (stop.clone(), stats.clone());
+            let flags = Flags {
+                stop: stop.clone(),
+                finishing: finishing.clone(),
+            };
+            let stats = stats.clone();
             std::thread::Builder::new()
                 .name("export".into())
-                .spawn(move || run(cfg, writers, stop, stats, ready_tx))
+                .spawn(move || run(cfg, writers, flags, stats, ready_tx))
                 .map_err(|e| format!("export: cannot start a thread: {e}"))?
         };
         let mut export = Export {
             stop,
+            finishing,
             thread: Some(thread),
             stats,
-            _queryable: queryable,
+            queryable: Some(queryable),
             session,
+            run_id,
         };
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(export),
@@ -489,13 +666,21 @@ impl Listening {
     }
 }
 
+/// What the export thread is told: stop after a last drain; poll fast (the run is ending).
+struct Flags {
+    stop: Arc<AtomicBool>,
+    finishing: Arc<AtomicBool>,
+}
+
+/// The export thread: drains the run's services into `writers` until told to stop; returns the
+/// writers, so the end of the export still knows its readers.
 fn run(
     cfg: ExportConfig,
     writers: Writers,
-    stop: Arc<AtomicBool>,
+    flags: Flags,
     stats: Arc<Stats>,
     ready: mpsc::Sender<Result<(), String>>,
-) {
+) -> Writers {
     // Background priority: the role processes and the recorder go first; a starved export only
     // loses samples (its queues overflow), it never holds them back.
     formation_config::node::sched::background_thread();
@@ -503,20 +688,20 @@ fn run(
         Ok(n) => n,
         Err(e) => {
             let _ = ready.send(Err(format!("export: {e}")));
-            return;
+            return writers;
         }
     };
     let readers = match Readers::open(&node, cfg.facts.n_agents) {
         Ok(r) => r,
         Err(e) => {
             let _ = ready.send(Err(e));
-            return;
+            return writers;
         }
     };
     let _ = ready.send(Ok(()));
     loop {
         // Read before draining: samples published up to the stop are still put.
-        let stopping = stop.load(Ordering::SeqCst);
+        let stopping = flags.stop.load(Ordering::SeqCst);
         if let Err(e) = drain(&readers, &writers, &stats) {
             tracing::warn!("{e}");
         }
@@ -524,13 +709,20 @@ fn run(
             break;
         }
         stats.wakes.fetch_add(1, Ordering::Relaxed);
-        if let Err(e) = readers.wake.wait(IDLE_WAKE) {
+        // The run's last steps raise no wake-up of their own: at the end, poll.
+        let sleep = if flags.finishing.load(Ordering::SeqCst) {
+            END_POLL
+        } else {
+            IDLE_WAKE
+        };
+        if let Err(e) = readers.wake.wait(sleep) {
             tracing::warn!("export: {e}");
-            std::thread::sleep(IDLE_WAKE);
+            std::thread::sleep(sleep);
         }
     }
     drop(readers);
     drop(node);
+    writers
 }
 
 #[cfg(test)]
@@ -547,6 +739,38 @@ mod tests {
             dt_s: 0.001,
             steps: 30000,
         }
+    }
+
+    #[test]
+    fn gaps_in_the_steps_read_count_as_missed_and_the_end_waits_for_the_last_step() {
+        assert_eq!(steps_skipped(0, 0), 0);
+        assert_eq!(steps_skipped(5, 5), 0);
+        assert_eq!(steps_skipped(5, 9), 4);
+        // A step read again (a replay after a restart) is no gap.
+        assert_eq!(steps_skipped(9, 3), 0);
+        assert!(!caught_up(9999, 10_000));
+        assert!(caught_up(10_000, 10_000));
+        // A run that recorded nothing has nothing to wait for.
+        assert!(caught_up(0, 0));
+    }
+
+    #[test]
+    fn the_end_line_names_what_was_put_missed_and_how_long_the_end_took() {
+        let r = EndReport {
+            recorded: 10_000,
+            steps_exported: 9_990,
+            steps_missed: 10,
+            next_step: 10_000,
+            caught_up: true,
+            drain_ms: 3.2,
+            linger_ms: 41.0,
+            readers_left: false,
+            bound_ms: 2000.0,
+        };
+        assert_eq!(
+            r.line(),
+            "export: 9990 of 10000 steps put, 10 missed by the export (its queue overflowed); drained in 3 ms, no reader left after 41 ms (bound 2000 ms)"
+        );
     }
 
     #[test]

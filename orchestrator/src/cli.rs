@@ -40,18 +40,10 @@ pub fn whole_number<T: TryFrom<u64>>(text: &str) -> Result<T, String> {
     }
 }
 
-/// What `--foxglove` says in a build without the cargo feature `foxglove`.
-pub const NO_FOXGLOVE: &str =
-    "--foxglove: this build has no Foxglove view (build the orchestrator with its default feature `foxglove`)";
-
-/// What `--ros2` and `--record rosbag2` say in a build without the cargo feature `ros2`.
-pub const NO_ROS2: &str =
-    "--ros2, --record rosbag2: this build has no ROS 2 view (build the orchestrator with its default feature `ros2`)";
-
 /// Value parser of `--foxglove ADDR`: `HOST:PORT` (a name is resolved; port 0 picks a free one).
 pub fn foxglove_addr(text: &str) -> Result<std::net::SocketAddr, String> {
     if !cfg!(feature = "foxglove") {
-        return Err(NO_FOXGLOVE.into());
+        return Err(crate::record::NO_FOXGLOVE.into());
     }
     use std::net::ToSocketAddrs;
     let bad = |why: String| {
@@ -412,7 +404,7 @@ impl RunnerArgs {
     fn check_ros2(&self) -> Result<(), ExitCode> {
         let wanted = self.ros2 || self.record.contains(&crate::record::Format::Rosbag2);
         if wanted && !cfg!(feature = "ros2") {
-            eprintln!("error: {NO_ROS2}");
+            eprintln!("error: {}", crate::record::NO_ROS2);
             return Err(ExitCode::from(EXIT_INVALID));
         }
         #[cfg(feature = "ros2")]

@@ -17,6 +17,8 @@ use crate::msg::{
     self, Clock, Color, Header, Marker, MarkerArray, MarkerKind, Message, Pose, PoseArray,
     PoseStamped, StringMsg, TfMessage, Time, TransformStamped,
 };
+pub use formation_config::view::LinkState;
+use formation_config::view::{agent_rgb, quaternion_xyzw};
 
 /// The fixed frame of every message.
 pub const WORLD_FRAME: &str = "world";
@@ -111,17 +113,6 @@ pub const EVENTS: usize = 4;
 /// Index of agent 1's pose topic; agent i's is `POSES + i - 1`.
 pub const POSES: usize = 5;
 
-/// State of a graph edge at a step (its colour, as in the Foxglove scene).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LinkState {
-    /// Shares cross it both ways: green.
-    Up,
-    /// Up, but a share of this step does not cross it: amber.
-    Stale,
-    /// Cut: red.
-    Down,
-}
-
 /// What does not change during a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
@@ -164,15 +155,7 @@ pub struct Frame<'a> {
 /// The rotation of ZYX Euler angles A = [phi, theta, psi] (body to inertial, R = Rz Ry Rx) as a
 /// unit quaternion [x, y, z, w].
 pub fn quaternion(a: [f64; 3]) -> [f64; 4] {
-    let (sr, cr) = (a[0] * 0.5).sin_cos();
-    let (sp, cp) = (a[1] * 0.5).sin_cos();
-    let (sy, cy) = (a[2] * 0.5).sin_cos();
-    [
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-        cr * cp * cy + sr * sp * sy,
-    ]
+    quaternion_xyzw(a)
 }
 
 fn rgba(r: u8, g: u8, b: u8, a: f32) -> Color {
@@ -184,31 +167,16 @@ fn rgba(r: u8, g: u8, b: u8, a: f32) -> Color {
     ]
 }
 
-/// Colour of agent `id` (1-based): the ten-colour palette of the figures and the Foxglove scene.
+/// Colour of agent `id` (1-based): the palette of the figures and the Foxglove scene.
 pub fn agent_color(id: usize, alpha: f32) -> Color {
-    const PALETTE: [[u8; 3]; 10] = [
-        [31, 119, 180],
-        [255, 127, 14],
-        [44, 160, 44],
-        [214, 39, 40],
-        [148, 103, 189],
-        [140, 86, 75],
-        [227, 119, 194],
-        [127, 127, 127],
-        [188, 189, 34],
-        [23, 190, 207],
-    ];
-    let [r, g, b] = PALETTE[(id.max(1) - 1) % PALETTE.len()];
+    let [r, g, b] = agent_rgb(id);
     rgba(r, g, b, alpha)
 }
 
 /// Colour of an edge (those of the Foxglove scene).
 pub fn link_color(state: LinkState) -> Color {
-    match state {
-        LinkState::Up => rgba(40, 170, 80, 0.9),
-        LinkState::Stale => rgba(240, 170, 20, 0.95),
-        LinkState::Down => rgba(220, 30, 30, 0.95),
-    }
+    let ([r, g, b], alpha) = state.rgba();
+    rgba(r, g, b, alpha)
 }
 
 /// Sizes of the markers, m.

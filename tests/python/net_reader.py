@@ -14,16 +14,12 @@ import time
 
 import formation_client as fc
 import formation_client.net as fnet
+from net_common import first_run
 
 endpoint, wanted, every = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
 deadline = time.monotonic() + 120
 with fnet.connect(endpoint, retry_s=60) as net:
-    info = None
-    while info is None and time.monotonic() < deadline:
-        runs = net.runs(timeout=1.0)
-        info = runs[0] if runs else None
-    if info is None:
-        sys.exit("no run answered formation/*/info")
+    info = first_run(net, deadline)
     print(json.dumps({"info": info}), flush=True)
     run_id, n = info["run_id"], info["n_agents"]
     states = net.states(run_id)

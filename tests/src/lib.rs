@@ -234,3 +234,18 @@ pub fn work_dir_beside_binaries(group: &str, tag: &str) -> PathBuf {
     std::fs::create_dir_all(&d).expect("can create a folder beside the binaries");
     d
 }
+
+/// Runs `ip ARGS` (iproute2), panicking with its error text when it fails: the network-namespace
+/// tests build their links with it.
+pub fn ip(args: &[&str]) {
+    let o = std::process::Command::new("ip")
+        .args(args)
+        .output()
+        .expect("ip runs");
+    assert!(
+        o.status.success(),
+        "ip {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

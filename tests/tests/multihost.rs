@@ -10,7 +10,7 @@
 //! Needs root (namespaces, veth): skipped with a message otherwise, and required (a failure)
 //! when `FORMATION_REQUIRE_NETNS=1` (set by `.ci/run`, which runs as root).
 
-use formation_tests::bin;
+use formation_tests::{bin, ip};
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -57,16 +57,6 @@ fn available(test: &str) -> bool {
             false
         }
     }
-}
-
-fn ip(args: &[&str]) {
-    let o = Command::new("ip").args(args).output().expect("ip runs");
-    assert!(
-        o.status.success(),
-        "ip {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&o.stderr)
-    );
 }
 
 /// A folder for the test's files outside /tmp (each namespace has its own /tmp).

@@ -213,3 +213,121 @@ fn an_export_beyond_loopback_without_auth_is_refused_before_the_run_starts() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Starts `tests/python/net_last_step.py` against `endpoint`: its one JSON line, once it exits.
+fn last_step_reader(py: &Path, endpoint: &str) -> std::thread::JoinHandle<(bool, String, String)> {
+    let child = python(py)
+        .arg(workspace_root().join("tests/python/net_last_step.py"))
+        .arg(endpoint)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the Python reader starts");
+    std::thread::spawn(move || {
+        let o = child.wait_with_output().expect("the reader exits");
+        (
+            o.status.success(),
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    })
+}
+
+#[test]
+fn a_reader_that_keeps_up_gets_every_quadrotors_last_step_and_the_end_marker() {
+    let Some(py) = python_with_zenoh("python_zenoh_last_step") else {
+        return;
+    };
+    let dir = temp_dir("python-zenoh-last");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let reader = last_step_reader(&py, &endpoint);
+    let mut run = RunningRun::start_with_env(
+        &["--set", DURATION, "--zenoh-listen", &endpoint],
+        &dir.join("out"),
+        &[("FORMATION_RUNS_DIR", &dir.join("runs"))],
+    );
+    let (status, _) = run.wait(TIMEOUT).expect("the run finishes");
+    let stderr = run.stderr();
+    assert!(status.success(), "run failed: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let (ok, out, err) = reader.join().expect("reader thread");
+    assert!(ok, "the reader failed: {err}\n{out}");
+    let v: Value = serde_json::from_str(out.trim()).expect("the reader prints JSON");
+    eprintln!("reader of every state: {v}");
+    let steps = v["info"]["steps"].as_u64().expect("steps");
+    for a in 1..=5 {
+        assert_eq!(
+            v["last"][a.to_string()].as_u64(),
+            Some(steps - 1),
+            "agent {a}'s last step: {v}"
+        );
+    }
+    // The end marker and summary.json tell the same end: every step put, none missed.
+    assert_eq!(v["end"]["recorded"].as_u64(), Some(steps), "{v}");
+    assert_eq!(v["end"]["caught_up"], true, "{v}");
+    let s: Value =
+        serde_json::from_slice(&std::fs::read(run.out.join("summary.json")).expect("summary.json"))
+            .unwrap();
+    assert_eq!(
+        s["export"]["recorded"].as_u64(),
+        Some(steps),
+        "{}",
+        s["export"]
+    );
+    assert_eq!(
+        s["export"]["steps_exported"].as_u64().unwrap()
+            + s["export"]["steps_missed"].as_u64().unwrap(),
+        steps,
+        "{}",
+        s["export"]
+    );
+    assert!(stderr.contains("export: "), "{stderr}");
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_run_that_fails_with_the_export_on_ends_with_its_own_exit_code_and_no_panic() {
+    // With a reader when the Zenoh binding is here (its session is torn down with the run's),
+    // without one otherwise.
+    let py = python_with_zenoh("python_zenoh_failed_run");
+    let dir = temp_dir("python-zenoh-failed");
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let reader = py.as_ref().map(|py| last_step_reader(py, &endpoint));
+    let mut run = RunningRun::start_with_env(
+        &[
+            "--set",
+            "simulation.duration_s=30",
+            "--zenoh-listen",
+            &endpoint,
+        ],
+        &dir.join("out"),
+        &[("FORMATION_RUNS_DIR", &dir.join("runs"))],
+    );
+    run.wait_for_line("formation run: id", Duration::from_secs(60))
+        .expect("the run starts");
+    let start = std::time::Instant::now();
+    let pid = loop {
+        match run.agent_pid(1) {
+            Some(p) if start.elapsed() > Duration::from_millis(1500) => break p,
+            _ if start.elapsed() > Duration::from_secs(60) => panic!("agent 2 never ran"),
+            _ => std::thread::sleep(Duration::from_millis(50)),
+        }
+    };
+    // SAFETY: a pid of this run's agent 2, just read.
+    unsafe { libc::kill(pid as i32, libc::SIGKILL) };
+    let (status, _) = run.wait(TIMEOUT).expect("the run ends");
+    let stderr = run.stderr();
+    // The default policy stops the run: exit 1, the death named, no thread of it panicked.
+    assert_eq!(status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("was killed (SIGKILL)"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("export: "), "{stderr}");
+    if let Some(r) = reader {
+        let (_, out, err) = r.join().expect("reader thread");
+        assert!(!err.contains("panicked"), "the reader: {err}");
+        eprintln!("reader of a failed run: {}", out.trim());
+    }
+    drop(run);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -11,12 +11,13 @@
 //! (`.ci/run` installs them into `target/pyenv`). Without them the Python part is skipped with a
 //! message, unless `FORMATION_REQUIRE_ROS2=1` (set by `.ci/run`): then it fails.
 
+use formation_tests::ip;
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, sim, temp_dir, workspace_root};
 use serde_json::Value;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Child, ChildStdout, Command, Stdio};
 use std::time::Duration;
 
 /// Long enough for any run here; a run that takes longer is a hang.
@@ -200,6 +201,59 @@ fn a_rosbag2_of_a_sim_is_read_back_by_rosbags_with_the_right_types_and_counts() 
     );
 }
 
+/// A subscriber of tests/python/ros2_subscriber.py.
+struct Subscriber;
+
+impl Subscriber {
+    /// Starts `cmd` (a Python interpreter, or a command that runs one) on the subscriber script
+    /// for `n` agents: it reads until a pose stamped `end_ns` or later of each agent, or for
+    /// `listen_s`, in DDS domain `domain` with Cyclone DDS configured by `cyclone`. Returns once
+    /// its readers exist.
+    fn start(
+        mut cmd: Command,
+        n: usize,
+        end_ns: u64,
+        listen_s: u32,
+        domain: &str,
+        cyclone: &str,
+    ) -> (Child, BufReader<ChildStdout>) {
+        let mut sub = cmd
+            .arg(script("ros2_subscriber.py"))
+            .args([n.to_string(), end_ns.to_string(), listen_s.to_string()])
+            .env("ROS_DOMAIN_ID", domain)
+            .env("CYCLONEDDS_URI", cyclone)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("python starts");
+        let mut out = BufReader::new(sub.stdout.take().expect("piped"));
+        let mut line = String::new();
+        out.read_line(&mut line).expect("the subscriber speaks");
+        assert_eq!(line.trim(), "ready", "the subscriber's first line");
+        (sub, out)
+    }
+
+    /// What it received (its JSON report), once it is done.
+    fn report(sub: &mut Child, out: &mut BufReader<ChildStdout>) -> Value {
+        let mut line = String::new();
+        out.read_line(&mut line).expect("the subscriber's report");
+        let _ = sub.wait();
+        serde_json::from_str(&line).expect("JSON from the subscriber")
+    }
+}
+
+/// A Cyclone DDS configuration on interface `iface` that also discovers by unicast at `peer`,
+/// with or without `multicast`.
+fn cyclone_config(iface: &str, peer: &str, multicast: bool) -> String {
+    format!(
+        "<CycloneDDS><Domain Id=\"any\"><General><Interfaces>\
+         <NetworkInterface name=\"{iface}\"/></Interfaces><AllowMulticast>{multicast}</AllowMulticast>\
+         </General><Discovery><ParticipantIndex>auto</ParticipantIndex>\
+         <MaxAutoParticipantIndex>64</MaxAutoParticipantIndex><Peers><Peer address=\"{peer}\"/>\
+         </Peers></Discovery></Domain></CycloneDDS>"
+    )
+}
+
 /// Runs `formation run --ros2` (with `extra` arguments) while a cyclonedds subscriber listens;
 /// checks what it received against the run's `trajectory.csv`, and that the run's trajectory is
 /// `formation sim`'s when `lockstep`.
@@ -214,24 +268,14 @@ fn cyclonedds_receives_the_run(tag: &str, extra: &[&str], lockstep: bool) {
     let end_ns = 1_990_000_000u64;
     // Cyclone DDS on the loopback interface, discovering by unicast on this machine: ROS 2's
     // localhost-only setting, the range the run discovers in by default.
-    let cyclone = "<CycloneDDS><Domain Id=\"any\"><General><Interfaces>\
-        <NetworkInterface name=\"lo\"/></Interfaces><AllowMulticast>false</AllowMulticast>\
-        </General><Discovery><ParticipantIndex>auto</ParticipantIndex>\
-        <MaxAutoParticipantIndex>64</MaxAutoParticipantIndex><Peers><Peer address=\"127.0.0.1\"/>\
-        </Peers></Discovery></Domain></CycloneDDS>";
-    let mut sub = Command::new(python)
-        .arg(script("ros2_subscriber.py"))
-        .args([n.to_string(), end_ns.to_string(), "90".into()])
-        .env("ROS_DOMAIN_ID", &domain)
-        .env("CYCLONEDDS_URI", cyclone)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("python starts");
-    let mut out = BufReader::new(sub.stdout.take().expect("piped"));
-    let mut line = String::new();
-    out.read_line(&mut line).expect("the subscriber speaks");
-    assert_eq!(line.trim(), "ready", "the subscriber's first line");
+    let (mut sub, mut out) = Subscriber::start(
+        Command::new(python),
+        n,
+        end_ns,
+        90,
+        &domain,
+        &cyclone_config("lo", "127.0.0.1", false),
+    );
 
     let mut args = vec!["--set", DURATION];
     args.extend_from_slice(extra);
@@ -249,10 +293,7 @@ fn cyclonedds_receives_the_run(tag: &str, extra: &[&str], lockstep: bool) {
         )),
         "{stderr}"
     );
-    line.clear();
-    out.read_line(&mut line).expect("the subscriber's report");
-    let _ = sub.wait();
-    let got: Value = serde_json::from_str(&line).expect("JSON from the subscriber");
+    let got = Subscriber::report(&mut sub, &mut out);
     let rows = trajectory(&run_dir);
     assert_eq!(n_agents(&rows), n);
     for id in 1..=n {
@@ -323,4 +364,211 @@ fn without_record_rosbag2_a_stale_rosbag2_of_an_earlier_run_is_removed() {
         "a recording that is not this run's was left in {}",
         out.display()
     );
+}
+
+/// Why the discovery-range test cannot run here, if it cannot (it makes a network namespace, a
+/// second "machine", joined to this one by a veth pair).
+fn netns_unavailable() -> Option<String> {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return Some("not root (a network namespace and a veth pair need CAP_NET_ADMIN)".into());
+    }
+    let ip_ok = Command::new("ip")
+        .arg("-V")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    (!ip_ok).then(|| "the `ip` command (iproute2) is missing".into())
+}
+
+/// Another machine on this machine's network: a network namespace whose veth end has
+/// 10.254.K.2/24, facing 10.254.K.1/24 here. Removed on drop, whatever happened.
+struct Neighbour {
+    ns: String,
+    here: String,
+    /// This machine's address on the shared link.
+    addr_here: String,
+    /// The veth end inside the namespace.
+    iface: String,
+}
+
+impl Neighbour {
+    fn new() -> Neighbour {
+        let k = (std::process::id() % 200 + 20) as usize;
+        let n = Neighbour {
+            ns: format!("fmros{k}"),
+            here: format!("fmros{k}a"),
+            addr_here: format!("10.254.{k}.1"),
+            iface: format!("fmros{k}b"),
+        };
+        n.remove();
+        ip(&["netns", "add", &n.ns]);
+        ip(&["-n", &n.ns, "link", "set", "lo", "up"]);
+        ip(&[
+            "link", "add", &n.here, "type", "veth", "peer", "name", &n.iface,
+        ]);
+        ip(&["link", "set", &n.iface, "netns", &n.ns]);
+        ip(&[
+            "addr",
+            "add",
+            &format!("{}/24", n.addr_here),
+            "dev",
+            &n.here,
+        ]);
+        ip(&["link", "set", &n.here, "up", "multicast", "on"]);
+        ip(&[
+            "-n",
+            &n.ns,
+            "addr",
+            "add",
+            &format!("10.254.{k}.2/24"),
+            "dev",
+            &n.iface,
+        ]);
+        ip(&[
+            "-n",
+            &n.ns,
+            "link",
+            "set",
+            &n.iface,
+            "up",
+            "multicast",
+            "on",
+        ]);
+        n
+    }
+
+    fn remove(&self) {
+        for args in [
+            vec!["link", "del", self.here.as_str()],
+            vec!["netns", "del", self.ns.as_str()],
+        ] {
+            let _ = Command::new("ip")
+                .args(&args)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status();
+        }
+    }
+
+    /// What a cyclonedds subscriber on the neighbour receives while a run of `extra` arguments
+    /// (in domain `domain`, discovery range `range` when given) flies here. The subscriber
+    /// discovers the way a ROS 2 node on the subnet does: by multicast on its link, and by unicast
+    /// to this machine's address.
+    /// The subscriber listens for `listen_s` seconds at most.
+    fn hears(
+        &self,
+        python: &Path,
+        dir: &Path,
+        range: Option<&str>,
+        extra: &[&str],
+        listen_s: u32,
+    ) -> Value {
+        let domain = random_domain().to_string();
+        let mut in_namespace = Command::new("ip");
+        in_namespace.args(["netns", "exec", &self.ns]).arg(python);
+        // Reads until it has the last pose (t = duration less one 100 Hz output period), or
+        // gives up after `listen_s`.
+        let (mut sub, mut out) = Subscriber::start(
+            in_namespace,
+            5,
+            1_990_000_000,
+            listen_s,
+            &domain,
+            &cyclone_config(&self.iface, &self.addr_here, true),
+        );
+
+        let mut args = vec!["--set", DURATION, "--ros2"];
+        args.extend_from_slice(extra);
+        let mut env = vec![("ROS_DOMAIN_ID", Path::new(&domain))];
+        if let Some(r) = range {
+            env.push(("ROS_AUTOMATIC_DISCOVERY_RANGE", Path::new(r)));
+        }
+        let mut run = RunningRun::start_with_env(&args, &dir.join("run"), &env);
+        let (st, _) = run.wait(RUN_TIMEOUT).expect("the run ends");
+        assert!(
+            st.success(),
+            "formation run --ros2 failed: {}",
+            run.stderr()
+        );
+        let said = run.stderr();
+        let got = Subscriber::report(&mut sub, &mut out);
+        serde_json::json!({ "got": got, "run": said })
+    }
+}
+
+impl Drop for Neighbour {
+    fn drop(&mut self) {
+        self.remove();
+    }
+}
+
+/// The whole count of poses a subscriber report holds.
+fn poses_heard(report: &Value) -> u64 {
+    report["got"]["pose_counts"]
+        .as_array()
+        .map(|c| c.iter().filter_map(Value::as_u64).sum())
+        .unwrap_or(0)
+}
+
+#[test]
+fn another_machine_on_the_network_hears_a_run_only_when_the_subnet_range_is_asked_for() {
+    const TEST: &str =
+        "another_machine_on_the_network_hears_a_run_only_when_the_subnet_range_is_asked_for";
+    if let Some(why) = netns_unavailable() {
+        if std::env::var("FORMATION_REQUIRE_NETNS").as_deref() == Ok("1") {
+            panic!("{TEST}: FORMATION_REQUIRE_NETNS=1 but {why}");
+        }
+        eprintln!("skipping {TEST}: {why}");
+        return;
+    }
+    let Some(python) = python_or_skip(TEST) else {
+        return;
+    };
+    let dir = temp_dir("ros2-range");
+    let neighbour = Neighbour::new();
+
+    // The default range, a realtime run (2 s of wall clock, ample for discovery's first
+    // announcements both ways), the neighbour listening 15 s from before the run starts: it
+    // hears nothing.
+    let default = neighbour.hears(&python, &dir.join("default"), None, &["--realtime"], 15);
+    assert!(
+        default["run"]
+            .as_str()
+            .unwrap_or("")
+            .contains("discovery on this machine only"),
+        "{}",
+        default["run"]
+    );
+    assert_eq!(
+        poses_heard(&default),
+        0,
+        "a run in the default (localhost) range reached another machine: {}",
+        default["got"]
+    );
+
+    // The same neighbour with ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (the run waits for it to
+    // join): it hears every agent, so the silence above is the range's doing, not the link's.
+    let subnet = neighbour.hears(
+        &python,
+        &dir.join("subnet"),
+        Some("SUBNET"),
+        &["--ros2-wait", "30"],
+        60,
+    );
+    for (i, c) in subnet["got"]["pose_counts"]
+        .as_array()
+        .expect("counts")
+        .iter()
+        .enumerate()
+    {
+        assert!(
+            c.as_u64().unwrap_or(0) > 0,
+            "agent {}: the neighbour heard no pose in the SUBNET range: {}\n{}",
+            i + 1,
+            subnet["got"],
+            subnet["run"]
+        );
+    }
 }

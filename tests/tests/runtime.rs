@@ -279,6 +279,20 @@ impl Drop for BusyLoops {
     }
 }
 
+/// (nice value, scheduling policy) of process `pid`'s main thread, from `/proc/<pid>/stat`
+/// (fields 19 and 41; the command name in parentheses may hold spaces).
+fn nice_and_policy(pid: u32) -> (i64, u64) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).expect("the process exists");
+    let rest: Vec<&str> = stat
+        .rsplit_once(')')
+        .expect("a stat line")
+        .1
+        .split_ascii_whitespace()
+        .collect();
+    // rest[0] is field 3 (state).
+    (rest[16].parse().unwrap(), rest[38].parse().unwrap())
+}
+
 /// A long paper run started with `extra` arguments beside a CPU-bound loop on every CPU this
 /// process may use: (the loops, the run, its start line, its folder, those CPUs); `None` on one
 /// CPU (the automatic layout pins nothing there).
@@ -320,11 +334,28 @@ fn beside_programs_keeping_every_cpu_busy_a_lockstep_run_starts_unpinned_and_say
         "{line}"
     );
     let mut seen = 0;
+    let mut preempting = 0;
     for pid in run.role_processes() {
         assert_eq!(cpus_allowed(pid), allowed, "{}", cmdline(pid));
         seen += 1;
+        let (nice, policy) = nice_and_policy(pid);
+        if cmdline(pid).contains("leader") {
+            continue;
+        }
+        // Plant and agents wake up ahead of the loops: SCHED_OTHER (0), never SCHED_BATCH (3),
+        // at nice -10 as root (the test's user in CI), nice 0 otherwise.
+        assert_eq!(policy, 0, "{}: policy {policy}", cmdline(pid));
+        // SAFETY: geteuid has no preconditions.
+        let root = unsafe { libc::geteuid() } == 0;
+        assert_eq!(nice, if root { -10 } else { 0 }, "{}", cmdline(pid));
+        preempting += 1;
     }
     assert_eq!(seen, 7, "plant, leader and 5 agents: {}", run.stderr());
+    assert_eq!(preempting, 6, "plant and 5 agents: {}", run.stderr());
+    assert!(
+        line.contains("plant and agents under SCHED_OTHER at nice "),
+        "{line}"
+    );
     drop((run, busy));
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -20,6 +20,8 @@
 
 use crate::frame::{AgentSample, Frame, Limits};
 use formation_config::scenario::events::{Event, EventKind, Timeline};
+pub use formation_config::view::LinkState;
+use formation_config::view::{agent_rgb, quaternion_xyzw, DOWN_RGB};
 use formation_config::Scenario;
 use foxglove::messages::{
     line_primitive, log, scene_entity_deletion, ArrowPrimitive, Color, CubePrimitive,
@@ -60,41 +62,16 @@ pub fn scene_decimation(s: &Scenario) -> u64 {
     want.div_ceil(out) * out
 }
 
-/// The state of an edge of the graph at a step.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LinkState {
-    /// Shares cross the edge both ways.
-    Up,
-    /// The edge is up but some share of this step does not cross it: an end's process is down
-    /// (crash, hang) or a message-loss event drops it; the receiver works on older data.
-    Stale,
-    /// A `link_down` event cut the edge.
-    Down,
-}
-
 /// The state of the edge {a, b} (0-based) at step k, from the run's timeline.
 pub fn link_state(timeline: &Timeline, a: usize, b: usize, k: u64) -> LinkState {
-    if !timeline.link_up(a, b, k) {
-        LinkState::Down
-    } else if timeline.delivered(a, b, k) && timeline.delivered(b, a, k) {
-        LinkState::Up
-    } else {
-        LinkState::Stale
-    }
+    LinkState::at(timeline, a, b, k)
 }
 
 /// The rotation of ZYX Euler angles A = [phi, theta, psi] (body to inertial, R = Rz Ry Rx as
 /// the plant's eq. (1)) as a unit quaternion.
 pub fn quaternion(a: [f64; 3]) -> Quaternion {
-    let (sr, cr) = (a[0] * 0.5).sin_cos();
-    let (sp, cp) = (a[1] * 0.5).sin_cos();
-    let (sy, cy) = (a[2] * 0.5).sin_cos();
-    Quaternion {
-        w: cr * cp * cy + sr * sp * sy,
-        x: sr * cp * cy - cr * sp * sy,
-        y: cr * sp * cy + sr * cp * sy,
-        z: cr * cp * sy - sr * sp * cy,
-    }
+    let [x, y, z, w] = quaternion_xyzw(a);
+    Quaternion { x, y, z, w }
 }
 
 /// A point of the scene rotated by a quaternion (for the top-view figure and the tests).
@@ -118,21 +95,9 @@ pub fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-/// Colour of agent `id` (1-based): the ten-colour palette of the figures, cycled.
+/// Colour of agent `id` (1-based): the palette of the figures, cycled.
 pub fn agent_color(id: usize, alpha: f64) -> Color {
-    const PALETTE: [[u8; 3]; 10] = [
-        [31, 119, 180],
-        [255, 127, 14],
-        [44, 160, 44],
-        [214, 39, 40],
-        [148, 103, 189],
-        [140, 86, 75],
-        [227, 119, 194],
-        [127, 127, 127],
-        [188, 189, 34],
-        [23, 190, 207],
-    ];
-    let [r, g, b] = PALETTE[(id.max(1) - 1) % PALETTE.len()];
+    let [r, g, b] = agent_rgb(id);
     rgba(r, g, b, alpha)
 }
 
@@ -147,16 +112,14 @@ fn rgba(r: u8, g: u8, b: u8, a: f64) -> Color {
 
 /// Colour of a quadrotor whose process is down.
 fn down_color(alpha: f64) -> Color {
-    rgba(150, 150, 150, alpha)
+    let [r, g, b] = DOWN_RGB;
+    rgba(r, g, b, alpha)
 }
 
 /// Colour of an edge in `state`.
 pub fn link_color(state: LinkState) -> Color {
-    match state {
-        LinkState::Up => rgba(40, 170, 80, 0.9),
-        LinkState::Stale => rgba(240, 170, 20, 0.95),
-        LinkState::Down => rgba(220, 30, 30, 0.95),
-    }
+    let ([r, g, b], alpha) = state.rgba();
+    rgba(r, g, b, f64::from(alpha))
 }
 
 /// An event of the run and the step it applies at.
@@ -265,32 +228,14 @@ pub struct SceneConfig {
 impl SceneConfig {
     /// The scene of scenario `s`.
     pub fn from_scenario(s: &Scenario) -> SceneConfig {
-        let mut edges: Vec<(usize, usize)> = s
-            .graph
-            .edges
-            .iter()
-            .map(|e| {
-                let (a, b) = (e.a - 1, e.b - 1);
-                (a.min(b), a.max(b))
-            })
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
         SceneConfig {
             n: s.n_agents(),
             dt: s.simulation.dt_s,
             decimation: scene_decimation(s),
             target_radius_m: s.metrics.target_radius_m,
             half_fov_tan: (s.metrics.sensor_fov_deg.to_radians() * 0.5).tan(),
-            edges,
-            leader_links: s
-                .graph
-                .leader_weights
-                .iter()
-                .enumerate()
-                .filter(|(_, &b)| b > 0.0)
-                .map(|(i, _)| i)
-                .collect(),
+            edges: formation_config::view::edges(s),
+            leader_links: formation_config::view::leader_links(s),
             limits: Limits::of(s),
         }
     }

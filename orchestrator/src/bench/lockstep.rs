@@ -4,7 +4,7 @@
 //! can be set against the bare fan-out measured in the same bench run.
 
 use super::link::Sizes;
-use super::report::Row;
+use super::row::Row;
 use crate::run::step_timing::WARMUP_STEPS;
 use serde::Serialize;
 use serde_json::Value;

@@ -24,6 +24,7 @@ mod peer;
 mod plan;
 mod procs;
 mod report;
+mod row;
 #[cfg(feature = "multihost")]
 mod secure;
 mod sock;
@@ -111,6 +112,56 @@ pub struct BenchArgs {
     /// Print `{"results": [...]}` on stdout instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Measure only the host's own timer noise and exit: a bare 1 ms timer loop (absolute
+    /// sleeps, 1 ns timer slack, no work) for `--seconds` per round, under the normal policy and,
+    /// when this process is allowed to (CAP_SYS_NICE or RLIMIT_RTPRIO, checked), under
+    /// SCHED_FIFO 10 as a realtime run's plant; each round alternates the two. Prints the mean
+    /// lateness and the fraction of wake-ups later than 500 µs (docs/realtime.md, "The host's own
+    /// limit").
+    #[arg(long)]
+    pub host: bool,
+}
+
+/// `formation bench --host`: the bare timer loop, alternated normal / SCHED_FIFO per round.
+fn host_main(args: &BenchArgs) -> ExitCode {
+    use crate::run::{host_probe, rt};
+    if !(args.seconds > 0.0 && args.seconds <= 3600.0) {
+        eprintln!("error: --seconds {}: expected 0 < s <= 3600", args.seconds);
+        return ExitCode::from(EXIT_INVALID);
+    }
+    let fifo = rt::decide(rt::Requested::Auto, false, rt::Privilege::of_this_process())
+        .map(|s| s.priority)
+        .unwrap_or(0);
+    let policies: Vec<u32> = if fifo > 0 { vec![0, fifo] } else { vec![0] };
+    let duration = std::time::Duration::from_secs_f64(args.seconds);
+    let mut rows = Vec::new();
+    for round in 1..=args.rounds {
+        for &p in &policies {
+            let s = host_probe::probe(p, duration);
+            let policy = if p > 0 {
+                format!("SCHED_FIFO {p}")
+            } else {
+                "normal".to_string()
+            };
+            if !args.json {
+                println!(
+                    "host round {round} {policy:<14} {} periods of {} µs: mean {:.1} µs late, max {:.0} µs, > {} µs late: {} ({:.4} %)",
+                    s.periods,
+                    host_probe::PERIOD.as_micros(),
+                    s.mean_late_us,
+                    s.max_late_us,
+                    host_probe::LATE.as_micros(),
+                    s.late,
+                    s.late_fraction * 100.0
+                );
+            }
+            rows.push(serde_json::json!({"round": round, "rt_priority": p, "probe": s}));
+        }
+    }
+    if args.json {
+        println!("{}", serde_json::json!({ "host": rows }));
+    }
+    ExitCode::SUCCESS
 }
 
 fn parse_transports(s: &str) -> Result<Vec<Transport>, String> {
@@ -218,6 +269,9 @@ fn unique_prefix() -> String {
 /// Entry point of `formation bench`: 0 on success, 1 if a case failed, 2 on bad arguments, 130
 /// when interrupted.
 pub fn main(args: BenchArgs) -> ExitCode {
+    if args.host {
+        return host_main(&args);
+    }
     let allowed = procs::allowed_cpus();
     let inputs = match validate(&args, &allowed) {
         Ok(i) => i,
@@ -269,7 +323,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         budget,
         allowed: &allowed,
     };
-    let mut rounds: Vec<Vec<report::Row>> = Vec::new();
+    let mut rounds: Vec<Vec<row::Row>> = Vec::new();
     let mut failures = 0;
     for round in 1..=args.rounds {
         if procs::aborted() {
@@ -325,7 +379,7 @@ fn run_round(
     first: usize,
     inputs: &[PlanInput],
     args: &BenchArgs,
-    rows: &mut Vec<report::Row>,
+    rows: &mut Vec<row::Row>,
 ) -> usize {
     let mut failures = 0;
     for (k, input) in inputs.iter().enumerate() {
@@ -347,12 +401,7 @@ fn run_round(
 /// The Zenoh cases of one round, case numbers from `first`: ping-pong, then the split step's
 /// fan-out and the split lockstep run, one after the other; returns the number that failed.
 #[cfg(feature = "multihost")]
-fn run_zenoh(
-    ctx: &case::Ctx,
-    first: usize,
-    args: &BenchArgs,
-    rows: &mut Vec<report::Row>,
-) -> usize {
+fn run_zenoh(ctx: &case::Ctx, first: usize, args: &BenchArgs, rows: &mut Vec<row::Row>) -> usize {
     let seconds = args.seconds;
     let link = args.zenoh_link;
     let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
@@ -422,7 +471,7 @@ fn run_zenoh(
 
 /// Without Zenoh nothing runs (`--transports zenoh` is refused by [`validate`]).
 #[cfg(not(feature = "multihost"))]
-fn run_zenoh(_: &case::Ctx, _: usize, _: &BenchArgs, _: &mut Vec<report::Row>) -> usize {
+fn run_zenoh(_: &case::Ctx, _: usize, _: &BenchArgs, _: &mut Vec<row::Row>) -> usize {
     0
 }
 
@@ -431,7 +480,7 @@ fn run_cases(
     ctx: &case::Ctx,
     cases: &[(usize, &plan::Case)],
     first: usize,
-    rows: &mut Vec<report::Row>,
+    rows: &mut Vec<row::Row>,
 ) -> usize {
     let mut failures = 0;
     for &(idx, c) in cases {
@@ -451,7 +500,7 @@ fn run_cases(
                 failures += 1;
             }
             Ok(h) => {
-                let row = report::Row::new(c, ctx.sizes, &h);
+                let row = row::Row::new(c, ctx.sizes, &h);
                 eprintln!(
                     "  {what}: p50 {:.1} µs ({} samples)",
                     row.p50_us, row.samples
@@ -469,7 +518,7 @@ fn run_cases(
 }
 
 /// Runs the lockstep case with `n` agents; returns 1 if it failed.
-fn run_lockstep(n: usize, seconds: f64, rows: &mut Vec<report::Row>) -> usize {
+fn run_lockstep(n: usize, seconds: f64, rows: &mut Vec<row::Row>) -> usize {
     let what = format!("lockstep (formation run) n={n}");
     let scratch = std::env::temp_dir().join(format!("formation-bench-{}", std::process::id()));
     let failed = match lockstep::run(n, seconds, &scratch) {

@@ -14,7 +14,7 @@
 //! latency of its own.
 
 use super::lockstep::{self, row_as};
-use super::report::Row;
+use super::row::Row;
 use super::secure::Secured;
 use crate::run::step_timing::WARMUP_STEPS;
 use formation_net::bench::{SPLIT_AGENTS, SPLIT_HOST};

@@ -3,7 +3,7 @@
 //! round, then the median over the rounds, with the split run's real-time factor.
 
 use super::lockstep::{across_rounds, median, Comparison};
-use super::report::Row;
+use super::row::Row;
 use serde::Serialize;
 
 /// Transport of the Zenoh rows.

@@ -15,7 +15,7 @@ use super::case::{measure_with, Ctx};
 use super::link::{self, Link, Msg, Sizes, Wait, MIN_PAYLOAD};
 use super::plan::Pattern;
 use super::procs::Peers;
-use super::report::Row;
+use super::row::Row;
 use super::secure::Secured;
 use super::PeerArgs;
 use formation_net::bench::{self as zb, Records, Side, StepPattern};

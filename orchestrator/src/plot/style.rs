@@ -40,21 +40,10 @@ impl<T: DrawingBackend<ErrorType: 'static>> Backend for T {}
 /// The drawing area type every figure draws on.
 pub type Area<DB> = DrawingArea<DB, Shift>;
 
-/// Colour of agent `id` (1-based): a ten-colour qualitative palette, cycled.
+/// Colour of agent `id` (1-based): the palette every view of a run uses, cycled.
 pub fn agent_color(id: u32) -> RGBColor {
-    const PALETTE: [RGBColor; 10] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(127, 127, 127),
-        RGBColor(188, 189, 34),
-        RGBColor(23, 190, 207),
-    ];
-    PALETTE[(id.max(1) as usize - 1) % PALETTE.len()]
+    let [r, g, b] = formation_config::view::agent_rgb(id as usize);
+    RGBColor(r, g, b)
 }
 
 /// Dark grey for reference signals (target, constraints).

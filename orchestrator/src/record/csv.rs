@@ -2,6 +2,7 @@
 //! round-trip form, so equal trajectories give byte-equal files.
 
 use super::metrics::Metrics;
+use super::sink::{Sink, StepRows};
 use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use formation_config::Scenario;
 use std::fs::File;
@@ -99,22 +100,6 @@ pub const COLUMNS: &[&str] = &[
     "tau",
 ];
 
-/// The rows of one output step, handed to the writer thread.
-pub(crate) struct StepRows {
-    /// Virtual leader P_d, m.
-    pub(crate) p_d: [f64; 3],
-    /// Ground target T_g, m.
-    pub(crate) target: [f64; 3],
-    /// Formation offsets Delta_i0 of the N agents, m.
-    pub(crate) offsets: Vec<[f64; 3]>,
-    /// The plant's truths of the N agents.
-    pub(crate) truths: Vec<PlantTruth>,
-    /// The N commands.
-    pub(crate) commands: Vec<ControlCommand>,
-    /// Formation error of each agent, m.
-    pub(crate) errors: Vec<f64>,
-}
-
 enum Msg {
     /// Consecutive output steps, in order.
     Steps(Vec<StepRows>),
@@ -123,76 +108,37 @@ enum Msg {
     Flush(std::sync::mpsc::SyncSender<std::io::Result<()>>),
 }
 
-/// What the writer thread writes.
-pub struct Files<'a> {
-    /// `trajectory.csv`, if written.
-    pub trajectory: Option<&'a Path>,
-    /// `run.mcap`, if written (`--record mcap`).
-    pub mcap: Option<super::mcap::McapSink>,
-    /// `rosbag2/`, if written (`--record rosbag2`).
-    #[cfg(feature = "ros2")]
-    pub rosbag2: Option<super::ros2::BagSink>,
-}
-
-/// The sinks the writer thread owns.
-struct Sinks {
-    rows: Option<RowWriter>,
-    mcap: Option<super::mcap::McapSink>,
-    #[cfg(feature = "ros2")]
-    rosbag2: Option<super::ros2::BagSink>,
-}
+/// The sinks the writer thread owns, in the order they are written.
+struct Sinks(Vec<Box<dyn Sink>>);
 
 impl Sinks {
-    fn write_rows(&mut self, r: &StepRows) -> std::io::Result<()> {
-        if let Some(rows) = &mut self.rows {
-            rows.write_rows(r)?;
-        }
-        if let Some(mcap) = &mut self.mcap {
-            mcap.write_step(r)?;
-        }
-        #[cfg(feature = "ros2")]
-        if let Some(bag) = &mut self.rosbag2 {
-            bag.write_step(r)?;
-        }
-        Ok(())
+    fn step(&mut self, r: &StepRows) -> std::io::Result<()> {
+        self.0.iter_mut().try_for_each(|s| s.step(r))
     }
 
-    fn write_event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
-        #[cfg(feature = "ros2")]
-        if let Some(bag) = &mut self.rosbag2 {
-            bag.write_event(line)?;
-        }
-        if let Some(mcap) = &mut self.mcap {
-            mcap.injection(line);
-        }
-        match (&mut self.mcap, super::mcap::event_message(line)) {
-            (Some(mcap), Some((step, event))) => mcap.write_event(step, &event),
-            _ => Ok(()),
-        }
+    fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        self.0.iter_mut().try_for_each(|s| s.event(line))
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        match &mut self.rows {
-            Some(rows) => rows.flush(),
-            None => Ok(()),
-        }
+        self.0.iter_mut().try_for_each(|s| s.flush())
     }
 
+    /// Flushes and completes every sink; the first failure is returned, the others still close.
     fn close(mut self) -> std::io::Result<()> {
-        self.flush()?;
-        #[cfg(feature = "ros2")]
-        if let Some(bag) = self.rosbag2.take() {
-            bag.finish()?;
-        }
-        match self.mcap.take() {
-            Some(mcap) => mcap.finish(),
-            None => Ok(()),
-        }
+        let flushed = self.flush();
+        let closed = self
+            .0
+            .into_iter()
+            .map(|s| s.finish())
+            .fold(Ok(()), |first, r| first.and(r));
+        flushed.and(closed)
     }
 }
 
-/// Writer of `trajectory.csv` (and `run.mcap`): formatting and writing run on a thread of their
-/// own, off the simulation loop (the formatting code is the same, so the bytes are too).
+/// The recorder's writer of its file outputs (`trajectory.csv`, `run.mcap`, the rosbag2: the
+/// [`Sink`]s of the run): formatting and writing run on a thread of their own, off the simulation
+/// loop (the formatting code is the same, so the bytes are too).
 pub struct TrajectoryWriter {
     tx: Option<std::sync::mpsc::SyncSender<Msg>>,
     handle: Option<std::thread::JoinHandle<std::io::Result<()>>>,
@@ -203,17 +149,9 @@ pub struct TrajectoryWriter {
 }
 
 impl TrajectoryWriter {
-    /// Creates the files, writes the CSV header and starts the writer thread.
-    pub fn create(files: Files, s: &Scenario) -> std::io::Result<TrajectoryWriter> {
-        let mut rows = Sinks {
-            rows: files
-                .trajectory
-                .map(|path| RowWriter::create(path, s))
-                .transpose()?,
-            mcap: files.mcap,
-            #[cfg(feature = "ros2")]
-            rosbag2: files.rosbag2,
-        };
+    /// Starts the writer thread over `sinks` (their files created).
+    pub(crate) fn create(sinks: Vec<Box<dyn Sink>>) -> std::io::Result<TrajectoryWriter> {
+        let mut rows = Sinks(sinks);
         let (tx, rx) = std::sync::mpsc::sync_channel::<Msg>(1024);
         let handle = std::thread::Builder::new()
             .name("csv-writer".into())
@@ -232,11 +170,11 @@ impl TrajectoryWriter {
                     match rx.recv_timeout(wait) {
                         Ok(Msg::Steps(batch)) => {
                             for r in &batch {
-                                rows.write_rows(r)?;
+                                rows.step(r)?;
                             }
                             pending = true;
                         }
-                        Ok(Msg::Event(line)) => rows.write_event(&line)?,
+                        Ok(Msg::Event(line)) => rows.event(&line)?,
                         Ok(Msg::Flush(reply)) => {
                             let _ = reply.send(rows.flush());
                             (flushed, pending) = (Instant::now(), false);
@@ -357,7 +295,7 @@ impl Drop for TrajectoryWriter {
 }
 
 /// Buffered, synchronous writer of `trajectory.csv` rows (runs on the writer thread).
-struct RowWriter {
+pub(crate) struct RowWriter {
     out: BufWriter<File>,
     margin: f64,
     rate_limit: f64,
@@ -366,7 +304,7 @@ struct RowWriter {
 
 impl RowWriter {
     /// Creates the file and writes the header.
-    fn create(path: &Path, s: &Scenario) -> std::io::Result<RowWriter> {
+    pub(crate) fn create(path: &Path, s: &Scenario) -> std::io::Result<RowWriter> {
         let mut out = BufWriter::with_capacity(
             1 << 20,
             formation_config::node::files::create_replacing(path)?,
@@ -445,9 +383,19 @@ impl RowWriter {
         }
         Ok(())
     }
+}
+
+impl Sink for RowWriter {
+    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+        self.write_rows(rows)
+    }
 
     /// Flushes the buffer to the file.
     fn flush(&mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
+
+    fn finish(mut self: Box<Self>) -> std::io::Result<()> {
         self.out.flush()
     }
 }
@@ -519,16 +467,8 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("trajectory.csv");
         let s = Scenario::paper();
-        let mut w = TrajectoryWriter::create(
-            Files {
-                trajectory: Some(&path),
-                mcap: None,
-                #[cfg(feature = "ros2")]
-                rosbag2: None,
-            },
-            &s,
-        )
-        .unwrap();
+        let mut w = TrajectoryWriter::create(vec![Box::new(RowWriter::create(&path, &s).unwrap())])
+            .unwrap();
         // Two and a half batches, then a few steps fewer than a batch: a flush hands over the
         // partial batch, so the file holds every step queued, five rows each, in order.
         let total = (5 * STEPS_PER_BATCH / 2) as u64;

@@ -19,7 +19,7 @@
 //! that is not finite (only at a divergence step, and the barrier widths `c1`, `c2` of the
 //! `unconstrained` variant) is `null`.
 
-use super::csv::StepRows;
+use super::sink::{event_message, Sink, StepRows};
 use formation_config::protocol::wire::{ControlCommand, PlantTruth};
 use formation_config::{Scenario, Variant};
 use serde::Serialize;
@@ -420,6 +420,25 @@ impl McapSink {
     }
 }
 
+impl Sink for McapSink {
+    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+        self.write_step(rows)
+    }
+
+    /// The scene marks the injection; an accepted one is an `/events` message at its step.
+    fn event(&mut self, line: &Value) -> std::io::Result<()> {
+        self.injection(line);
+        match event_message(line) {
+            Some((step, event)) => self.write_event(step, &event),
+            None => Ok(()),
+        }
+    }
+
+    fn finish(self: Box<Self>) -> std::io::Result<()> {
+        McapSink::finish(*self)
+    }
+}
+
 /// The four per-agent messages of one step.
 enum AgentMsg {
     State(StateMsg),
@@ -500,38 +519,6 @@ fn messages(agent: u32, truth: &PlantTruth, cmd: &ControlCommand, error_m: f64) 
             disturbance: truth.disturbance,
         }),
     ]
-}
-
-/// The `/events` message of an injection line of `events.jsonl` (`None` for a rejected request):
-/// the fields that describe what applies and when, without the wall-clock time and the request's
-/// nonce, so that a lockstep run with injections at given steps records the same bytes every time.
-pub fn event_message(line: &Value) -> Option<(u64, Value)> {
-    let kind = line.get("event")?.as_str()?;
-    if kind != "fault" && kind != "delay" {
-        return None;
-    }
-    let step = line.get("step")?.as_u64()?;
-    let mut out = serde_json::Map::new();
-    out.insert("step".into(), step.into());
-    out.insert("t".into(), line.get("t")?.clone());
-    out.insert("kind".into(), kind.into());
-    out.insert("agent".into(), line.get("agent")?.clone());
-    let fields: &[&str] = if kind == "fault" {
-        &["requested_step", "gamma", "delta"]
-    } else {
-        &[
-            "requested_step",
-            "base_s",
-            "amplitude_s",
-            "angular_rate_rad_s",
-        ]
-    };
-    for f in fields {
-        if let Some(v) = line.get(*f).filter(|v| !v.is_null()) {
-            out.insert((*f).into(), v.clone());
-        }
-    }
-    Some((step, Value::Object(out)))
 }
 
 #[cfg(test)]

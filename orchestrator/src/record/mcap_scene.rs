@@ -3,7 +3,7 @@
 //! `/scene/events`, `/log`, `/agent/{i}/plot`), built from the recorded output steps at every
 //! scene frame and from the run's events, so that Foxglove's 3D panel shows the swarm.
 
-use super::csv::StepRows;
+use super::sink::StepRows;
 use formation_config::Scenario;
 use formation_viz::channels::{channels, encode, Encoded};
 use formation_viz::{Frame, Limits, SceneBuilder};

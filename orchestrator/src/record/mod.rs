@@ -17,8 +17,17 @@ pub mod recovery;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod separation;
+pub(crate) mod sink;
 pub mod summary;
 pub mod table;
+
+/// What `--foxglove` says in a build without the cargo feature `foxglove`.
+pub const NO_FOXGLOVE: &str =
+    "--foxglove: this build has no Foxglove view (build the orchestrator with its default feature `foxglove`)";
+
+/// What `--ros2` and `--record rosbag2` say in a build without the cargo feature `ros2`.
+pub const NO_ROS2: &str =
+    "--ros2, --record rosbag2: this build has no ROS 2 view (build the orchestrator with its default feature `ros2`)";
 
 pub use metrics::Divergence;
 pub use summary::Summary;
@@ -94,6 +103,7 @@ pub struct Recorder {
     mode: &'static str,
     dt: f64,
     timing: Option<serde_json::Value>,
+    export: Option<serde_json::Value>,
     /// Per-step worst formation error and violations, for the events' recovery.
     series: recovery::Series,
     /// The scenario's events and graph.
@@ -151,7 +161,7 @@ impl Recorder {
             .transpose()?;
         #[cfg(not(feature = "foxglove"))]
         if outputs.foxglove.is_some() {
-            return Err(std::io::Error::other(crate::cli::NO_FOXGLOVE));
+            return Err(std::io::Error::other(NO_FOXGLOVE));
         }
         #[cfg(feature = "ros2")]
         let (live_ros2, rosbag2) = {
@@ -170,22 +180,24 @@ impl Recorder {
         };
         #[cfg(not(feature = "ros2"))]
         if outputs.ros2.is_some() || outputs.rosbag2 {
-            return Err(std::io::Error::other(crate::cli::NO_ROS2));
+            return Err(std::io::Error::other(NO_ROS2));
         }
-        let mcap = outputs
-            .mcap
-            .then(|| mcap::McapSink::create(&mcap_path, s, variant))
-            .transpose()?;
-        let csv = if outputs.trajectory || mcap.is_some() || outputs.rosbag2 {
-            let files = csv::Files {
-                trajectory: outputs.trajectory.then_some(csv_path.as_path()),
-                mcap,
-                #[cfg(feature = "ros2")]
-                rosbag2,
-            };
-            Some(csv::TrajectoryWriter::create(files, s)?)
-        } else {
+        // The file outputs, in the order the writer thread writes them.
+        let mut sinks: Vec<Box<dyn sink::Sink>> = Vec::new();
+        if outputs.trajectory {
+            sinks.push(Box::new(csv::RowWriter::create(&csv_path, s)?));
+        }
+        if outputs.mcap {
+            sinks.push(Box::new(mcap::McapSink::create(&mcap_path, s, variant)?));
+        }
+        #[cfg(feature = "ros2")]
+        if let Some(bag) = rosbag2 {
+            sinks.push(Box::new(bag));
+        }
+        let csv = if sinks.is_empty() {
             None
+        } else {
+            Some(csv::TrajectoryWriter::create(sinks)?)
         };
         Ok(Recorder {
             csv,
@@ -197,6 +209,7 @@ impl Recorder {
             mode,
             dt: s.simulation.dt_s,
             timing: None,
+            export: None,
             series: recovery::Series::with_capacity(
                 s.n_steps() as usize,
                 s.metrics.safety_distance_m,
@@ -278,6 +291,11 @@ impl Recorder {
         self.timing = Some(timing);
     }
 
+    /// Sets the `export` object of `summary.json` (runs with `--zenoh-listen`).
+    pub fn set_export(&mut self, export: serde_json::Value) {
+        self.export = Some(export);
+    }
+
     /// Checkpoints refused per agent (damaged, another agent's or run's): restarted cold.
     pub fn set_checkpoints_refused(&mut self, refused: Vec<u32>) {
         self.checkpoints_refused = refused;
@@ -341,6 +359,7 @@ impl Recorder {
             wall_time_s,
         );
         summary.timing = self.timing.take();
+        summary.export = self.export.take();
         let marks = recovery::marks(&self.events, &self.runtime_events, &self.incidents, self.dt);
         summary.events = self.series.measure(&marks, self.dt);
         if !self.timeline.is_empty() {

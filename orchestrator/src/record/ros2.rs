@@ -4,7 +4,7 @@
 //! `--ros2` publishes the same messages live on DDS from those steps, through a bounded queue that
 //! never holds the run back (a full queue drops the step, counted).
 
-use super::csv::StepRows;
+use super::sink::{Sink, StepRows};
 use formation_config::protocol::wire::PlantTruth;
 use formation_config::scenario::events::{Event, Timeline};
 use formation_config::Scenario;
@@ -24,23 +24,10 @@ pub const BAG_METADATA: &str = "metadata.yaml";
 /// The scene of scenario `s`: graph edges (0-based, sorted), agents linked to the leader, target
 /// radius.
 pub fn scene_of(s: &Scenario) -> Scene {
-    let mut edges: Vec<(usize, usize)> = s
-        .graph
-        .edges
-        .iter()
-        .map(|e| {
-            let (a, b) = (e.a - 1, e.b - 1);
-            (a.min(b), a.max(b))
-        })
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
     Scene {
         n_agents: s.n_agents(),
-        edges,
-        leader_links: (0..s.n_agents())
-            .filter(|&i| s.graph.leader_weights.get(i).is_some_and(|&b| b > 0.0))
-            .collect(),
+        edges: formation_config::view::edges(s),
+        leader_links: formation_config::view::leader_links(s),
         target_radius_m: s.metrics.target_radius_m,
     }
 }
@@ -106,15 +93,11 @@ impl Frames {
         );
         let timeline = &self.timeline;
         self.links.clear();
-        self.links.extend(self.edges.iter().map(|&(a, b)| {
-            if !timeline.link_up(a, b, step) {
-                LinkState::Down
-            } else if timeline.delivered(a, b, step) && timeline.delivered(b, a, step) {
-                LinkState::Up
-            } else {
-                LinkState::Stale
-            }
-        }));
+        self.links.extend(
+            self.edges
+                .iter()
+                .map(|&(a, b)| LinkState::at(timeline, a, b, step)),
+        );
         Frame {
             time_ns: step * self.dt_ns,
             p_d,
@@ -134,7 +117,7 @@ fn dt_ns(s: &Scenario) -> u64 {
 /// The `/formation/events` text of an injection line and its step (`None`: a rejection): the
 /// JSON of `run.mcap`'s `/events`.
 pub fn event_text(line: &serde_json::Value) -> Option<(u64, String)> {
-    super::mcap::event_message(line).map(|(step, e)| (step, e.to_string()))
+    super::sink::event_message(line).map(|(step, e)| (step, e.to_string()))
 }
 
 /// `--record rosbag2`: the recording, written on the recorder's writer thread.
@@ -206,6 +189,20 @@ impl BagSink {
             &self.dir.join(BAG_METADATA),
             metadata.as_bytes(),
         )
+    }
+}
+
+impl Sink for BagSink {
+    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+        self.write_step(rows)
+    }
+
+    fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
+        self.write_event(line)
+    }
+
+    fn finish(self: Box<Self>) -> std::io::Result<()> {
+        BagSink::finish(*self)
     }
 }
 
@@ -303,8 +300,8 @@ impl LiveRos2 {
     pub fn finish(self) {
         let s = self.publisher.finish();
         eprintln!(
-            "ros2: published {} of {} output steps ({} dropped by the full queue, {} DDS writes refused)",
-            s.published, s.offered, s.dropped, s.writes_refused
+            "ros2: published {} of {} output steps ({} while nobody read any topic, {} dropped by the full queue, {} DDS writes refused)",
+            s.published, s.offered, s.unheard, s.dropped, s.writes_refused
         );
     }
 }

@@ -104,6 +104,10 @@ pub struct Summary {
     /// (steady-state wall time per step); absent for `formation sim`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub timing: Option<serde_json::Value>,
+    /// The end of the export of a run with `--zenoh-listen` (`formation_net::export::EndReport`):
+    /// steps put, steps the export missed, how long its end took; absent without the export.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub export: Option<serde_json::Value>,
     /// Each event of the timeline and each incident of the supervision, with how the formation
     /// came through it (docs/failures.md).
     pub events: Vec<super::recovery::EventSummary>,
@@ -185,6 +189,7 @@ impl Summary {
                 })
                 .collect(),
             timing: None,
+            export: None,
             events: Vec::new(),
             connectivity: None,
         }

@@ -42,8 +42,20 @@ mod on {
     /// The export with its endpoints bound, before the run's services exist.
     pub struct Opened(Listening);
 
-    /// The running export: stopped (after a last drain of the run's services) when dropped.
-    pub struct Running(#[allow(dead_code)] Export);
+    /// The running export: ended by [`Running::finish`]; dropped without it (a run that returns
+    /// on an error), stopped after a last drain of the run's services.
+    pub struct Running(Export);
+
+    impl Running {
+        /// Ends the export with a run that recorded `recorded` steps, before its role processes
+        /// stop (bounded by `formation_net::export::END_BOUND`); prints how it went on stderr and
+        /// returns it for `summary.json` `export`.
+        pub fn finish(self, recorded: u64) -> serde_json::Value {
+            let r = self.0.finish(recorded);
+            eprintln!("{}", r.line());
+            serde_json::to_value(&r).expect("JSON of plain values")
+        }
+    }
 
     /// Binds the endpoints of `--zenoh-listen` (`None` without it); an endpoint refused, a
     /// missing or unsafe `--auth` file or a port in use is an error naming it (exit 2).
@@ -110,6 +122,13 @@ mod on {
     impl Opened {
         /// Unreachable.
         pub fn start(self) -> Result<Running, String> {
+            match self {}
+        }
+    }
+
+    impl Running {
+        /// Unreachable.
+        pub fn finish(self, _: u64) -> serde_json::Value {
             match self {}
         }
     }

@@ -1,23 +1,31 @@
-//! Placement that adapts to the load of others (`formation run --pin auto` in lockstep).
+//! Placement and scheduling that adapt to the load of others (lockstep runs).
 //!
-//! Pinning makes a lockstep step ~9 % faster on idle CPUs (docs/runtime.md, "Cost of a step"), but
-//! a role process pinned to a CPU that another program keeps busy waits for a whole scheduler slice
-//! at every hop of the step chain: beside two CPU-bound loops on 2 vCPUs the pinned paper step
-//! took ~49x its idle time, the unpinned one ~2x (docs/measurements.md). So:
+//! On idle CPUs a lockstep step is fastest pinned (`--pin auto`, ~9 %, docs/runtime.md "Cost of a
+//! step") and under `SCHED_BATCH` (~12 %: a woken process does not preempt the one that woke it).
+//! Beside programs that compute, both turn against the run: every hop of the step chain then waits
+//! for a whole scheduler slice of the other program, because a pinned process cannot move to
+//! another CPU and a `SCHED_BATCH` process never preempts. Beside two CPU-bound loops on 2 vCPUs
+//! the pinned paper step took ~49x its idle time and a 20-ring step ~14x even unpinned
+//! (docs/measurements.md). So the run has two modes, *quiet* and *busy*:
 //!
-//! * before spawning, the CPUs of the layout are sampled over [`START_WINDOW`]; if one is busy
-//!   with other work above [`START_BUSY_ABOVE`], the run starts unpinned ([`PinGovernor::start`]);
-//! * during the run a thread of the orchestrator samples every [`SAMPLE_EVERY`] the load of others
-//!   on each CPU (the CPU's busy time less what this run's processes used there,
-//!   [`foreign_loads`]) and unpins plant and agents when it stays above [`UNPIN_ABOVE`], pins them
-//!   again when it stays below [`REPIN_BELOW`] ([`PinGovernor::next`]).
+//! * quiet: plant and agents pinned to the layout (`--pin auto` only) under `SCHED_BATCH`;
+//! * busy: plant and agents unpinned (`--pin auto` only) under `SCHED_OTHER` at [`BUSY_NICE`]
+//!   (nice 0 without the privilege to lower it), so that each wakes up ahead of other work.
+//!
+//! Before spawning, the CPUs are sampled over [`START_WINDOW`]; if one is busy with other work
+//! above [`START_BUSY_ABOVE`], the run starts busy ([`PinGovernor::start`]). During the run a
+//! thread of the orchestrator samples every [`SAMPLE_EVERY`] the load of others on each CPU (the
+//! CPU's busy time less what this run's processes used there, [`foreign_loads`]) and turns busy
+//! when it stays above [`UNPIN_ABOVE`], quiet again when it stays below [`REPIN_BELOW`]
+//! ([`PinGovernor::next`]). `--pin always`, `--pin off` and a CPU list keep their placement; the
+//! scheduling adapts in every lockstep run.
 //!
 //! The decisions are a pure state machine ([`PinGovernor`]); the /proc reading is
-//! [`super::proc_load`]. A failure to read /proc leaves the placement as it is, with one warning.
-//! Pinning does not change what a lockstep run computes, only how fast.
+//! [`super::proc_load`]. A failure to read /proc leaves the run as it is, with one warning.
+//! Neither placement nor scheduling changes what a lockstep run computes, only how fast.
 
 use super::placement::Placement;
-use super::proc_load::{self, CpuTimes};
+use super::proc_load::{self, CpuTimes, Sched};
 use super::spawn::RoleProcess;
 use std::collections::HashMap;
 use std::sync::mpsc::{self, RecvTimeoutError};
@@ -63,6 +71,15 @@ pub const REPIN_BELOW: f64 = 0.20;
 /// a build pauses between compile jobs for about a second; pinning into such a pause and
 /// unpinning 1 s later would cost more than it gains.
 pub const REPIN_AFTER: u32 = 6;
+
+/// Nice value of plant and agents while other work computes on the run's CPUs (-10): at this
+/// weight (9.3x that of nice 0) a woken role process preempts a CPU-bound program at once. Beside
+/// two CPU-bound loops on 2 vCPUs, a 20-ring lockstep step (docs/measurements.md, "Pinning beside
+/// other work"): `SCHED_BATCH` ~1.4-3.9 ms, `SCHED_OTHER` nice 0 ~0.8 ms, nice -10 ~0.44 ms, against
+/// ~0.28 ms idle. Lowering nice needs CAP_SYS_NICE (root has it); without it the processes run at
+/// nice 0 and the run says so. Not a real-time policy: a lockstep run keeps a CPU busy for as long
+/// as it lasts, and under `SCHED_FIFO` it would starve everything else there.
+pub const BUSY_NICE: i32 = -10;
 
 /// Load of others on one CPU over a sample, as a fraction of that CPU (0.0 ..= 1.0).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -211,34 +228,56 @@ struct Member {
 
 #[derive(Debug)]
 struct State {
-    pinned: bool,
+    /// Quiet (pinned where the placement adapts, `SCHED_BATCH`) or busy.
+    quiet: bool,
+    /// Whether [`BUSY_NICE`] was granted when last asked for (`None`: not asked yet).
+    boosted: Option<bool>,
     members: Vec<Member>,
 }
 
-/// The run's placement as it is now, shared by the spawns (a taken-over agent starts where its
-/// predecessor would be now) and the governor.
+/// What adapts to the load of others in a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Adapts {
+    /// Nothing (realtime runs: their scheduling is their own, docs/realtime.md).
+    Nothing,
+    /// The scheduling policy of plant and agents (lockstep with `--pin off`, `always` or a list).
+    Scheduling,
+    /// Scheduling and pinning (lockstep with `--pin auto`).
+    SchedulingAndPinning,
+}
+
+/// The run's placement and scheduling as they are now, shared by the spawns (a taken-over agent
+/// starts where and as its predecessor would be now) and the governor.
 #[derive(Debug, Clone)]
 pub struct Pins {
     layout: Option<Placement>,
+    adapts: Adapts,
     state: Arc<Mutex<State>>,
-    /// Why the run started unpinned although it has a layout.
-    unpinned_because: Option<CpuLoad>,
+    /// Why the run started busy.
+    busy_because: Option<CpuLoad>,
 }
 
 impl Pins {
     /// A placement that does not adapt: pinned to `layout`, or not at all.
     pub fn fixed(layout: Option<Placement>) -> Pins {
-        Pins::with(layout, true, None)
+        Pins::with(layout, Adapts::Nothing, true, None)
     }
 
-    fn with(layout: Option<Placement>, pinned: bool, unpinned_because: Option<CpuLoad>) -> Pins {
+    fn with(
+        layout: Option<Placement>,
+        adapts: Adapts,
+        quiet: bool,
+        busy_because: Option<CpuLoad>,
+    ) -> Pins {
         Pins {
             layout,
+            adapts,
             state: Arc::new(Mutex::new(State {
-                pinned,
+                quiet,
+                boosted: None,
                 members: Vec::new(),
             })),
-            unpinned_because,
+            busy_because,
         }
     }
 
@@ -246,7 +285,23 @@ impl Pins {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    fn cpu_of(&self, place: Place, pinned: bool) -> Option<usize> {
+    /// Whether the run is quiet now: the role processes it spawns inherit `SCHED_BATCH` from the
+    /// orchestrator (see `run`) when they are.
+    pub fn quiet(&self) -> bool {
+        self.lock().quiet
+    }
+
+    /// The scheduling of plant and agents in mode `quiet`, if it adapts.
+    fn sched(&self, quiet: bool) -> Option<Sched> {
+        match (self.adapts, quiet) {
+            (Adapts::Nothing, _) => None,
+            (_, true) => Some(Sched::Batch),
+            (_, false) => Some(Sched::Other { nice: BUSY_NICE }),
+        }
+    }
+
+    fn cpu_of(&self, place: Place, quiet: bool) -> Option<usize> {
+        let pinned = quiet || self.adapts != Adapts::SchedulingAndPinning;
         let layout = self.layout.as_ref().filter(|_| pinned)?;
         match place {
             Place::Plant => Some(layout.plant()),
@@ -263,7 +318,16 @@ impl Pins {
         spawn: impl FnOnce(Option<usize>) -> Result<RoleProcess, String>,
     ) -> Result<RoleProcess, String> {
         let mut state = self.lock();
-        let child = spawn(self.cpu_of(place, state.pinned))?;
+        let child = spawn(self.cpu_of(place, state.quiet))?;
+        if place != Place::Anywhere {
+            if let Some(sched) = self.sched(state.quiet) {
+                // A successor spawned from a thread at the background nice, or a busy run's
+                // processes: as the run's mode is now. Scheduling is an optimisation.
+                if let Ok(granted) = proc_load::set_process_sched(child.pid(), sched) {
+                    state.boosted.get_or_insert(granted);
+                }
+            }
+        }
         state.add(child.pid(), place);
         Ok(child)
     }
@@ -276,9 +340,12 @@ impl Pins {
     /// One line for the log and the console: the layout (`plant cpu 0, agents 1 0 1 0 1`) or
     /// `not pinned`, with the reason when the layout was left for the load of others.
     pub fn describe(&self, n: usize) -> String {
-        let pinned = self.lock().pinned;
-        match (&self.layout, self.unpinned_because) {
-            (Some(l), _) if pinned => l.describe(n),
+        let (quiet, boosted) = {
+            let s = self.lock();
+            (s.quiet, s.boosted)
+        };
+        let placement = match (&self.layout, self.busy_because) {
+            (Some(l), _) if self.cpu_of(Place::Plant, quiet).is_some() => l.describe(n),
             (Some(_), Some(load)) => format!(
                 "not pinned: cpu {} busy with other work ({:.0} % of a CPU over {} ms; `--pin always` pins anyway)",
                 load.cpu,
@@ -286,28 +353,56 @@ impl Pins {
                 START_WINDOW.as_millis()
             ),
             _ => "not pinned".to_string(),
+        };
+        match self.sched(quiet) {
+            Some(Sched::Other { nice }) => {
+                format!(
+                    "{placement}; {}",
+                    describe_busy(nice, boosted.unwrap_or(true))
+                )
+            }
+            _ => placement,
         }
     }
 
-    /// Pins (or unpins, to `allowed`) every thread of plant and agents; the first failure other
-    /// than an exited process is returned, the others are still moved.
-    fn apply(&self, pinned: bool, allowed: &[usize]) -> Result<(), String> {
+    /// Puts every thread of plant and agents in mode `quiet`: pinned (or unpinned, to
+    /// `allowed`) where the placement adapts, and scheduled as [`Pins::sched`] says. The first
+    /// failure other than an exited process is returned, the others are still moved. Returns
+    /// whether [`BUSY_NICE`] was granted (true when not asked for).
+    fn apply(&self, quiet: bool, allowed: &[usize]) -> Result<bool, String> {
         let mut state = self.lock();
-        state.pinned = pinned;
+        state.quiet = quiet;
         let mut first_error = None;
+        let mut granted = true;
         for m in &state.members {
             if m.place == Place::Anywhere {
                 continue;
             }
-            let cpus = match self.cpu_of(m.place, pinned) {
-                Some(c) => vec![c],
-                None => allowed.to_vec(),
-            };
-            if let Err(e) = proc_load::set_process_affinity(m.pid, &cpus) {
-                first_error.get_or_insert(format!("cannot set the CPUs of pid {}: {e}", m.pid));
+            if self.adapts == Adapts::SchedulingAndPinning {
+                let cpus = match self.cpu_of(m.place, quiet) {
+                    Some(c) => vec![c],
+                    None => allowed.to_vec(),
+                };
+                if let Err(e) = proc_load::set_process_affinity(m.pid, &cpus) {
+                    first_error.get_or_insert(format!("cannot set the CPUs of pid {}: {e}", m.pid));
+                }
+            }
+            if let Some(sched) = self.sched(quiet) {
+                match proc_load::set_process_sched(m.pid, sched) {
+                    Ok(g) => granted &= g,
+                    Err(e) => {
+                        first_error.get_or_insert(format!(
+                            "cannot set the scheduling of pid {}: {e}",
+                            m.pid
+                        ));
+                    }
+                }
             }
         }
-        first_error.map_or(Ok(()), Err)
+        if !quiet {
+            state.boosted = Some(granted);
+        }
+        first_error.map_or(Ok(granted), Err)
     }
 
     /// The run's processes now: (pid, CPU it is pinned to).
@@ -316,8 +411,15 @@ impl Pins {
         state
             .members
             .iter()
-            .map(|m| (m.pid, self.cpu_of(m.place, state.pinned)))
+            .map(|m| (m.pid, self.cpu_of(m.place, state.quiet)))
             .collect()
+    }
+
+    /// The CPUs whose load of others decides the mode: the layout's, else `allowed`.
+    fn watched(&self, allowed: &[usize]) -> Vec<usize> {
+        self.layout
+            .as_ref()
+            .map_or_else(|| allowed.to_vec(), Placement::cpus)
     }
 }
 
@@ -335,14 +437,32 @@ impl State {
     }
 }
 
+/// One line on the scheduling of a busy run: `nice` granted or not.
+fn describe_busy(nice: i32, granted: bool) -> String {
+    if granted {
+        format!("plant and agents under SCHED_OTHER at nice {nice} beside other work")
+    } else {
+        format!(
+            "plant and agents under SCHED_OTHER at nice 0 beside other work (nice {nice} needs CAP_SYS_NICE)"
+        )
+    }
+}
+
 /// The placement of a run before its processes start: `layout` as resolved from `--pin`;
-/// `adaptive` (`--pin auto` in lockstep): the CPUs of the layout are sampled first (over
-/// [`START_WINDOW`]) and a governor is returned for [`Governor::start`].
-pub fn decide_start(layout: Option<Placement>, adaptive: bool) -> (Pins, Option<PinGovernor>) {
-    let cpus = match layout.as_ref().filter(|_| adaptive) {
-        Some(l) => l.cpus(),
-        None => return (Pins::fixed(layout), None),
-    };
+/// `adapts` what adapts to the load of others. Unless nothing does, the CPUs (the layout's, else
+/// `allowed`) are sampled first (over [`START_WINDOW`]) and a governor is returned for
+/// [`Governor::start`].
+pub fn decide_start(
+    layout: Option<Placement>,
+    adapts: Adapts,
+    allowed: &[usize],
+) -> (Pins, Option<PinGovernor>) {
+    if adapts == Adapts::Nothing {
+        return (Pins::fixed(layout), None);
+    }
+    let cpus = layout
+        .as_ref()
+        .map_or_else(|| allowed.to_vec(), Placement::cpus);
     let sample = proc_load::cpu_times().and_then(|before| {
         std::thread::sleep(START_WINDOW);
         let after = proc_load::cpu_times()?;
@@ -352,7 +472,10 @@ pub fn decide_start(layout: Option<Placement>, adaptive: bool) -> (Pins, Option<
     match sample {
         Ok(loads) => {
             let (governor, busy) = PinGovernor::start(&loads);
-            (Pins::with(layout, governor.pinned(), busy), Some(governor))
+            (
+                Pins::with(layout, adapts, governor.pinned(), busy),
+                Some(governor),
+            )
         }
         Err(e) => {
             eprintln!("warning: {e}; the placement does not adapt to the load of others");
@@ -424,10 +547,8 @@ impl Reading {
 }
 
 fn govern(pins: &Pins, mut governor: PinGovernor, allowed: &[usize], stopped: &mpsc::Receiver<()>) {
-    let Some(layout) = pins.layout.as_ref() else {
-        return;
-    };
-    let cpus = layout.cpus();
+    let cpus = pins.watched(allowed);
+    let pinning = pins.adapts == Adapts::SchedulingAndPinning && pins.layout.is_some();
     let give_up = |e: &dyn std::fmt::Display| {
         eprintln!("warning: {e}; the placement stays as it is");
         tracing::warn!("placement governor stopped: {e}");
@@ -443,33 +564,48 @@ fn govern(pins: &Pins, mut governor: PinGovernor, allowed: &[usize], stopped: &m
         };
         let loads = foreign_loads(&before.cpus, &after.cpus, &cpus, &after.own_since(&before));
         before = after;
-        let (pin, line) = match governor.next(&loads) {
+        let quiet = match governor.next(&loads) {
             Decision::Nothing => continue,
-            Decision::Unpin(load) => (
-                false,
-                format!(
-                    "cpu {} busy with other work ({:.0} % of a CPU for {} samples of {} ms): plant and agents unpinned",
-                    load.cpu,
-                    100.0 * load.foreign,
-                    UNPIN_AFTER,
-                    SAMPLE_EVERY.as_millis()
-                ),
-            ),
-            Decision::Pin => (
-                true,
-                format!(
-                    "other work under {:.0} % of every CPU for {:.1} s: pinned again",
-                    100.0 * REPIN_BELOW,
-                    (REPIN_AFTER * SAMPLE_EVERY).as_secs_f64()
-                ),
-            ),
+            Decision::Unpin(_) => false,
+            Decision::Pin => true,
+        };
+        let granted = match pins.apply(quiet, allowed) {
+            Ok(g) => g,
+            Err(e) => return give_up(&e),
+        };
+        let line = match governor_line(&loads, quiet, pinning, granted) {
+            Some(l) => l,
+            None => continue,
         };
         eprintln!("formation run: {line}");
         tracing::info!("{line}");
-        if let Err(e) = pins.apply(pin, allowed) {
-            return give_up(&e);
-        }
     }
+}
+
+/// What the run says when it turns busy (`quiet` false) or quiet again after `loads`.
+fn governor_line(loads: &[CpuLoad], quiet: bool, pinning: bool, granted: bool) -> Option<String> {
+    if quiet {
+        let what = if pinning {
+            "pinned again, under SCHED_BATCH"
+        } else {
+            "plant and agents under SCHED_BATCH again"
+        };
+        return Some(format!(
+            "other work under {:.0} % of every CPU for {:.1} s: {what}",
+            100.0 * REPIN_BELOW,
+            (REPIN_AFTER * SAMPLE_EVERY).as_secs_f64()
+        ));
+    }
+    let load = busiest_above(loads, UNPIN_ABOVE)?;
+    let unpinned = if pinning { "unpinned; " } else { "" };
+    Some(format!(
+        "cpu {} busy with other work ({:.0} % of a CPU for {} samples of {} ms): {unpinned}{}",
+        load.cpu,
+        100.0 * load.foreign,
+        UNPIN_AFTER,
+        SAMPLE_EVERY.as_millis(),
+        describe_busy(BUSY_NICE, granted)
+    ))
 }
 
 #[cfg(test)]
@@ -592,15 +728,18 @@ mod tests {
         assert_eq!(foreign_loads(&before, &before, &[0], &[])[0].foreign, 0.0);
     }
 
-    #[test]
-    fn a_successor_takes_its_agents_place_and_spawns_follow_the_placement_now() {
-        let layout = Placement::resolve(
+    fn auto_layout() -> Option<Placement> {
+        Placement::resolve(
             &super::super::placement::PinRequest::Auto,
             false,
             &[0, 1],
             0,
-        );
-        let pins = Pins::with(layout, true, None);
+        )
+    }
+
+    #[test]
+    fn a_successor_takes_its_agents_place_and_spawns_follow_the_placement_now() {
+        let pins = Pins::with(auto_layout(), Adapts::SchedulingAndPinning, true, None);
         {
             let mut s = pins.lock();
             s.add(10, Place::Plant);
@@ -613,16 +752,17 @@ mod tests {
             pins.members(),
             [(10, Some(0)), (14, Some(1)), (12, None), (13, None)]
         );
-        pins.lock().pinned = false;
-        assert_eq!(pins.cpu_of(Place::Agent(0), pins.lock().pinned), None);
-        assert_eq!(pins.describe(5), "not pinned");
+        pins.lock().quiet = false;
+        assert_eq!(pins.cpu_of(Place::Agent(0), false), None);
+        assert!(
+            pins.describe(5)
+                .starts_with("not pinned; plant and agents under SCHED_OTHER"),
+            "{}",
+            pins.describe(5)
+        );
         let busy = Pins::with(
-            Placement::resolve(
-                &super::super::placement::PinRequest::Auto,
-                false,
-                &[0, 1],
-                0,
-            ),
+            auto_layout(),
+            Adapts::SchedulingAndPinning,
             false,
             Some(CpuLoad {
                 cpu: 1,
@@ -634,6 +774,62 @@ mod tests {
                 .starts_with("not pinned: cpu 1 busy with other work (97 % of a CPU over 200 ms"),
             "{}",
             busy.describe(5)
+        );
+    }
+
+    #[test]
+    fn a_busy_run_is_scheduled_to_preempt_other_work_and_a_quiet_one_under_batch() {
+        let pins = Pins::with(auto_layout(), Adapts::SchedulingAndPinning, true, None);
+        assert_eq!(pins.sched(true), Some(Sched::Batch));
+        assert_eq!(pins.sched(false), Some(Sched::Other { nice: BUSY_NICE }));
+        assert!(
+            BUSY_NICE < 0,
+            "busy processes must outweigh nice-0 programs"
+        );
+        // Realtime runs keep their own scheduling.
+        assert_eq!(Pins::fixed(auto_layout()).sched(false), None);
+    }
+
+    #[test]
+    fn pin_always_and_pin_off_keep_their_placement_while_the_scheduling_adapts() {
+        // `--pin always`: pinned in both modes.
+        let always = Pins::with(auto_layout(), Adapts::Scheduling, false, None);
+        assert_eq!(always.cpu_of(Place::Plant, false), Some(0));
+        assert_eq!(always.sched(false), Some(Sched::Other { nice: BUSY_NICE }));
+        assert!(
+            always.describe(5).starts_with("plant cpu 0"),
+            "{}",
+            always.describe(5)
+        );
+        // `--pin off`: never pinned; the CPUs watched are those it may use.
+        let off = Pins::with(None, Adapts::Scheduling, true, None);
+        assert_eq!(off.cpu_of(Place::Plant, true), None);
+        assert_eq!(off.watched(&[0, 1]), vec![0, 1]);
+        assert_eq!(off.describe(5), "not pinned");
+    }
+
+    #[test]
+    fn the_run_says_when_it_turns_busy_naming_the_cpu_and_the_nice_granted() {
+        let loads = sample(&[0.1, 0.9]);
+        let line = governor_line(&loads, false, true, true).expect("a line");
+        assert!(
+            line.starts_with("cpu 1 busy with other work (90 % of a CPU"),
+            "{line}"
+        );
+        assert!(
+            line.contains("unpinned; plant and agents under SCHED_OTHER at nice -10"),
+            "{line}"
+        );
+        let refused = governor_line(&loads, false, false, false).expect("a line");
+        assert!(!refused.contains("unpinned"), "{refused}");
+        assert!(
+            refused.contains("at nice 0") && refused.contains("CAP_SYS_NICE"),
+            "{refused}"
+        );
+        let quiet = governor_line(&sample(&[0.0, 0.0]), true, true, true).expect("a line");
+        assert!(
+            quiet.ends_with("pinned again, under SCHED_BATCH"),
+            "{quiet}"
         );
     }
 }

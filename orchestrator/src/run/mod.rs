@@ -10,6 +10,7 @@ mod cleanup;
 mod driver;
 pub mod export;
 mod governor;
+pub mod host_probe;
 pub(crate) mod injections;
 pub(crate) mod placement;
 mod proc_load;
@@ -19,6 +20,7 @@ pub(crate) mod remote;
 #[cfg(not(feature = "multihost"))]
 #[path = "remote_off.rs"]
 pub(crate) mod remote;
+pub mod rt;
 mod services;
 mod spawn;
 pub(crate) mod step_timing;
@@ -59,23 +61,24 @@ pub struct RunArgs {
     /// Realtime mode with `--wait spin-block`: busy-poll time before blocking, µs.
     #[arg(long, default_value_t = 20, value_parser = crate::cli::whole_number::<u32>, allow_negative_numbers = true)]
     pub spin_us: u32,
-    /// Realtime mode: run plant and agents under SCHED_FIFO at this priority (1..=99; needs
-    /// CAP_SYS_NICE; 0, the default: normal policy).
-    #[arg(
-        long,
-        default_value_t = 0,
-        value_parser = clap::value_parser!(u32).range(0..=99),
-        allow_negative_numbers = true
-    )]
-    pub rt_priority: u32,
+    /// Realtime mode: the scheduling of plant and agents. `auto` (default): SCHED_FIFO at
+    /// priority 10 when this process is allowed to (CAP_SYS_NICE in its effective set, as root
+    /// has, or RLIMIT_RTPRIO >= 10: checked) and the plant blocks (`--wait block`: never a busy
+    /// loop at a realtime priority), the normal policy otherwise; `P` (1..=99): SCHED_FIFO at P
+    /// (refused with `--wait spin-block`; the normal policy when not allowed); `0`: the normal
+    /// policy. The run says which it got. See docs/realtime.md, "Scheduling".
+    #[arg(long, default_value = "auto", value_name = "auto|P", value_parser = rt::parse)]
+    pub rt_priority: rt::Requested,
     /// CPU placement of plant and agents: `auto` (lockstep: the automatic layout, plant on the
     /// first CPU this process may use with 4/5 of an even share of the agents, spread over the
     /// order, the other agents round-robin over the other CPUs; not pinned while other programs
     /// keep one of these CPUs busy, checked before the start and every 500 ms; realtime: not
     /// pinned), `always` (the automatic layout whatever the load, also in realtime), `off`, or a
     /// CPU list such as `0,1` or `0-3` (plant on the first, agent i on the CPU i + 1 places
-    /// further, round-robin; whatever the load). Leader and orchestrator are never pinned. See
-    /// docs/runtime.md, "Cost of a step".
+    /// further, round-robin; whatever the load). Leader and orchestrator are never pinned. In
+    /// lockstep, beside other work, plant and agents also leave SCHED_BATCH for SCHED_OTHER at
+    /// nice -10 under every placement. See docs/runtime.md, "Cost of a step" and "Pinning and
+    /// scheduling beside other work".
     #[arg(long, default_value = "auto", value_name = "auto|always|off|CPUS")]
     pub pin: String,
     /// Outside observers the run makes room for: K spare subscribers / listeners on every service
@@ -202,11 +205,31 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(cli::EXIT_INVALID);
         }
     };
+    // Realtime: SCHED_FIFO or not, decided once here and said (exit 2 for a busy loop at a
+    // realtime priority); lockstep runs never use it.
+    let rt_priority = if args.realtime {
+        match rt::decide(
+            args.rt_priority,
+            args.wait == timing::WaitMode::SpinBlock,
+            rt::Privilege::of_this_process(),
+        ) {
+            Ok(s) => {
+                eprintln!("formation run: plant and agents under {s}");
+                s.priority
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::from(cli::EXIT_INVALID);
+            }
+        }
+    } else {
+        0
+    };
     let mode = Mode {
         realtime: args.realtime,
         wait: args.wait,
         spin_us: args.spin_us,
-        rt_priority: args.rt_priority,
+        rt_priority,
         // The bridges and the export take one observer slot of every service each.
         observers: args.observers
             + usize::from(remote.is_some())
@@ -289,9 +312,16 @@ pub fn main(args: RunArgs) -> ExitCode {
         placement::Slot::none()
     };
     let layout = placement::Placement::resolve(&pin, args.realtime, &allowed, slot.index);
-    // `--pin auto` in lockstep: the CPUs are sampled first (governor::START_WINDOW).
-    let (pins, adapt) =
-        governor::decide_start(layout, placement::Placement::adapts(&pin, args.realtime));
+    // Lockstep: the CPUs are sampled first (governor::START_WINDOW).
+    let adapts = match (
+        args.realtime,
+        placement::Placement::adapts(&pin, args.realtime),
+    ) {
+        (true, _) => governor::Adapts::Nothing,
+        (false, true) => governor::Adapts::SchedulingAndPinning,
+        (false, false) => governor::Adapts::Scheduling,
+    };
+    let (pins, adapt) = governor::decide_start(layout, adapts, &allowed);
     // Held until the run's iceoryx2 files are removed below; if this process dies, the last role
     // process to exit removes them (formation_config::node::members).
     let membership = match Membership::create(&out, &prefix) {
@@ -406,10 +436,11 @@ fn run(
     remote: Option<std::rc::Rc<remote::RemoteRun>>,
     export: Option<export::Opened>,
 ) -> Result<(Outcome, crate::record::Summary), String> {
-    if !mode.realtime {
-        // Lockstep: this thread, the CSV writer and every role process (they inherit it) run
-        // under SCHED_BATCH: a woken process waits for the running one to block instead of
-        // preempting it (see formation_config::node::sched::batch_policy).
+    if !mode.realtime && pins.quiet() {
+        // Lockstep on a quiet machine: this thread, the CSV writer and every role process (they
+        // inherit it) run under SCHED_BATCH: a woken process waits for the running one to block
+        // instead of preempting it (see formation_config::node::sched::batch_policy). Beside other
+        // work they do not (governor: the role processes then preempt it).
         if let Err(e) = formation_config::node::sched::batch_policy() {
             eprintln!("warning: {e}; running under the normal policy");
         }
@@ -460,6 +491,13 @@ fn run(
         rejoin_at: None,
         members: None,
     };
+    // Realtime: the host's own timer noise just before the run, under the plant's scheduling, on
+    // a thread that keeps the normal nice value the orchestrator gives up below.
+    let prober = mode
+        .realtime
+        .then(|| host_probe::Prober::start(mode.rt_priority))
+        .and_then(|p| p.map_err(|e| eprintln!("warning: {e}")).ok());
+    let probed_before = prober.as_ref().and_then(host_probe::Prober::measure);
     let mut children = Children(Vec::with_capacity(n + 2));
     children.0.push(pins.spawn(governor::Place::Plant, |cpu| {
         spawn::spawn(&exe, Role::Plant, "plant".into(), &child_args(None), cpu)
@@ -578,11 +616,15 @@ fn run(
     };
     tracing::info!(recorded, outcome = ?outcome, "run ending");
     drop(governor_thread);
+    // The export ends first, while the plant still holds the last steps it has not read.
+    if let Some(report) = export.map(|e| e.finish(recorded)) {
+        recorder.set_export(report);
+    }
     ports.stop(recorded);
     recorder.add_events(live.injections.changes());
     drop(live);
     spawn::stop_all(&mut children.0, STOP_GRACE);
-    drop(export);
+    let probed_after = prober.as_ref().and_then(host_probe::Prober::measure);
     drop(ports);
     drop(services);
     drop(node);
@@ -605,6 +647,9 @@ fn run(
                     t["clocks"] = r.clocks_json();
                 }
                 timing::warn_over_tau_m(&t);
+                if let (Some(b), Some(a)) = (probed_before, probed_after) {
+                    t["host_probe"] = timing::host_probe_json(&b, &a, &t);
+                }
                 recorder.set_timing(t)
             }
             Err(e) => eprintln!("warning: no timing statistics: {e}"),

@@ -110,6 +110,55 @@ pub fn process_ticks(pid: u32) -> Option<u64> {
 /// A process or thread that exited meanwhile is not an error.
 pub fn set_process_affinity(pid: u32, cpus: &[usize]) -> io::Result<()> {
     let set = crate::cpus::CpuSet::of(cpus)?;
+    for_each_thread(pid, |tid| set.apply_to(tid))
+}
+
+/// The scheduling of a lockstep process, set on all its threads by [`set_process_sched`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sched {
+    /// `SCHED_BATCH`, nice 0: a woken process does not preempt the running one (an idle machine).
+    Batch,
+    /// `SCHED_OTHER` at nice `nice` (<= 0): a woken process preempts a program that computes.
+    Other {
+        /// Nice value; below 0 needs CAP_SYS_NICE (root has it).
+        nice: i32,
+    },
+}
+
+/// Puts every thread of process `pid` under `sched`. Returns whether the nice value was granted:
+/// without the privilege to lower it, the threads get the policy at nice 0 (`Ok(false)`).
+pub fn set_process_sched(pid: u32, sched: Sched) -> io::Result<bool> {
+    let (policy, nice) = match sched {
+        Sched::Batch => (libc::SCHED_BATCH, 0),
+        Sched::Other { nice } => (libc::SCHED_OTHER, nice),
+    };
+    let mut granted = true;
+    for_each_thread(pid, |tid| {
+        let param = libc::sched_param { sched_priority: 0 };
+        // SAFETY: a valid sched_param for a normal policy; tid is a thread of our child.
+        if unsafe { libc::sched_setscheduler(tid, policy, &param) } != 0 {
+            return Err(io::Error::last_os_error());
+        }
+        let want = if granted { nice } else { 0 };
+        // SAFETY: setpriority on one thread (Linux: nice is per thread) with a valid nice value.
+        if unsafe { libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, want) } != 0 {
+            let e = io::Error::last_os_error();
+            if !matches!(e.raw_os_error(), Some(libc::EACCES) | Some(libc::EPERM)) {
+                return Err(e);
+            }
+            granted = false;
+            // SAFETY: as above, nice 0 (never refused for one's own child).
+            unsafe { libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, 0) };
+        }
+        Ok(())
+    })?;
+    Ok(granted)
+}
+
+/// Applies `f` to every thread of process `pid`. A thread created while the threads are walked
+/// inherits the settings of its creator, so the walk is repeated until it finds no new thread. A
+/// process or thread that exited meanwhile is not an error.
+fn for_each_thread(pid: u32, mut f: impl FnMut(i32) -> io::Result<()>) -> io::Result<()> {
     let mut done: Vec<i32> = Vec::new();
     for _ in 0..3 {
         let tasks = match std::fs::read_dir(format!("/proc/{pid}/task")) {
@@ -125,7 +174,7 @@ pub fn set_process_affinity(pid: u32, cpus: &[usize]) -> io::Result<()> {
             if done.contains(&tid) {
                 continue;
             }
-            match set.apply_to(tid) {
+            match f(tid) {
                 Ok(()) => {}
                 Err(e) if e.raw_os_error() == Some(libc::ESRCH) => {}
                 Err(e) => return Err(e),

@@ -183,6 +183,28 @@ pub fn collect(
     }))
 }
 
+/// The `host_probe` object of a realtime run's timing: the bare timer loop before and after the
+/// run (`super::host_probe`), pooled, and the run's deadline-miss fraction over the pooled late
+/// fraction (`miss_ratio`; null when the loop never woke late).
+pub fn host_probe_json(
+    before: &super::host_probe::ProbeStats,
+    after: &super::host_probe::ProbeStats,
+    t: &Value,
+) -> Value {
+    use super::host_probe as hp;
+    let both = hp::pooled(before, after);
+    let misses = t["deadline_miss_fraction"].as_f64().unwrap_or(0.0);
+    json!({
+        "period_us": hp::PERIOD.as_micros() as u64,
+        "late_over_us": hp::LATE.as_micros() as u64,
+        "rt_priority": t["rt_priority"],
+        "before": before,
+        "after": after,
+        "pooled": both,
+        "miss_ratio": hp::miss_ratio(misses, &both),
+    })
+}
+
 /// Prints the timing object as a small table.
 pub fn print(t: &Value) {
     println!(
@@ -213,6 +235,23 @@ pub fn print(t: &Value) {
         t["late_commands"],
         t["late_commands_applied"]
     );
+    let hp = &t["host_probe"];
+    if !hp.is_null() {
+        let f = |k: &str| hp["pooled"][k].as_f64().unwrap_or(0.0);
+        println!(
+            "  host: a bare {} µs timer loop woke > {} µs late in {:.4} % of {} periods (before {:.4} %, after {:.4} %; mean {:.0} µs late); deadline misses over it: {}",
+            hp["period_us"],
+            hp["late_over_us"],
+            f("late_fraction") * 100.0,
+            hp["pooled"]["periods"],
+            hp["before"]["late_fraction"].as_f64().unwrap_or(0.0) * 100.0,
+            hp["after"]["late_fraction"].as_f64().unwrap_or(0.0) * 100.0,
+            f("mean_late_us"),
+            hp["miss_ratio"]
+                .as_f64()
+                .map_or("- (no late wake-up)".to_string(), |r| format!("{r:.2}x")),
+        );
+    }
     for l in t["links"].as_array().into_iter().flatten() {
         let f = |q: &str| l[q].as_f64().map_or("-".to_string(), |x| format!("{x:.1}"));
         println!(
