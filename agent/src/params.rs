@@ -58,7 +58,7 @@ pub struct AgentParams {
     /// In whose controllers it is re-armed (`runtime.rejoin_reference_for`).
     pub rejoin_members: RejoinMembers,
     /// Gate of D23's drive once this controller has come back (`runtime.rejoin_drive_gate_m`, m;
-    /// `None`: held until its re-armed generator is over).
+    /// `None`: the start-up gate `nn_leader_gate_m`; 0: held until its re-armed generator is over).
     pub rejoin_drive_gate: Option<f64>,
 }
 

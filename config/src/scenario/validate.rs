@@ -936,6 +936,9 @@ fn check_adaptive_and_auxiliary(s: &Scenario, c: &mut Collector) {
     if let Some(g) = ctl.position.nn_leader_gate_m {
         c.non_negative("controller.position.nn_leader_gate_m", g, D23);
     }
+    if let Some(l) = ctl.position.nn_leader_drive_limit_m {
+        c.positive("controller.position.nn_leader_drive_limit_m", l, D23);
+    }
     if let Some(l) = ctl.position.position_error_limit_m {
         c.positive("controller.position.position_error_limit_m", l, CTRL);
     }
