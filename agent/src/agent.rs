@@ -16,7 +16,7 @@ use formation_config::protocol::wire::{
     VehicleState,
 };
 use formation_config::scenario::events::{Change, Event, Timeline};
-use formation_config::scenario::{DelaySpec, Scenario};
+use formation_config::scenario::{DelaySpec, PositionGains, Scenario};
 use formation_config::Variant;
 use nalgebra::Vector3;
 
@@ -49,6 +49,31 @@ pub struct Agent {
     /// Per neighbour (in `p.neighbours` order): the step the plant took it down from after its
     /// process was lost ([`Agent::taken_down`]), if it was.
     lost_from: Vec<Option<u64>>,
+}
+
+/// Whether the leader-relative RBFNN drive (D23) acts: the agent's own start-up generator (D19)
+/// is over (`offset` `None`), or its remaining offset |e| is at or below `gate` (m,
+/// `nn_leader_gate_m`; `None`: only once the generator is over).
+pub fn drive_gate_open(offset: Option<crate::startup::Slot>, gate: Option<f64>) -> bool {
+    match (offset, gate) {
+        (None, _) => true,
+        (Some(_), None) => false,
+        (Some(e), Some(g)) => {
+            let [x, y, z] = e[0];
+            (x * x + y * y + z * z).sqrt() <= g
+        }
+    }
+}
+
+/// D23's leader-relative drive of the RBFNN update (15) for the leader-relative errors `e` (m)
+/// and `e_dot` (m/s): K_LP,nn e + K_LV,nn e', scaled down to the norm K_LP,nn e_D when
+/// `nn_leader_drive_limit_m` e_D is set (the drive of a position error of e_D alone).
+pub fn leader_drive(e: [f64; 3], e_dot: [f64; 3], pg: &PositionGains) -> [f64; 3] {
+    let d = std::array::from_fn(|k| pg.nn_leader_k_p * e[k] + pg.nn_leader_k_v * e_dot[k]);
+    match pg.nn_leader_drive_limit_m {
+        Some(e_d) => clip_norm(d, pg.nn_leader_k_p.abs() * e_d),
+        None => d,
+    }
 }
 
 /// The share an agent sends its neighbours for its state `s`.
@@ -549,18 +574,27 @@ impl Agent {
             let mut drive: [f64; 3] =
                 std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
             // D23: the leader-relative errors of D11 drive the network too, once this agent's own
-            // start-up reference generator (D19) has brought its reference to the slot: the
-            // network does not integrate the shaped approach of the start-up.
-            let started = self.startup[0].is_none();
+            // start-up reference generator (D19) has brought its reference to the slot, or within
+            // nn_leader_gate_m of it: the network does not integrate the shaped approach of the
+            // start-up.
+            // A controller that has come back (rearmed[0] > 0) gates with the re-entry gate if one
+            // is set, else with the start-up gate.
+            let gate = if self.rearmed[0] > 0 {
+                self.p.rejoin_drive_gate.or(pg.nn_leader_gate_m)
+            } else {
+                pg.nn_leader_gate_m
+            };
+            let started = drive_gate_open(self.startup[0].and_then(|b| b.offset()), gate);
             if self.p.leader_data && started && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0)
             {
                 let lp = clip_norm(
                     std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
                     shaped,
                 );
-                for (k, d) in drive.iter_mut().enumerate() {
-                    *d += pg.nn_leader_k_p * lp[k]
-                        + pg.nn_leader_k_v * (me.v[k] - leader.v[k] - me.off_v[k]);
+                let lv = std::array::from_fn(|k| me.v[k] - leader.v[k] - me.off_v[k]);
+                let lead = leader_drive(lp, lv, pg);
+                for (d, l) in drive.iter_mut().zip(lead) {
+                    *d += l;
                 }
             }
             self.nn
@@ -675,5 +709,41 @@ mod lost_neighbour_tests {
         a.taken_down(j, 151);
         assert!(a.ready(200), "not awaited once its process is known lost");
         a.taken_down(99, 151);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{drive_gate_open, leader_drive};
+    use formation_config::scenario::Scenario;
+
+    /// D23's drive: K_LP,nn e + K_LV,nn e' as it is below the limit, scaled along its own
+    /// direction to K_LP,nn e_D above it, untouched without a limit.
+    #[test]
+    fn the_leader_relative_drive_is_limited_to_that_of_a_position_error_of_e_d() {
+        let mut pg = Scenario::paper().controller.position;
+        pg.nn_leader_k_p = 0.15;
+        pg.nn_leader_k_v = 0.3;
+        pg.nn_leader_drive_limit_m = None;
+        let small = leader_drive([0.1, 0.0, 0.0], [0.0, 0.05, 0.0], &pg);
+        assert_eq!(small, [0.015, 0.015, 0.0]);
+        pg.nn_leader_drive_limit_m = Some(0.3);
+        assert_eq!(leader_drive([0.1, 0.0, 0.0], [0.0, 0.05, 0.0], &pg), small);
+        let big = leader_drive([0.0, 0.0, 0.0], [0.0, -1.0, 0.0], &pg);
+        assert!((big[1] + 0.15 * 0.3).abs() < 1e-12 && big[0] == 0.0 && big[2] == 0.0);
+    }
+
+    /// D23's gate: open once the generator is over whatever the threshold; while it runs, open only
+    /// with a threshold, and then exactly when |e| is at or below it (e' and e'' do not count).
+    #[test]
+    fn the_leader_relative_drive_opens_within_the_gate_or_once_the_generator_is_over() {
+        let at = |e: [f64; 3]| Some([e, [0.3, 0.0, 0.0], [1.0, 0.0, 0.0]]);
+        assert!(drive_gate_open(None, None));
+        assert!(drive_gate_open(None, Some(0.05)));
+        assert!(!drive_gate_open(at([1e-9, 0.0, 0.0]), None));
+        assert!(drive_gate_open(at([0.03, 0.04, 0.0]), Some(0.05)));
+        assert!(!drive_gate_open(at([0.03, 0.04, 1e-3]), Some(0.05)));
+        assert!(!drive_gate_open(at([2.0, 0.0, -5.0]), Some(0.05)));
+        assert!(drive_gate_open(at([0.0; 3]), Some(0.0)));
     }
 }

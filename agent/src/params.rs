@@ -57,6 +57,9 @@ pub struct AgentParams {
     pub rejoin_reference: Option<BlendGains>,
     /// In whose controllers it is re-armed (`runtime.rejoin_reference_for`).
     pub rejoin_members: RejoinMembers,
+    /// Gate of D23's drive once this controller has come back (`runtime.rejoin_drive_gate_m`, m;
+    /// `None`: the start-up gate `nn_leader_gate_m`; 0: held until its re-armed generator is over).
+    pub rejoin_drive_gate: Option<f64>,
 }
 
 impl AgentParams {
@@ -89,6 +92,7 @@ impl AgentParams {
                 rate: s.runtime.rejoin_reference_rate_1_s,
             }),
             rejoin_members: s.runtime.rejoin_reference_for,
+            rejoin_drive_gate: s.runtime.rejoin_drive_gate_m,
         }
     }
 

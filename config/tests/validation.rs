@@ -1004,6 +1004,14 @@ rejects!(
     }
 );
 rejects!(
+    a_zero_limit_of_the_leader_relative_rbfnn_drive_is_rejected_naming_d23,
+    "controller.position.nn_leader_drive_limit_m",
+    D23,
+    |s| {
+        s.controller.position.nn_leader_drive_limit_m = Some(0.0);
+    }
+);
+rejects!(
     negative_initial_disturbance_bound_estimate_is_rejected_naming_eq_49,
     "controller.adaptive.disturbance_hat_initial",
     "eq. (49)",

@@ -261,6 +261,17 @@ pub struct Runtime {
     /// lambda_R: rate of its final approach to the slot (double pole at -2 lambda_R), 1/s.
     /// Default 0.5 (D19's lambda_S).
     pub rejoin_reference_rate_1_s: f64,
+    /// Gate of D23's leader-relative RBFNN drive in a controller that has come back, m: as
+    /// `controller.position.nn_leader_gate_m` at start-up, the drive acts once the re-armed
+    /// generator's remaining offset |e| is at or below it; 0: held until that generator is over.
+    /// Default absent: the start-up gate `nn_leader_gate_m`. A returning quadrotor is back within
+    /// centimetres of its slot, so the start-up gate (5 cm) releases the drive at once; the limit
+    /// `controller.position.nn_leader_drive_limit_m` bounds what the network then integrates of
+    /// the return's error (without it, agent 5 down at 45 s for 2 s: 0.54 m, 5.3 s), and holding
+    /// the drive for the generator's ~10 s tail left a warm restart worse than a cold one
+    /// (docs/failures.md, "Bumpless re-entry").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rejoin_drive_gate_m: Option<f64>,
     /// Level-hover fallback: attitude gain (torque = -J (k_att A + k_rate omega)), 1/s². Default 16.
     pub fallback_attitude_gain: f64,
     /// Level-hover fallback: rate gain, 1/s. Default 8.
@@ -286,6 +297,7 @@ impl Default for Runtime {
             rejoin_reference_for: RejoinMembers::All,
             rejoin_reference_accel_m_s2: 1.0,
             rejoin_reference_rate_1_s: 0.5,
+            rejoin_drive_gate_m: None,
             fallback_attitude_gain: 16.0,
             fallback_rate_gain: 8.0,
             stale_after_s: 0.1,

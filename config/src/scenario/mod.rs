@@ -378,6 +378,29 @@ pub struct PositionGains {
     /// `paper.toml` (docs/tuning.md, section 10: 1.5-2x K_LP,nn keeps it out of the limit cycle).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub nn_leader_k_v: f64,
+    /// Gate of the leader-relative RBFNN drive (D23), e_G: the drive acts once the remaining offset
+    /// |e| = |r - s| of the agent's own start-up reference generator (D19, agent/src/startup.rs) is
+    /// at or below this, m. Paper: none (D23 is ours). Absent (the default): the drive waits until
+    /// the generator is over (|e|, |e'| below 1e-6, near 20 s on the paper's starts). Ours: 0.05 in
+    /// `paper.toml` (docs/tuning.md, section 11): the fast part of the approach, where the network
+    /// must not integrate the shaped errors (the N = 50 path's limit cycle at 3-8 s), ends with |e|
+    /// of metres to decimetres, while the generator's final exponential tail from 5 cm down to
+    /// 1e-6 m takes about 10 s in which the drive's absence left the unpinned agents of generated
+    /// formations 0.15-0.20 m off their slots (docs/scaling.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nn_leader_gate_m: Option<f64>,
+    /// Limit of the leader-relative RBFNN drive (D23), e_D: the drive K_LP,nn e_iL + K_LV,nn e_iL'
+    /// is scaled down to the norm K_LP,nn e_D, the drive of a leader-relative position error of
+    /// e_D alone, m (conditional integration: the network integrates small, slow leader-relative
+    /// errors at full rate and a transient's at a bounded one). Paper: none (D23 is ours). Absent
+    /// (the default): no limit. Ours: 0.4 in `paper.toml` (docs/tuning.md, section 12): the drive
+    /// of the paper mission's slow leader-relative errors (centimetres, decimetres per second)
+    /// stays under it, while a neighbour's swing after an outage or a returning quadrotor's error
+    /// in the descent and spin, integrated unbounded, sustained the saturation limit cycle of
+    /// section 10 (hover failsafe at 6 s: recovered after 9.3 s against 2.4 s) or set it off
+    /// (agent 5 down at 45 s: 0.54 m); below 0.25 it bites the enclosing window's own errors.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nn_leader_drive_limit_m: Option<f64>,
     /// Largest norm of the position errors the law (14) acts on: e_iP and the leader-relative
     /// P_i - P_d - Delta_i0 (D11) are scaled down to this norm before the gains k_P, k_LP apply, m
     /// (reference shaping, docs/deviations.md D18). Paper: none (absent, the default). Ours: 1.0 —

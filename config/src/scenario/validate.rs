@@ -933,6 +933,12 @@ fn check_adaptive_and_auxiliary(s: &Scenario, c: &mut Collector) {
         );
     }
     check_fault_identification(s, c);
+    if let Some(g) = ctl.position.nn_leader_gate_m {
+        c.non_negative("controller.position.nn_leader_gate_m", g, D23);
+    }
+    if let Some(l) = ctl.position.nn_leader_drive_limit_m {
+        c.positive("controller.position.nn_leader_drive_limit_m", l, D23);
+    }
     if let Some(l) = ctl.position.position_error_limit_m {
         c.positive("controller.position.position_error_limit_m", l, CTRL);
     }
@@ -1005,6 +1011,9 @@ fn check_runtime(s: &Scenario, c: &mut Collector) {
         r.rejoin_reference_rate_1_s,
         RUNTIME,
     );
+    if let Some(g) = r.rejoin_drive_gate_m {
+        c.non_negative("runtime.rejoin_drive_gate_m", g, RUNTIME);
+    }
 }
 
 /// Most events of a timeline (scenario and `--events FILE` together): every process asks the
