@@ -29,10 +29,10 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let mut args: Vec<OsString> = Vec::new();
     if n != 5 {
-        let scenario = formation_runtime::scenario_gen::generate(
-            &formation_runtime::scenario_gen::GenOptions::new(
+        let scenario = formation_analysis::scenario_gen::generate(
+            &formation_analysis::scenario_gen::GenOptions::new(
                 n,
-                formation_runtime::scenario_gen::graphs::GraphKind::Path,
+                formation_analysis::scenario_gen::graphs::GraphKind::Path,
             ),
         )?;
         let path = out.join("scenario-in.toml");

@@ -13,8 +13,9 @@
 use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
 
+use formation_analysis::{check, plot, scenario_gen, sweep};
 use formation_bench as bench;
-use formation_runtime::{check, cli, live, plot, role, run, scenario_gen, schema, sim, sweep};
+use formation_runtime::{cli, live, role, run, schema, sim};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]

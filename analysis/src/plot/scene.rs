@@ -79,7 +79,7 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
     if let Ok(events) = std::fs::read_to_string(dir.join("events.jsonl")) {
         for line in events.lines() {
             let v: serde_json::Value = serde_json::from_str(line).unwrap_or_default();
-            if let Some(e) = crate::record::live::scenario_event(&v) {
+            if let Some(e) = formation_runtime::record::live::scenario_event(&v) {
                 builder.add_event(&e);
             }
         }

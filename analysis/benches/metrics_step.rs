@@ -10,12 +10,12 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use formation_agent::fault_id::FaultIdentifier;
+use formation_analysis::scenario_gen::{generate, graphs::GraphKind, GenOptions};
 use formation_config::{Scenario, Variant};
 use formation_runtime::record::coverage::CoverageGrid;
 use formation_runtime::record::metrics::Metrics;
 use formation_runtime::record::recovery::Series;
 use formation_runtime::record::separation::Separation;
-use formation_runtime::scenario_gen::{generate, graphs::GraphKind, GenOptions};
 use formation_runtime::ClosedLoop;
 use nalgebra::Vector3;
 use std::hint::black_box;
