@@ -18,9 +18,8 @@ use crate::blf::Barrier;
 use crate::command_filter::CommandFilter;
 use crate::fault_id::{FaultIdentifier, SATURATION_GUARD};
 use crate::params::AgentParams;
+use formation_config::kinematics::{rotational_drift, AttitudeTrig};
 use formation_config::Variant;
-use formation_plant::dynamics::rotational_drift;
-use formation_plant::kinematics::AttitudeTrig;
 use nalgebra::{Matrix3, Vector3};
 
 /// Internal states of the attitude loop.

@@ -21,8 +21,8 @@
 //! Fixed-size buffers only (one period, at most [`MAX_PROBE_PERIOD_STEPS`] samples): no allocation per
 //! step.
 
+use formation_config::kinematics::rotational_drift;
 use formation_config::scenario::{FaultIdentificationSpec, MAX_PROBE_PERIOD_STEPS};
-use formation_plant::dynamics::rotational_drift;
 use nalgebra::Vector3;
 
 /// Fraction of the half torque range beyond which the expected delivered torque Gamma-hat U + delta-hat

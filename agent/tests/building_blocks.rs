@@ -97,7 +97,7 @@ fn command_conversion_inverts_the_thrust_direction_of_eq_1() {
     let u = [0.8, -0.5, 0.3];
     let (t, a) = thrust_and_attitude(u, m, g, 0.0);
     // R_t e3 T/m - g e3 must give back u.
-    let axis = formation_plant::kinematics::thrust_axis(&Vector3::from(a));
+    let axis = formation_config::kinematics::thrust_axis(&Vector3::from(a));
     let acc = axis * (t / m) - Vector3::new(0.0, 0.0, g);
     for k in 0..3 {
         assert!(

@@ -7,6 +7,8 @@
 //!   table (each service's name, message type, limits, publishers and subscribers, declared once)
 //!   and the pacing constants of the lockstep protocol. With the `ipc` feature the messages are
 //!   iceoryx2 `ZeroCopySend` types.
+//! * [`kinematics`]: the quadrotor's rotation matrices, Euler-angle rates and rotational drift
+//!   (eq. (1)-(2)), the model the plant integrates and the controller inverts.
 //! * [`view`]: what every view of a run draws alike (agent colours, edge states, attitudes as
 //!   quaternions), for the Foxglove scene, the ROS 2 markers and the figures.
 //! * [`node`] (feature `node`): the plumbing of a role process — iceoryx2 nodes under a run prefix,
@@ -16,6 +18,7 @@
 //! the scenario and the message structs, and none of the process plumbing.
 #![warn(missing_docs)]
 
+pub mod kinematics;
 pub mod protocol;
 pub mod scenario;
 pub mod view;

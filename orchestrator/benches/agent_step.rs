@@ -3,8 +3,8 @@
 //! a fresh clone of the agent (the clone is not timed).
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion};
-use formation::ClosedLoop;
 use formation_config::{Scenario, Variant};
+use formation_runtime::ClosedLoop;
 use std::hint::black_box;
 
 /// The closed loop after `steps` steps, with the states of the next one observed.

@@ -1,8 +1,8 @@
 //! Eq. (1)-(2) of one quadrotor and a fixed-step RK4 with the inputs held over the step.
 
-use crate::kinematics::AttitudeTrig;
 use crate::memo::{Direct, Math};
 use crate::perturbations::{disturbance_with, model_perturbation_with, uncertainty};
+use formation_config::kinematics::{rotational_drift, AttitudeTrig};
 use formation_config::scenario::AgentSpec;
 use nalgebra::Vector3;
 
@@ -60,13 +60,6 @@ pub struct HeldInput {
     pub thrust: f64,
     /// Delivered torque U_iA, N m.
     pub torque: Vector3<f64>,
-}
-
-/// F_iA = -J^-1 S(Omega) J Omega - J^-1 K_D Omega of eq. (2) for the inertia diagonal `j` and the
-/// damping diagonal `drag` (also the controller's nominal model).
-pub fn rotational_drift(j: &Vector3<f64>, drag: &Vector3<f64>, w: &Vector3<f64>) -> Vector3<f64> {
-    let jw = w.component_mul(j);
-    -(w.cross(&jw) + drag.component_mul(w)).component_div(j)
 }
 
 /// The terms of eq. (2) that depend on time only (evaluated once per distinct RK4 stage time).

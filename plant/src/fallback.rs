@@ -23,7 +23,7 @@
 //! plant keeps per quadrotor while it flies it.
 
 use crate::dynamics::RigidState;
-use crate::kinematics::AttitudeTrig;
+use formation_config::kinematics::AttitudeTrig;
 use formation_config::protocol::wire::ControlCommand;
 use formation_config::scenario::events::Runtime;
 use nalgebra::Vector3;
@@ -238,7 +238,7 @@ pub fn attitude_step(
 /// The acceleration thrust `thrust` (N) gives a quadrotor of `frame` at attitude `a` without
 /// external forces: R e_3 T / m - g e_3 (eq. (1) without F_iP).
 pub fn thrust_acceleration(thrust: f64, a: &Vector3<f64>, frame: &Airframe) -> Vector3<f64> {
-    crate::kinematics::thrust_axis(a) * (thrust / frame.mass)
+    formation_config::kinematics::thrust_axis(a) * (thrust / frame.mass)
         - Vector3::new(0.0, 0.0, frame.gravity)
 }
 

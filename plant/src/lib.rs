@@ -9,7 +9,6 @@
 pub mod dynamics;
 pub mod fallback;
 pub mod faults;
-pub mod kinematics;
 pub mod memo;
 pub mod perturbations;
 pub mod plant;

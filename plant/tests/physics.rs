@@ -1,10 +1,10 @@
 //! Physical facts of the plant model (eq. (1)-(4)).
 
+use formation_config::kinematics::{euler_rate_matrix, rotation, thrust_axis};
 use formation_config::protocol::wire::{ControlCommand, FaultInjection};
 use formation_config::Scenario;
 use formation_plant::dynamics::{derivative, rk4, Body, HeldInput, RigidState};
 use formation_plant::faults::{actuate, saturate, FaultModel};
-use formation_plant::kinematics::{euler_rate_matrix, rotation, thrust_axis};
 use formation_plant::Plant;
 use nalgebra::{Matrix3, Vector3};
 

@@ -1,7 +1,7 @@
 //! Wire values a client printed, read back and checked against a run's outputs.
 
-use formation::record::table::Trajectory;
 use formation_config::protocol::wire::VehicleState;
+use formation_runtime::record::table::Trajectory;
 use std::collections::HashMap;
 
 /// The wire struct `T` whose bytes a client printed in hex (`"raw"` of its JSON line: exact floats,

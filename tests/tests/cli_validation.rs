@@ -3,8 +3,8 @@
 //! result is a failure (a FAIL verdict, a divergence) exits 3 with its outputs written; bare
 //! `formation` is `formation run` with its defaults.
 
-use formation::record::table::Trajectory;
 use formation_config::Scenario;
+use formation_runtime::record::table::Trajectory;
 use formation_tests::{bin, stderr_of as stderr, summary, temp_dir};
 use std::io::{BufRead, BufReader};
 use std::path::Path;

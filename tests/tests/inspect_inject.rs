@@ -6,7 +6,7 @@
 //! Every test uses its own runs directory (`FORMATION_RUNS_DIR`), so runs of other tests or other
 //! users never interfere; `RunningRun` kills the whole run on drop, even when an assertion fails.
 
-use formation::record::table::Trajectory;
+use formation_runtime::record::table::Trajectory;
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, stderr_of as stderr, temp_dir};
 use serde_json::Value;

@@ -11,8 +11,8 @@
 //! The interpreter is `$FORMATION_PYTHON` (`.ci/run` creates the venv `target/pyenv`); without it
 //! the test is skipped with the reason, unless `FORMATION_REQUIRE_PYTHON=1` (CI).
 
-use formation::record::table::Trajectory;
 use formation_config::protocol::wire::{AgentTelemetry, VehicleState};
+use formation_runtime::record::table::Trajectory;
 use formation_tests::run::RunningRun;
 use formation_tests::wire::{assert_state_is_row, from_raw, rows_by_agent_and_step};
 use formation_tests::{formation_in, python_or_skip, temp_dir, workspace_root};

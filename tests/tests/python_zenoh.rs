@@ -11,9 +11,9 @@
 //! `./clients/python[net]` into its venv); without it the test is skipped with the reason, unless
 //! `FORMATION_REQUIRE_PYTHON=1` (CI): then it fails.
 
-use formation::record::table::Trajectory;
 use formation_config::protocol::layout::WireLayout;
 use formation_config::protocol::wire::VehicleState;
+use formation_runtime::record::table::Trajectory;
 use formation_tests::run::RunningRun;
 use formation_tests::wire::{assert_state_is_row, from_raw, rows_by_agent_and_step};
 use formation_tests::{formation, python_or_skip, stderr_of, temp_dir, workspace_root};

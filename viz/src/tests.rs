@@ -35,7 +35,7 @@ fn the_quaternion_rotates_like_the_plants_rotation_matrix() {
         [-1.2, 0.7, -2.9],
         [0.05, 1.3, 3.0],
     ] {
-        let r = formation_plant::kinematics::rotation(&nalgebra::Vector3::from(a));
+        let r = formation_config::kinematics::rotation(&nalgebra::Vector3::from(a));
         let q = quaternion(a);
         let norm = (q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z).sqrt();
         assert!((norm - 1.0).abs() < 1e-12);

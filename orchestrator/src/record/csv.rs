@@ -24,81 +24,110 @@ pub const STEPS_PER_BATCH: usize = 64;
 /// file within `BATCH_LATENCY + FLUSH_EVERY`.
 pub const BATCH_LATENCY: Duration = Duration::from_millis(100);
 
-/// Column names, in order.
-pub const COLUMNS: &[&str] = &[
-    "step",
-    "t",
-    "agent",
-    "px",
-    "py",
-    "pz",
-    "vx",
-    "vy",
-    "vz",
-    "phi",
-    "theta",
-    "psi",
-    "p",
-    "q",
-    "r",
-    "pdx",
-    "pdy",
-    "pdz",
-    "ex",
-    "ey",
-    "ez",
-    "e_norm",
-    "tx",
-    "ty",
-    "upx",
-    "upy",
-    "upz",
-    "thrust",
-    "phi_c",
-    "theta_c",
-    "psi_c",
-    "phi_c_raw",
-    "theta_c_raw",
-    "alpha_x",
-    "alpha_y",
-    "alpha_z",
-    "att_norm",
-    "att_cmd_norm",
-    "c1_bar",
-    "rate_norm",
-    "alpha_norm",
-    "c2_bar",
-    "blf1",
-    "blf2",
-    "u_ac_x",
-    "u_ac_y",
-    "u_ac_z",
-    "u_a_x",
-    "u_a_y",
-    "u_a_z",
-    "gamma_x",
-    "gamma_y",
-    "gamma_z",
-    "gamma_hat_x",
-    "gamma_hat_y",
-    "gamma_hat_z",
-    "delta_x",
-    "delta_y",
-    "delta_z",
-    "delta_hat_x",
-    "delta_hat_y",
-    "delta_hat_z",
-    "d_norm",
-    "d_hat",
-    "f_x",
-    "f_y",
-    "f_z",
-    "f_hat_x",
-    "f_hat_y",
-    "f_hat_z",
-    "nn_norm",
-    "tau",
-];
+/// The columns of `trajectory.csv`, in file order (meanings and units: docs/formats.md). The
+/// writer's header and every reader take their names from here.
+macro_rules! columns {
+    ($($variant:ident = $name:literal,)*) => {
+        /// One column of `trajectory.csv`; its position in the file is its index in [`Column::ALL`].
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum Column {
+            $(
+                #[doc = concat!("`", $name, "` (docs/formats.md)")]
+                $variant,
+            )*
+        }
+
+        impl Column {
+            /// Every column, in file order.
+            pub const ALL: &'static [Column] = &[$(Column::$variant,)*];
+
+            /// The column's name in the header.
+            pub const fn name(self) -> &'static str {
+                match self {
+                    $(Column::$variant => $name,)*
+                }
+            }
+        }
+
+        /// Column names, in file order (the header line).
+        pub const COLUMNS: &[&str] = &[$($name,)*];
+    };
+}
+
+columns! {
+    Step = "step",
+    T = "t",
+    Agent = "agent",
+    Px = "px",
+    Py = "py",
+    Pz = "pz",
+    Vx = "vx",
+    Vy = "vy",
+    Vz = "vz",
+    Phi = "phi",
+    Theta = "theta",
+    Psi = "psi",
+    P = "p",
+    Q = "q",
+    R = "r",
+    Pdx = "pdx",
+    Pdy = "pdy",
+    Pdz = "pdz",
+    Ex = "ex",
+    Ey = "ey",
+    Ez = "ez",
+    ENorm = "e_norm",
+    Tx = "tx",
+    Ty = "ty",
+    Upx = "upx",
+    Upy = "upy",
+    Upz = "upz",
+    Thrust = "thrust",
+    PhiC = "phi_c",
+    ThetaC = "theta_c",
+    PsiC = "psi_c",
+    PhiCRaw = "phi_c_raw",
+    ThetaCRaw = "theta_c_raw",
+    AlphaX = "alpha_x",
+    AlphaY = "alpha_y",
+    AlphaZ = "alpha_z",
+    AttNorm = "att_norm",
+    AttCmdNorm = "att_cmd_norm",
+    C1Bar = "c1_bar",
+    RateNorm = "rate_norm",
+    AlphaNorm = "alpha_norm",
+    C2Bar = "c2_bar",
+    Blf1 = "blf1",
+    Blf2 = "blf2",
+    UAcX = "u_ac_x",
+    UAcY = "u_ac_y",
+    UAcZ = "u_ac_z",
+    UAX = "u_a_x",
+    UAY = "u_a_y",
+    UAZ = "u_a_z",
+    GammaX = "gamma_x",
+    GammaY = "gamma_y",
+    GammaZ = "gamma_z",
+    GammaHatX = "gamma_hat_x",
+    GammaHatY = "gamma_hat_y",
+    GammaHatZ = "gamma_hat_z",
+    DeltaX = "delta_x",
+    DeltaY = "delta_y",
+    DeltaZ = "delta_z",
+    DeltaHatX = "delta_hat_x",
+    DeltaHatY = "delta_hat_y",
+    DeltaHatZ = "delta_hat_z",
+    DNorm = "d_norm",
+    DHat = "d_hat",
+    FX = "f_x",
+    FY = "f_y",
+    FZ = "f_z",
+    FHatX = "f_hat_x",
+    FHatY = "f_hat_y",
+    FHatZ = "f_hat_z",
+    NnNorm = "nn_norm",
+    Tau = "tau",
+}
 
 enum Msg {
     /// Consecutive output steps, in order.

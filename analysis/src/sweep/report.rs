@@ -2,7 +2,7 @@
 //! progress display (a bar on a terminal, plain lines when piped).
 
 use super::spec::Sample;
-use crate::record::Summary;
+use formation_runtime::record::Summary;
 use serde::Serialize;
 use std::io::{IsTerminal, Write};
 use std::path::Path;
@@ -49,13 +49,14 @@ pub struct EventMetrics {
 
 impl EventMetrics {
     /// The figures of a run's measured events.
-    pub fn of(events: &[crate::record::recovery::EventSummary]) -> EventMetrics {
+    pub fn of(events: &[formation_runtime::record::recovery::EventSummary]) -> EventMetrics {
         if events.is_empty() {
             return EventMetrics::default();
         }
-        let sum = |f: &dyn Fn(&crate::record::recovery::EventSummary) -> Option<u64>| {
-            events.iter().filter_map(f).reduce(|a, b| a + b)
-        };
+        let sum =
+            |f: &dyn Fn(&formation_runtime::record::recovery::EventSummary) -> Option<u64>| {
+                events.iter().filter_map(f).reduce(|a, b| a + b)
+            };
         EventMetrics {
             peak_error_m: events.iter().map(|e| e.peak_error_m).reduce(f64::max),
             recovered_after_s: events
@@ -76,9 +77,10 @@ impl EventMetrics {
 impl Metrics {
     /// The kept figures of a run summary.
     pub fn of(s: &Summary) -> Metrics {
-        let worst = |f: &dyn Fn(&crate::record::summary::AgentSummary) -> Option<f64>| {
-            s.agents.iter().filter_map(f).reduce(f64::max)
-        };
+        let worst =
+            |f: &dyn Fn(&formation_runtime::record::summary::AgentSummary) -> Option<f64>| {
+                s.agents.iter().filter_map(f).reduce(f64::max)
+            };
         Metrics {
             rms_cover_m: worst(&|a| a.rms_formation_error_m.cover),
             rms_enclose_m: worst(&|a| a.rms_formation_error_m.enclose),

@@ -104,7 +104,7 @@ pub fn apply(base: &Scenario, values: &[(String, Value)]) -> Result<Scenario, St
             path => overrides.push(format!("{path}={v}")),
         }
     }
-    let s = crate::cli::apply_overrides(s, &overrides)?;
+    let s = formation_runtime::cli::apply_overrides(s, &overrides)?;
     formation_config::scenario::validate::validate(&s).map_err(|errs| {
         errs.0
             .iter()

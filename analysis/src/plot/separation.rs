@@ -3,7 +3,7 @@
 
 use super::style::{draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel};
 use super::{Figure, Run};
-use crate::record::separation::closest_pair;
+use formation_runtime::record::separation::closest_pair;
 use plotters::prelude::*;
 
 /// (t, closest distance) at every output instant the agents share.

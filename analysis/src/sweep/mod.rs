@@ -1,5 +1,5 @@
 //! `formation sweep`: Monte Carlo or grid over scenario parameters, each sample run by the
-//! in-process runner ([`crate::sim::run_in_process_with`]) on `--jobs` threads.
+//! in-process runner ([`formation_runtime::sim::run_in_process_with`]) on `--jobs` threads.
 //!
 //! * [`spec`]: `--vary NAME=SPEC` and the sampling.
 //! * [`apply`]: what each parameter does to the base scenario.
@@ -12,7 +12,7 @@ pub mod apply;
 pub mod report;
 pub mod spec;
 
-use crate::cli;
+use formation_runtime::cli;
 use report::{Outcome, Progress};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -81,14 +81,14 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
     };
     let jobs = args
         .jobs
-        .unwrap_or_else(|| crate::cpus::allowed().len().max(1))
+        .unwrap_or_else(|| formation_runtime::cpus::allowed().len().max(1))
         .clamp(1, samples.len().max(1));
     let out = args
         .common
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("out/sweep-{}", base.name)));
-    crate::out_lock::check_folder(&out)
+    formation_runtime::out_lock::check_folder(&out)
         .and_then(|()| {
             formation_config::node::files::ensure_private_dir(&out.join("samples"))
                 .map_err(|e| e.to_string())
@@ -180,15 +180,15 @@ fn run_one(
 ) -> Outcome {
     let start = Instant::now();
     let result = apply::apply(base, &sample.values).and_then(|s| {
-        crate::sim::write_resolved_scenario(&s, dir)
+        formation_runtime::sim::write_resolved_scenario(&s, dir)
             .map_err(|e| format!("cannot write {}: {e}", dir.display()))?;
-        crate::sim::run_in_process_with(
+        formation_runtime::sim::run_in_process_with(
             &s,
             variant,
             dir,
-            crate::record::Outputs {
+            formation_runtime::record::Outputs {
                 trajectory: false,
-                ..crate::record::Outputs::with(&[])
+                ..formation_runtime::record::Outputs::with(&[])
             },
         )
         .map_err(|e| format!("cannot write {}: {e}", dir.display()))

@@ -12,9 +12,9 @@ pub mod graphs;
 pub mod radii;
 pub mod rings;
 
-use crate::cli::EXIT_INVALID;
 use formation_config::scenario::validate::validate;
 use formation_config::scenario::Scenario;
+use formation_runtime::cli::EXIT_INVALID;
 use graphs::GraphKind;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -23,13 +23,13 @@ use std::process::ExitCode;
 #[derive(clap::Args, Debug)]
 pub struct ScenarioArgs {
     /// Number of quadrotors (2..=MAX_AGENTS, 128).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub n: usize,
     /// Communication graph: ring, path, k-nearest, complete, random-connected.
     #[arg(long, default_value = "path")]
     pub graph: String,
     /// Neighbours per agent of `--graph k-nearest` (before symmetrisation).
-    #[arg(long, default_value_t = 4, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 4, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub k: usize,
     /// Seed of `--graph random-connected`.
     #[arg(long, default_value_t = 1)]

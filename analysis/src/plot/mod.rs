@@ -114,7 +114,7 @@ pub fn main(args: PlotArgs) -> ExitCode {
         }
         Err(e @ PlotError::Input(_)) => {
             eprintln!("error: {e}");
-            ExitCode::from(crate::cli::EXIT_INVALID)
+            ExitCode::from(formation_runtime::cli::EXIT_INVALID)
         }
         Err(e @ PlotError::Render(_)) => {
             eprintln!("error: {e}");

@@ -8,6 +8,7 @@ use super::style::{draw_xy_mesh, titled, Area, Backend, DrawResult, FONT};
 use super::PlotError;
 use formation_config::protocol::wire::ReferenceFrame;
 use formation_config::Scenario;
+use formation_runtime::record::csv::Column;
 use formation_viz::topview::{shapes, Shape};
 use formation_viz::{AgentSample, Frame, Scene, SceneBuilder};
 use plotters::prelude::*;
@@ -39,47 +40,48 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
     let mut lines = text.lines();
     let col = columns(lines.next().unwrap_or_default());
     let need = [
-        "step",
-        "t",
-        "agent",
-        "px",
-        "py",
-        "pz",
-        "phi",
-        "theta",
-        "psi",
-        "pdx",
-        "pdy",
-        "pdz",
-        "e_norm",
-        "tx",
-        "ty",
-        "att_norm",
-        "c1_bar",
-        "rate_norm",
-        "c2_bar",
-        "gamma_x",
-        "gamma_y",
-        "gamma_z",
-        "gamma_hat_x",
-        "gamma_hat_y",
-        "gamma_hat_z",
-        "delta_x",
-        "delta_y",
-        "delta_z",
-        "delta_hat_x",
-        "delta_hat_y",
-        "delta_hat_z",
-        "tau",
+        Column::Step,
+        Column::T,
+        Column::Agent,
+        Column::Px,
+        Column::Py,
+        Column::Pz,
+        Column::Phi,
+        Column::Theta,
+        Column::Psi,
+        Column::Pdx,
+        Column::Pdy,
+        Column::Pdz,
+        Column::ENorm,
+        Column::Tx,
+        Column::Ty,
+        Column::AttNorm,
+        Column::C1Bar,
+        Column::RateNorm,
+        Column::C2Bar,
+        Column::GammaX,
+        Column::GammaY,
+        Column::GammaZ,
+        Column::GammaHatX,
+        Column::GammaHatY,
+        Column::GammaHatZ,
+        Column::DeltaX,
+        Column::DeltaY,
+        Column::DeltaZ,
+        Column::DeltaHatX,
+        Column::DeltaHatY,
+        Column::DeltaHatZ,
+        Column::Tau,
     ];
-    if let Some(missing) = need.iter().find(|c| !col.contains_key(*c)) {
+    if let Some(missing) = need.iter().find(|c| !col.contains_key(c.name())) {
+        let missing = missing.name();
         return Err(input("trajectory.csv", &format!("no column '{missing}'")));
     }
     let mut builder = SceneBuilder::for_scenario(&s);
     if let Ok(events) = std::fs::read_to_string(dir.join("events.jsonl")) {
         for line in events.lines() {
             let v: serde_json::Value = serde_json::from_str(line).unwrap_or_default();
-            if let Some(e) = crate::record::live::scenario_event(&v) {
+            if let Some(e) = formation_runtime::record::live::scenario_event(&v) {
                 builder.add_event(&e);
             }
         }
@@ -104,7 +106,7 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
             .split(',')
             .map(|v| v.parse().unwrap_or(f64::NAN))
             .collect();
-        let step = row[col["step"]] as u64;
+        let step = row[col[Column::Step.name()]] as u64;
         if !builder.is_frame(step) {
             continue;
         }
@@ -112,29 +114,32 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
         if rows.len() < n {
             continue;
         }
-        let get = |r: &Vec<f64>, c: &str| r[col[c]];
-        let v3 = |r: &Vec<f64>, a: &str, b: &str, c: &str| [get(r, a), get(r, b), get(r, c)];
-        let t = get(&rows[0], "t");
+        let get = |r: &Vec<f64>, c: Column| r[col[c.name()]];
+        let v3 = |r: &Vec<f64>, a: Column, b: Column, c: Column| [get(r, a), get(r, b), get(r, c)];
+        let t = get(&rows[0], Column::T);
         mission.reference(step, step as f64 * dt, &mut reference);
         let frame = Frame {
             step,
             t,
             p_d: reference.p_d,
-            target: [get(&rows[0], "tx"), get(&rows[0], "ty"), 0.0],
-            slots: rows.iter().map(|r| v3(r, "pdx", "pdy", "pdz")).collect(),
+            target: [get(&rows[0], Column::Tx), get(&rows[0], Column::Ty), 0.0],
+            slots: rows
+                .iter()
+                .map(|r| v3(r, Column::Pdx, Column::Pdy, Column::Pdz))
+                .collect(),
             agents: rows
                 .iter()
                 .map(|r| AgentSample {
-                    position: v3(r, "px", "py", "pz"),
-                    attitude: v3(r, "phi", "theta", "psi"),
-                    formation_error_m: get(r, "e_norm"),
-                    gamma_hat: v3(r, "gamma_hat_x", "gamma_hat_y", "gamma_hat_z"),
-                    delta_hat: v3(r, "delta_hat_x", "delta_hat_y", "delta_hat_z"),
-                    gamma: v3(r, "gamma_x", "gamma_y", "gamma_z"),
-                    delta: v3(r, "delta_x", "delta_y", "delta_z"),
-                    attitude_margin_rad: get(r, "c1_bar") - get(r, "att_norm"),
-                    rate_margin_rad_s: get(r, "c2_bar") - get(r, "rate_norm"),
-                    tau_s: get(r, "tau"),
+                    position: v3(r, Column::Px, Column::Py, Column::Pz),
+                    attitude: v3(r, Column::Phi, Column::Theta, Column::Psi),
+                    formation_error_m: get(r, Column::ENorm),
+                    gamma_hat: v3(r, Column::GammaHatX, Column::GammaHatY, Column::GammaHatZ),
+                    delta_hat: v3(r, Column::DeltaHatX, Column::DeltaHatY, Column::DeltaHatZ),
+                    gamma: v3(r, Column::GammaX, Column::GammaY, Column::GammaZ),
+                    delta: v3(r, Column::DeltaX, Column::DeltaY, Column::DeltaZ),
+                    attitude_margin_rad: get(r, Column::C1Bar) - get(r, Column::AttNorm),
+                    rate_margin_rad_s: get(r, Column::C2Bar) - get(r, Column::RateNorm),
+                    tau_s: get(r, Column::Tau),
                 })
                 .collect(),
         };

@@ -1,4 +1,6 @@
-//! Rotation matrices of eq. (1)-(2).
+//! The quadrotor's kinematics of eq. (1)-(2): rotation matrices, Euler-angle rates and the
+//! rotational drift, shared by the plant (which integrates them) and the controller (its nominal
+//! model).
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -98,4 +100,11 @@ pub fn euler_rate_matrix(a: &Vector3<f64>) -> Matrix3<f64> {
 /// S(Omega): the skew matrix with S(a) b = a x b.
 pub fn skew(w: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0)
+}
+
+/// F_iA = -J^-1 S(Omega) J Omega - J^-1 K_D Omega of eq. (2) for the inertia diagonal `j` and the
+/// damping diagonal `drag` (also the controller's nominal model).
+pub fn rotational_drift(j: &Vector3<f64>, drag: &Vector3<f64>, w: &Vector3<f64>) -> Vector3<f64> {
+    let jw = w.component_mul(j);
+    -(w.cross(&jw) + drag.component_mul(w)).component_div(j)
 }

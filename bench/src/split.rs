@@ -16,8 +16,8 @@
 use super::lockstep::{self, row_as};
 use super::row::Row;
 use super::secure::Secured;
-use crate::run::step_timing::WARMUP_STEPS;
 use formation_net::bench::{SPLIT_AGENTS, SPLIT_HOST};
+use formation_runtime::WARMUP_STEPS;
 use std::ffi::OsString;
 use std::io::Read;
 use std::os::unix::fs::{DirBuilderExt, PermissionsExt};

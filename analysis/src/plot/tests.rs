@@ -4,7 +4,7 @@ use super::{run, Format, PlotArgs, PlotError, Rendered};
 use std::path::{Path, PathBuf};
 
 /// Every column of docs/formats.md, in the documented order: the recorder's own list.
-const HEADER: &[&str] = crate::record::csv::COLUMNS;
+const HEADER: &[&str] = formation_runtime::record::csv::COLUMNS;
 
 const FIGURES: &[&str] = &[
     "fig05_trajectory_3d.png",
@@ -414,8 +414,9 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
     let dir = temp_dir("scene");
     let mut s = formation_config::Scenario::paper();
     s.simulation.duration_s = 2.0;
-    crate::sim::write_resolved_scenario(&s, &dir).expect("scenario.toml");
-    crate::sim::run_in_process(&s, formation_config::Variant::Proposed, &dir).expect("sim");
+    formation_runtime::sim::write_resolved_scenario(&s, &dir).expect("scenario.toml");
+    formation_runtime::sim::run_in_process(&s, formation_config::Variant::Proposed, &dir)
+        .expect("sim");
     let times = vec![0.5, 1.5, 9.0];
     let files = run(&PlotArgs {
         dir: dir.clone(),
@@ -436,7 +437,8 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
     let steps: Vec<u64> = scenes.at.iter().map(|(_, sc)| sc.step).collect();
     assert_eq!(steps, vec![520, 1520, 1960]);
     // The scene's poses are the rows of trajectory.csv.
-    let tr = crate::record::table::Trajectory::read(&dir.join("trajectory.csv")).expect("csv");
+    let tr = formation_runtime::record::table::Trajectory::read(&dir.join("trajectory.csv"))
+        .expect("csv");
     let tf = &scenes.at[1].1.transforms.transforms[2];
     let row = tr
         .rows()

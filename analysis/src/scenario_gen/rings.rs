@@ -103,8 +103,8 @@ pub fn spin_rate(template_spin_rad_s: f64, template_enclose_m: f64, outer_enclos
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::coverage::CoverageGrid;
     use crate::scenario_gen::tests::min_distance;
+    use formation_runtime::record::coverage::CoverageGrid;
 
     const S_MIN: f64 = 1.1755705045849463; // 2 sin(pi/5): the paper's enclosing spacing
 

@@ -40,14 +40,14 @@ pub fn parent_pid() -> i32 {
     unsafe { libc::getppid() }
 }
 
-/// The CPUs this process may use ([`crate::cpus::allowed`]).
+/// The CPUs this process may use ([`formation_runtime::cpus::allowed`]).
 pub fn allowed_cpus() -> Vec<usize> {
-    crate::cpus::allowed()
+    formation_runtime::cpus::allowed()
 }
 
 /// Restricts the calling thread to `cpus`.
 pub fn set_affinity(cpus: &[usize]) -> io::Result<()> {
-    crate::cpus::CpuSet::of(cpus)?.apply()
+    formation_runtime::cpus::CpuSet::of(cpus)?.apply()
 }
 
 /// The peer processes of one case. Dropping it kills and reaps whatever is still running.

@@ -58,9 +58,9 @@ pub mod theorem1;
 pub mod verdict;
 mod verdicts;
 
-use crate::cli::load_with_overrides;
 use formation_config::scenario::graph::Topology;
 use formation_config::Scenario;
+use formation_runtime::cli::load_with_overrides;
 use serde::Serialize;
 use std::process::ExitCode;
 pub use verdict::{Level, Verdict};
@@ -323,7 +323,7 @@ pub fn main(args: CheckArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    let variant = match crate::cli::parse_variant(&args.variant) {
+    let variant = match formation_runtime::cli::parse_variant(&args.variant) {
         Ok(v) => v,
         Err(code) => return code,
     };
@@ -343,10 +343,10 @@ pub fn main(args: CheckArgs) -> ExitCode {
 }
 
 /// Exit code of a report that was printed: 0 unless a verdict is FAIL, then
-/// [`crate::cli::EXIT_RESULT_FAILED`] (3). WARN verdicts do not fail the command.
+/// [`formation_runtime::cli::EXIT_RESULT_FAILED`] (3). WARN verdicts do not fail the command.
 pub fn exit_code(worst: Level) -> ExitCode {
     match worst {
-        Level::Fail => ExitCode::from(crate::cli::EXIT_RESULT_FAILED),
+        Level::Fail => ExitCode::from(formation_runtime::cli::EXIT_RESULT_FAILED),
         Level::Ok | Level::Info | Level::Warn => ExitCode::SUCCESS,
     }
 }

@@ -36,9 +36,9 @@ mod zenoh;
 
 pub use peer::{main as peer_main, PeerArgs};
 
-use crate::cli::EXIT_INVALID;
 use formation_config::node::ipc as fipc;
 use formation_config::protocol::services::run_prefix;
+use formation_runtime::cli::EXIT_INVALID;
 use link::{Budget, Sizes, MAX_PAYLOAD, MIN_PAYLOAD};
 use plan::{PlanInput, Transport};
 use std::process::ExitCode;
@@ -64,13 +64,13 @@ pub struct BenchArgs {
     /// Agent processes of the fan-out cases (and of the lockstep run); a comma-separated list
     /// (`--n 20,50,100,128`) measures every N in one run: each round runs the cases of every N in
     /// turn, and the lockstep / fan-out ratio is given per N.
-    #[arg(long, default_value = "5", value_delimiter = ',', value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, default_value = "5", value_delimiter = ',', value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub n: Vec<usize>,
     /// Message size, bytes (16..=60000), both directions, every transport. Default: the sizes of
     /// the lockstep's per-step messages, the state sent to an agent (`VehicleState`) and the
     /// command it answers with (`ControlCommand`), so the fan-out is comparable with the lockstep
     /// row.
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub payload: Option<usize>,
     /// Measured time per case, s (a warm-up of 10 %, at most 0.25 s, is discarded first).
     #[arg(long, default_value_t = 1.5, allow_negative_numbers = true)]
@@ -80,7 +80,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub cpu: Option<String>,
     /// Spin budget of the spin-then-block strategy, µs.
-    #[arg(long, default_value_t = 50, value_parser = crate::cli::whole_number::<u64>, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 50, value_parser = formation_runtime::cli::whole_number::<u64>, allow_negative_numbers = true)]
     pub spin_us: u64,
     /// Only these transports (comma-separated: iox2-event, iox2-waitset, iox2-poll, uds-dgram,
     /// udp, zenoh). `zenoh` is measured only when named: bare Zenoh ping-pong and the fan-out of
@@ -107,7 +107,7 @@ pub struct BenchArgs {
     /// round 2, ... The table shows each case's median round, and each lockstep / fan-out ratio is
     /// the median of the ratios taken within each round, so that slow and fast phases of a shared
     /// machine cancel out (1..=20).
-    #[arg(long, default_value_t = 1, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub rounds: usize,
     /// Print `{"results": [...]}` on stdout instead of the table.
     #[arg(long)]
@@ -124,7 +124,7 @@ pub struct BenchArgs {
 
 /// `formation bench --host`: the bare timer loop, alternated normal / SCHED_FIFO per round.
 fn host_main(args: &BenchArgs) -> ExitCode {
-    use crate::run::{host_probe, rt};
+    use formation_runtime::run::{host_probe, rt};
     if !(args.seconds > 0.0 && args.seconds <= 3600.0) {
         eprintln!("error: --seconds {}: expected 0 < s <= 3600", args.seconds);
         return ExitCode::from(EXIT_INVALID);
@@ -206,7 +206,7 @@ fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<Vec<PlanInput>, String> 
     let cpus = a
         .cpu
         .as_deref()
-        .map(|s| crate::cpus::parse_list(s, allowed))
+        .map(|s| formation_runtime::cpus::parse_list(s, allowed))
         .transpose()?;
     let only = match a.transports.as_deref() {
         Some(s) => parse_transports(s)?,

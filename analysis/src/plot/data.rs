@@ -1,55 +1,56 @@
 //! Loading a run directory: `trajectory.csv` (columns read by name) and the optional `summary.json`.
 
 use super::PlotError;
+use formation_runtime::record::csv::Column;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// Columns every figure family together needs (docs/formats.md).
-pub const REQUIRED_COLUMNS: &[&str] = &[
-    "t",
-    "agent",
-    "px",
-    "py",
-    "pz",
-    "phi",
-    "theta",
-    "ex",
-    "ey",
-    "ez",
-    "tx",
-    "ty",
-    "thrust",
-    "phi_c",
-    "theta_c",
-    "att_norm",
-    "att_cmd_norm",
-    "c1_bar",
-    "rate_norm",
-    "alpha_norm",
-    "c2_bar",
-    "u_a_x",
-    "u_a_y",
-    "u_a_z",
-    "gamma_x",
-    "gamma_y",
-    "gamma_z",
-    "gamma_hat_x",
-    "gamma_hat_y",
-    "gamma_hat_z",
-    "delta_x",
-    "delta_y",
-    "delta_z",
-    "delta_hat_x",
-    "delta_hat_y",
-    "delta_hat_z",
-    "d_norm",
-    "d_hat",
-    "f_x",
-    "f_y",
-    "f_z",
-    "f_hat_x",
-    "f_hat_y",
-    "f_hat_z",
+pub const REQUIRED_COLUMNS: &[Column] = &[
+    Column::T,
+    Column::Agent,
+    Column::Px,
+    Column::Py,
+    Column::Pz,
+    Column::Phi,
+    Column::Theta,
+    Column::Ex,
+    Column::Ey,
+    Column::Ez,
+    Column::Tx,
+    Column::Ty,
+    Column::Thrust,
+    Column::PhiC,
+    Column::ThetaC,
+    Column::AttNorm,
+    Column::AttCmdNorm,
+    Column::C1Bar,
+    Column::RateNorm,
+    Column::AlphaNorm,
+    Column::C2Bar,
+    Column::UAX,
+    Column::UAY,
+    Column::UAZ,
+    Column::GammaX,
+    Column::GammaY,
+    Column::GammaZ,
+    Column::GammaHatX,
+    Column::GammaHatY,
+    Column::GammaHatZ,
+    Column::DeltaX,
+    Column::DeltaY,
+    Column::DeltaZ,
+    Column::DeltaHatX,
+    Column::DeltaHatY,
+    Column::DeltaHatZ,
+    Column::DNorm,
+    Column::DHat,
+    Column::FX,
+    Column::FY,
+    Column::FZ,
+    Column::FHatX,
+    Column::FHatY,
+    Column::FHatZ,
 ];
 
 /// The time series of one agent: one vector per column of [`REQUIRED_COLUMNS`].
@@ -78,7 +79,7 @@ pub struct Run {
 fn column_index(name: &str) -> usize {
     REQUIRED_COLUMNS
         .iter()
-        .position(|c| *c == name)
+        .position(|c| c.name() == name)
         .unwrap_or_else(|| panic!("internal: column '{name}' is not in REQUIRED_COLUMNS"))
 }
 
@@ -196,14 +197,14 @@ fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
     let index: HashMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (*n, i)).collect();
     let missing: Vec<&str> = REQUIRED_COLUMNS
         .iter()
-        .copied()
+        .map(|c| c.name())
         .filter(|c| !index.contains_key(c))
         .collect();
     if !missing.is_empty() {
         return Err(format!("missing column(s): {}", missing.join(", ")));
     }
-    let wanted: Vec<usize> = REQUIRED_COLUMNS.iter().map(|c| index[c]).collect();
-    let agent_col = column_index("agent");
+    let wanted: Vec<usize> = REQUIRED_COLUMNS.iter().map(|c| index[c.name()]).collect();
+    let agent_col = column_index(Column::Agent.name());
 
     let mut by_agent: Vec<AgentTrace> = Vec::new();
     let mut values = vec![0.0; REQUIRED_COLUMNS.len()];
@@ -220,8 +221,9 @@ fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
         for (v, (&src, name)) in values.iter_mut().zip(wanted.iter().zip(REQUIRED_COLUMNS)) {
             *v = parse_number(cells[src]).ok_or_else(|| {
                 format!(
-                    "line {}: column '{name}': not a number: '{}'",
+                    "line {}: column '{}': not a number: '{}'",
                     lineno + 1,
+                    name.name(),
                     cells[src]
                 )
             })?;

@@ -5,7 +5,7 @@
 
 use super::link::Sizes;
 use super::row::Row;
-use crate::run::step_timing::WARMUP_STEPS;
+use formation_runtime::WARMUP_STEPS;
 use serde::Serialize;
 use serde_json::Value;
 use std::ffi::OsString;
@@ -29,10 +29,12 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let mut args: Vec<OsString> = Vec::new();
     if n != 5 {
-        let scenario = crate::scenario_gen::generate(&crate::scenario_gen::GenOptions::new(
-            n,
-            crate::scenario_gen::graphs::GraphKind::Path,
-        ))?;
+        let scenario = formation_analysis::scenario_gen::generate(
+            &formation_analysis::scenario_gen::GenOptions::new(
+                n,
+                formation_analysis::scenario_gen::graphs::GraphKind::Path,
+            ),
+        )?;
         let path = out.join("scenario-in.toml");
         let text = toml::to_string(&scenario).map_err(|e| format!("scenario: {e}"))?;
         std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;

@@ -13,7 +13,9 @@
 use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
 
-use formation::{bench, check, cli, live, plot, role, run, scenario_gen, schema, sim, sweep};
+use formation_analysis::{check, plot, scenario_gen, sweep};
+use formation_bench as bench;
+use formation_runtime::{cli, live, role, run, schema, sim};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -95,20 +97,20 @@ enum Command {
     #[command(
         after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tls/0.0.0.0:7447 --tls /etc/formation/tls"
     )]
-    Host(formation::hosts::HostArgs),
+    Host(formation_runtime::hosts::HostArgs),
     /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation hosts\n  formation hosts --connect tls/10.0.0.2:7447 --tls ~/.formation/tls --json"
     )]
-    Hosts(formation::hosts::HostsArgs),
+    Hosts(formation_runtime::hosts::HostsArgs),
     /// Make a certificate authority and per-host certificates for mutual TLS between hosts
     /// (tls/HOST:PORT and quic/HOST:PORT endpoints, --tls DIR; docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation certs init --dir ~/formation-ca\n  formation certs issue --dir ~/formation-ca --name b --addr 10.0.0.2 --out b-tls\n  formation certs issue --dir ~/formation-ca --name a --out a-tls"
     )]
-    Certs(formation::hosts::CertsArgs),
+    Certs(formation_runtime::hosts::CertsArgs),
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.
     #[command(hide = true)]
@@ -154,11 +156,11 @@ fn main() -> ExitCode {
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
         Some(Command::Node(a)) => role::main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Host(a)) => formation::hosts::host_main(a),
+        Some(Command::Host(a)) => formation_runtime::hosts::host_main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Hosts(a)) => formation::hosts::hosts_main(a),
+        Some(Command::Hosts(a)) => formation_runtime::hosts::hosts_main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Certs(a)) => formation::hosts::certs_main(a),
+        Some(Command::Certs(a)) => formation_runtime::hosts::certs_main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
         None => run::main(cli::defaults::<run::RunArgs>("run")),
     }

@@ -9,14 +9,14 @@
 //! the boxcar over one probe period, the identified values).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use formation::record::coverage::CoverageGrid;
-use formation::record::metrics::Metrics;
-use formation::record::recovery::Series;
-use formation::record::separation::Separation;
-use formation::scenario_gen::{generate, graphs::GraphKind, GenOptions};
-use formation::ClosedLoop;
 use formation_agent::fault_id::FaultIdentifier;
+use formation_analysis::scenario_gen::{generate, graphs::GraphKind, GenOptions};
 use formation_config::{Scenario, Variant};
+use formation_runtime::record::coverage::CoverageGrid;
+use formation_runtime::record::metrics::Metrics;
+use formation_runtime::record::recovery::Series;
+use formation_runtime::record::separation::Separation;
+use formation_runtime::ClosedLoop;
 use nalgebra::Vector3;
 use std::hint::black_box;
 

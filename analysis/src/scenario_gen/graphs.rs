@@ -1,8 +1,8 @@
 //! Communication graphs of generated scenarios: ring, path, k-nearest, complete, random-connected;
 //! leader weights b; edge weights normalised by the largest degree.
 
-use crate::rng::SplitMix64;
 use formation_config::scenario::Edge;
+use formation_runtime::rng::SplitMix64;
 
 /// The graph families of `formation scenario --graph`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

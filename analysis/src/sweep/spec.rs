@@ -12,7 +12,7 @@
 //! the number of jobs or samples. A grid (`--grid`) takes the Cartesian product of the sets in the
 //! order the `--vary` options are given (the first varies slowest); every set must be finite there.
 
-use crate::rng::SplitMix64;
+use formation_runtime::rng::SplitMix64;
 
 /// One value of a parameter.
 #[derive(Debug, Clone, PartialEq)]
