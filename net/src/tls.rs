@@ -230,7 +230,7 @@ impl Material {
     pub fn load(dir: &Path) -> Result<Material, CertError> {
         files::check_private_dir(dir).map_err(|why| CertError::Folder {
             dir: dir.to_path_buf(),
-            why,
+            why: why.to_string(),
         })?;
         let ca = dir.join(CA_CERT);
         let cert = dir.join(CERT);
@@ -675,7 +675,7 @@ pub fn issue(ca_dir: &Path, what: &Issue, out: &Path) -> Result<Vec<PathBuf>, Ce
     check_name(&what.name)?;
     files::check_private_dir(ca_dir).map_err(|why| CertError::Folder {
         dir: ca_dir.to_path_buf(),
-        why,
+        why: why.to_string(),
     })?;
     let ca_cert_path = ca_dir.join(CA_CERT);
     let ca_key_path = ca_dir.join(CA_KEY);
