@@ -286,7 +286,7 @@ pub fn render_all(
     out: &Path,
     format: Format,
 ) -> Result<Vec<Rendered>, PlotError> {
-    style::register_fonts().map_err(PlotError::Render)?;
+    style::register_fonts().map_err(|e| PlotError::Render(e.to_string()))?;
     let fig = Figure {
         run,
         compare,

@@ -436,7 +436,8 @@ mod tests {
         };
         let good = encode_checkpoint(2, 77, &c);
         assert_eq!(decode_checkpoint(&good, 2, 77).unwrap(), c);
-        let why = |b: &[u8], agent, hash| decode_checkpoint(b, agent, hash).unwrap_err().to_string();
+        let why =
+            |b: &[u8], agent, hash| decode_checkpoint(b, agent, hash).unwrap_err().to_string();
         assert!(why(&good, 1, 77).contains("agent 3's"), "another agent's");
         assert!(why(&good, 2, 78).contains("scenario"), "another run's");
         for bit in [8 * 9, 8 * 30, 8 * 100, 8 * (good.len() - 3)] {
@@ -494,7 +495,8 @@ mod tests {
         };
         let good = encode_rejoin(55, &f).unwrap();
         assert_eq!(decode_rejoin(&good, 3, 55, 102).unwrap(), f);
-        let why = |b: &[u8], agent, hash, at| decode_rejoin(b, agent, hash, at).unwrap_err().to_string();
+        let why =
+            |b: &[u8], agent, hash, at| decode_rejoin(b, agent, hash, at).unwrap_err().to_string();
         assert!(
             why(&good, 2, 55, 102).contains("agent 4's"),
             "another agent's"
