@@ -52,6 +52,8 @@ impl std::fmt::Display for HandshakeError {
     }
 }
 
+impl std::error::Error for HandshakeError {}
+
 /// A host's link state as the orchestrator sees it (liveliness).
 #[derive(Debug, Default)]
 struct Seen {
