@@ -19,9 +19,9 @@ use crate::error::ZenohError;
 /// A frame that is not the one a [`StepPattern`] expects: what differs.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum FrameMismatch {
-    /// The body does not parse as a bridge frame (the parser's message).
-    #[error("{0}")]
-    Parse(String),
+    /// The body does not parse as a bridge frame.
+    #[error(transparent)]
+    Parse(#[from] bridge::RecordError),
     /// The first record is not the sending host.
     #[error("a frame without its sending host")]
     NoSender,
@@ -57,9 +57,9 @@ pub enum LinkError {
     /// The session does not open.
     #[error(transparent)]
     Session(#[from] crate::session::OptionError),
-    /// A publisher or subscriber cannot be declared (the bridge's message).
-    #[error("{0}")]
-    Declare(String),
+    /// A publisher or subscriber cannot be declared.
+    #[error(transparent)]
+    Declare(#[from] ZenohError),
 }
 use crate::cluster::LAUNCHER;
 use crate::plan::{agent_index, Placement};
@@ -330,8 +330,8 @@ impl Link {
         };
         let key = |to: Side| format!("formation/bench/{tag}/to/{}", to.name());
         Ok(Link {
-            publisher: bridge::frame_publisher(&s, key(other)).map_err(LinkError::Declare)?,
-            subscriber: bridge::frame_subscriber(&s, key(side)).map_err(LinkError::Declare)?,
+            publisher: bridge::frame_publisher(&s, key(other))?,
+            subscriber: bridge::frame_subscriber(&s, key(side))?,
             _session: s,
         })
     }
