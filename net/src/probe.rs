@@ -44,6 +44,7 @@ impl Probe {
         bytes: Option<Vec<u8>>,
         timeout: Duration,
     ) -> Result<Vec<Result<Vec<u8>, String>>, ZenohError> {
+        // Inner String: an error reply is the answering side's bytes, shown as text, not an error here.
         let mut g = self.session.get(key).timeout(timeout);
         if let Some(b) = bytes {
             g = g.payload(b);
