@@ -182,6 +182,13 @@ pub enum GenError {
     },
 }
 
+impl GenError {
+    /// The exit code of `formation scenario` for this error: 2, bad input (docs/cli.md).
+    pub fn exit_code(&self) -> u8 {
+        EXIT_INVALID
+    }
+}
+
 /// The paper scenario scaled to `opts`.
 pub fn generate(opts: &GenOptions) -> Result<Scenario, GenError> {
     generate_from(&Scenario::paper(), opts)
@@ -305,7 +312,7 @@ pub fn main(args: ScenarioArgs) -> ExitCode {
         Ok(s) => s,
         Err(e) => {
             eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
+            return ExitCode::from(e.exit_code());
         }
     };
     if let Err(errs) = validate(&s) {
