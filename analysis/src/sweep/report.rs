@@ -503,9 +503,9 @@ mod tests {
             .collect();
         o.push(outcome(10, 50.0, true));
         o.push(Outcome {
-            result: Err(SampleError::Apply(
-                super::super::apply::ApplyError::DelayMax(-1.0),
-            )),
+            result: Err(SampleError::Apply(super::super::apply::ApplyError::Set(
+                "bad".into(),
+            ))),
             ..outcome(11, 0.0, false)
         });
         let s = SweepSummary::build(
