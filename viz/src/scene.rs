@@ -69,13 +69,13 @@ pub fn link_state(timeline: &Timeline, a: usize, b: usize, k: u64) -> LinkState 
 
 /// The rotation of ZYX Euler angles A = [phi, theta, psi] (body to inertial, R = Rz Ry Rx as
 /// the plant's eq. (1)) as a unit quaternion.
-pub(crate) fn quaternion(a: [f64; 3]) -> Quaternion {
+pub fn quaternion(a: [f64; 3]) -> Quaternion {
     let [x, y, z, w] = quaternion_xyzw(a);
     Quaternion { x, y, z, w }
 }
 
 /// A point of the scene rotated by a quaternion (for the top-view figure and the tests).
-pub(crate) fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
+pub fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
     // v' = v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z).
     let u = [q.x, q.y, q.z];
     let cross = |a: [f64; 3], b: [f64; 3]| {
@@ -96,7 +96,7 @@ pub(crate) fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
 }
 
 /// Colour of agent `id` (1-based): the palette of the figures, cycled.
-pub(crate) fn agent_color(id: usize, alpha: f64) -> Color {
+pub fn agent_color(id: usize, alpha: f64) -> Color {
     let [r, g, b] = agent_rgb(id);
     rgba(r, g, b, alpha)
 }
@@ -117,7 +117,7 @@ fn down_color(alpha: f64) -> Color {
 }
 
 /// Colour of an edge in `state`.
-pub(crate) fn link_color(state: LinkState) -> Color {
+pub fn link_color(state: LinkState) -> Color {
     let ([r, g, b], alpha) = state.rgba();
     rgba(r, g, b, f64::from(alpha))
 }
@@ -307,33 +307,19 @@ pub struct Scene {
     /// Step of the frame.
     pub step: u64,
     /// `/tf`.
-    pub(crate) transforms: FrameTransforms,
+    pub transforms: FrameTransforms,
     /// `/scene/agents`.
-    pub(crate) agents: SceneUpdate,
+    pub agents: SceneUpdate,
     /// `/scene/mission`.
-    pub(crate) mission: SceneUpdate,
+    pub mission: SceneUpdate,
     /// `/scene/links`.
-    pub(crate) links: SceneUpdate,
+    pub links: SceneUpdate,
     /// `/scene/events`.
-    pub(crate) events: SceneUpdate,
+    pub events: SceneUpdate,
     /// `/log`: the events that apply since the previous frame, each with its step.
-    pub(crate) logs: Vec<(u64, Log)>,
+    pub logs: Vec<(u64, Log)>,
     /// `/agent/{i}/plot`, agents 1..N.
     pub plots: Vec<AgentPlot>,
-}
-
-impl Scene {
-    /// The position of agent `id` (1-based) in the world frame as `/tf` carries it, m.
-    pub fn agent_translation(&self, id: usize) -> Option<[f64; 3]> {
-        let frame = agent_frame(id);
-        let t = self
-            .transforms
-            .transforms
-            .iter()
-            .find(|t| t.child_frame_id == frame)?;
-        let p = t.translation.as_ref()?;
-        Some([p.x, p.y, p.z])
-    }
 }
 
 /// Builds the scene frame after frame: keeps the trails, the timeline and the events.
@@ -387,7 +373,7 @@ fn at(p: [f64; 3]) -> Option<Pose> {
 }
 
 /// Simulation time of step k as a timestamp.
-pub(crate) fn timestamp(step: u64, dt: f64) -> Timestamp {
+pub fn timestamp(step: u64, dt: f64) -> Timestamp {
     let ns = step_ns(step, dt);
     Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
 }

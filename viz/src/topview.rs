@@ -6,29 +6,6 @@
 use crate::scene::{rotate, Scene, WORLD_FRAME};
 use foxglove::messages::{line_primitive, Color, Pose, Quaternion, SceneEntity, SceneUpdate};
 
-/// A colour: red, green, blue and alpha, each in [0, 1], as the scene's messages carry it.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Rgba {
-    /// Red.
-    pub r: f64,
-    /// Green.
-    pub g: f64,
-    /// Blue.
-    pub b: f64,
-    /// Alpha (1: opaque).
-    pub a: f64,
-}
-
-/// The colour of a primitive's message.
-pub(crate) fn rgba(c: Color) -> Rgba {
-    Rgba {
-        r: c.r,
-        g: c.g,
-        b: c.b,
-        a: c.a,
-    }
-}
-
 /// A flat shape in world x-y coordinates, m.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Shape {
@@ -37,14 +14,14 @@ pub enum Shape {
         /// Vertices.
         points: Vec<[f64; 2]>,
         /// Fill colour (with alpha).
-        color: Rgba,
+        color: Color,
     },
     /// A stroked polyline (trails, error lines, arrows).
     Polyline {
         /// Vertices.
         points: Vec<[f64; 2]>,
         /// Colour.
-        color: Rgba,
+        color: Color,
         /// Width, m (the primitive's thickness).
         width_m: f64,
     },
@@ -55,7 +32,7 @@ pub enum Shape {
         /// Text.
         text: String,
         /// Colour.
-        color: Rgba,
+        color: Color,
         /// Font size, m.
         size_m: f64,
     },
@@ -141,7 +118,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
         let t = frame.then(&Rigid::of(&c.pose));
         let d = c.size.map_or(0.0, |s| s.x.max(s.y));
         let layer = if body { 3 } else { 0 };
-        let color = rgba(c.color.unwrap_or_default());
+        let color = c.color.unwrap_or_default();
         layered(
             layer,
             Shape::Polygon {
@@ -154,7 +131,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
     for s in &e.spheres {
         let t = frame.then(&Rigid::of(&s.pose));
         let d = s.size.map_or(0.0, |s| s.x.max(s.y));
-        let color = rgba(s.color.unwrap_or_default());
+        let color = s.color.unwrap_or_default();
         layered(
             2,
             Shape::Polygon {
@@ -175,7 +152,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             3,
             Shape::Polygon {
                 points,
-                color: rgba(c.color.unwrap_or_default()),
+                color: c.color.unwrap_or_default(),
             },
             out,
         );
@@ -195,7 +172,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
                     1,
                     Shape::Polyline {
                         points: pair.to_vec(),
-                        color: rgba(color),
+                        color,
                         width_m: l.thickness,
                     },
                     out,
@@ -206,7 +183,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
                 1,
                 Shape::Polyline {
                     points: pts,
-                    color: rgba(color),
+                    color,
                     width_m: l.thickness,
                 },
                 out,
@@ -220,7 +197,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             4,
             Shape::Polyline {
                 points: vec![xy(t.p), xy(tip)],
-                color: rgba(a.color.unwrap_or_default()),
+                color: a.color.unwrap_or_default(),
                 width_m: a.shaft_diameter,
             },
             out,
@@ -233,7 +210,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             Shape::Text {
                 at: xy(t.p),
                 text: x.text.clone(),
-                color: rgba(x.color.unwrap_or_default()),
+                color: x.color.unwrap_or_default(),
                 size_m: x.font_size,
             },
             out,
