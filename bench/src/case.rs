@@ -6,7 +6,6 @@ use super::link::{self, Budget, Link, Sizes, Wait};
 use super::plan::{Case, Transport};
 use super::procs::{self, Peers};
 use super::sock::{self, SockLink};
-use crate::error::{CaseError, ResultExt};
 use hdrhistogram::Histogram;
 use iceoryx2::prelude::*;
 use std::cell::{Cell, RefCell};
@@ -77,12 +76,12 @@ fn agent_args(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Vec<
 }
 
 /// Measures case number `idx`; the histogram holds one value (ns) per round trip or step.
-pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, CaseError> {
+pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String> {
     if let Some(cpu) = case.placement.cpu_of(0) {
-        procs::set_affinity(&[cpu]).ctx(format!("pin to cpu {cpu}"))?;
+        procs::set_affinity(&[cpu]).map_err(|e| format!("pin to cpu {cpu}: {e}"))?;
     }
     if case.batch {
-        formation_config::node::sched::batch_policy().map_err(CaseError::below)?;
+        formation_config::node::sched::batch_policy()?;
     }
     let result = run_pinned(ctx, idx, case);
     let _ = procs::set_affinity(ctx.allowed);
@@ -92,18 +91,20 @@ pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, CaseErr
     result
 }
 
-fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, CaseError> {
+fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String> {
     match case.transport {
         Transport::IoxEvent | Transport::IoxWaitSet | Transport::IoxPoll => {
-            let services = Services::create(ctx.node, idx, case.n).ctx("iceoryx2")?;
+            let services =
+                Services::create(ctx.node, idx, case.n).map_err(|e| format!("iceoryx2: {e}"))?;
             let notify = case.transport != Transport::IoxPoll;
-            let ports = Ports::plant(&services, ctx.sizes.down, notify).ctx("iceoryx2")?;
+            let ports = Ports::plant(&services, ctx.sizes.down, notify)
+                .map_err(|e| format!("iceoryx2: {e}"))?;
             let peers = spawn(ctx, idx, case, None)?;
             if case.transport == Transport::IoxWaitSet {
-                let ws = iox::waitset().ctx("iceoryx2")?;
+                let ws = iox::waitset().map_err(|e| format!("iceoryx2: {e}"))?;
                 let _guard = ws
                     .attach_notification(&ports.listener)
-                    .map_err(|e| CaseError::op("iceoryx2", format!("attach listener: {e:?}")))?;
+                    .map_err(|e| format!("iceoryx2: attach listener: {e:?}"))?;
                 let mut link = IoxLink::new(&ports, Some(&ws), u32::MAX, ctx.sizes.down);
                 measure(ctx, case, &mut link, peers)
             } else {
@@ -112,25 +113,28 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Case
             }
         }
         Transport::Uds => {
-            let addr = sock::uds_addr(ctx.prefix, idx, None).ctx("uds")?;
-            let s = sock::bind_uds(&addr).ctx("uds bind")?;
-            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait).ctx("uds")?;
+            let addr = sock::uds_addr(ctx.prefix, idx, None).map_err(|e| format!("uds: {e}"))?;
+            let s = sock::bind_uds(&addr).map_err(|e| format!("uds bind: {e}"))?;
+            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait)
+                .map_err(|e| format!("uds: {e}"))?;
             let peers = spawn(ctx, idx, case, None)?;
             measure(ctx, case, &mut link, peers)
         }
         Transport::Udp => {
-            let s = sock::bind_udp(0).ctx("udp bind")?;
-            let port = s.local_addr().ctx("udp")?.port();
-            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait).ctx("udp")?;
+            let s = sock::bind_udp(0).map_err(|e| format!("udp bind: {e}"))?;
+            let port = s.local_addr().map_err(|e| format!("udp: {e}"))?.port();
+            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait)
+                .map_err(|e| format!("udp: {e}"))?;
             let peers = spawn(ctx, idx, case, Some(port))?;
             measure(ctx, case, &mut link, peers)
         }
-        Transport::Zenoh => Err(CaseError::ZenohCase),
+        Transport::Zenoh => Err("zenoh is measured by its own cases (bench::zenoh)".into()),
     }
 }
 
-fn spawn(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Result<Peers, CaseError> {
-    Peers::spawn(agent_args(ctx, idx, case, udp_port)).ctx("spawn peer processes")
+fn spawn(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Result<Peers, String> {
+    Peers::spawn(agent_args(ctx, idx, case, udp_port))
+        .map_err(|e| format!("spawn peer processes: {e}"))
 }
 
 fn measure(
@@ -138,7 +142,7 @@ fn measure(
     case: &Case,
     link: &mut dyn Link,
     peers: Peers,
-) -> Result<Histogram<u64>, CaseError> {
+) -> Result<Histogram<u64>, String> {
     let grace = EXIT_GRACE + EXIT_GRACE_PER_PEER * case.n as u32;
     measure_with(ctx, (case.n, case.wait), link, peers, grace)
 }
@@ -151,7 +155,7 @@ pub fn measure_with(
     link: &mut dyn Link,
     peers: Peers,
     grace: Duration,
-) -> Result<Histogram<u64>, CaseError> {
+) -> Result<Histogram<u64>, String> {
     let peers = RefCell::new(peers);
     let last_check = Cell::new(Instant::now());
     let alive = || {
@@ -163,6 +167,9 @@ pub fn measure_with(
         peers.borrow_mut().all_alive()
     };
     let hist = link::run_plant(link, replies, wait, ctx.budget, &alive)?;
-    peers.into_inner().finish(grace).ctx("peers")?;
+    peers
+        .into_inner()
+        .finish(grace)
+        .map_err(|e| format!("peers: {e}"))?;
     Ok(hist)
 }

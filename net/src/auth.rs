@@ -58,8 +58,6 @@ impl std::fmt::Display for SecretError {
     }
 }
 
-impl std::error::Error for SecretError {}
-
 impl RunSecret {
     /// A new secret from the operating system's generator (`getrandom`).
     pub fn generate() -> Result<RunSecret, SecretError> {
@@ -150,8 +148,6 @@ impl std::fmt::Display for ProofError {
         }
     }
 }
-
-impl std::error::Error for ProofError {}
 
 /// The keys of one run (see the module documentation).
 #[derive(Clone)]

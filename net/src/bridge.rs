@@ -41,9 +41,7 @@
 
 use crate::auth::{Purpose, Replay, RunKey};
 use crate::clock::{self, LinkDelays};
-use crate::error::ZenohError;
 use crate::logs::LogLimit;
-use crate::plan::PlanError;
 use crate::plan::{agent_index, Placement};
 use crate::priority::{LinkPriority, Raised};
 use crate::proto;
@@ -160,7 +158,7 @@ impl Bridge {
 }
 
 /// A new placement for a thread, and where it answers (services it forwards, or why not).
-type Replan = (Placement, mpsc::Sender<Result<usize, BridgeError>>);
+type Replan = (Placement, mpsc::Sender<Result<usize, String>>);
 
 /// How long a re-plan of the sending thread may take (it looks between two cycles, at least every
 /// [`IDLE_WAKE`]).
@@ -179,10 +177,10 @@ impl Drop for Bridge {
     }
 }
 
-type Drain = Box<dyn FnMut(&mut dyn FnMut(&[u8])) -> Result<usize, BridgeError>>;
+type Drain = Box<dyn FnMut(&mut dyn FnMut(&[u8])) -> Result<usize, String>>;
 /// Publishes a sample's bytes, its send stamp (if it has one) shifted by the given ns; returns
 /// the shifted stamp (0: none).
-type Inject = Box<dyn FnMut(&[u8], i64) -> Result<u64, BridgeError>>;
+type Inject = Box<dyn FnMut(&[u8], i64) -> Result<u64, String>>;
 
 /// Offset of the send stamp (`sent_ns`) in the stamped wire types, `None` for the others.
 fn stamp_offset<T: Message>() -> Option<usize> {
@@ -248,11 +246,9 @@ struct Ports {
     ins: HashMap<String, InPort>,
 }
 
-fn err<'a, E: std::fmt::Debug>(
-    what: &'static str,
-    name: &'a str,
-) -> impl FnOnce(E) -> BridgeError + 'a {
-    move |e| BridgeError::ipc(what, name, e)
+fn err<'a, E: std::fmt::Debug>(what: &'a str, name: &'a str) -> impl FnOnce(E) -> String + 'a {
+    let what = what.to_string();
+    move |e| format!("bridge: {what} {name}: {e:?}")
 }
 
 impl<'a> Opener<'a> {
@@ -264,7 +260,7 @@ impl<'a> Opener<'a> {
         hosts: &'a [String],
         out: bool,
         old: Ports,
-    ) -> Result<Opener<'a>, BridgeError> {
+    ) -> Result<Opener<'a>, String> {
         let mut o = Opener {
             node,
             cfg,
@@ -287,7 +283,7 @@ impl<'a> Opener<'a> {
         senders: &[services::Party],
         receivers: &[services::Party],
         scope: services::Scope,
-    ) -> Result<(Vec<usize>, bool), BridgeError> {
+    ) -> Result<(Vec<usize>, bool), String> {
         let r = self.cfg.placement.route(
             &self.cfg.me,
             name,
@@ -311,9 +307,9 @@ impl<'a> Opener<'a> {
 }
 
 impl Visitor for Opener<'_> {
-    type Error = BridgeError;
+    type Error = String;
 
-    fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), BridgeError> {
+    fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), String> {
         if self.cfg.create && !self.out {
             let sn = service_name(&s.name).map_err(err("name", &s.name))?;
             let f = pubsub_with_limits(self.node.service_builder(&sn).publish_subscribe::<T>(), &l)
@@ -336,10 +332,10 @@ impl Visitor for Opener<'_> {
                 self.topics.push(t);
                 return Ok(());
             }
-            let sub = ports::subscriber(self.node, &s).map_err(BridgeError::from)?;
+            let sub = ports::subscriber(self.node, &s).map_err(|e| e.to_string())?;
             let drain: Drain = Box::new(move |f| {
                 let mut n = 0;
-                while let Some(sample) = sub.receive()? {
+                while let Some(sample) = sub.receive().map_err(|e| e.to_string())? {
                     f(wire_bytes(sample.payload()));
                     n += 1;
                 }
@@ -356,13 +352,13 @@ impl Visitor for Opener<'_> {
                 self.ins.insert(s.name.clone(), p);
                 return Ok(());
             }
-            let publisher = ports::publisher(self.node, &s).map_err(BridgeError::from)?;
+            let publisher = ports::publisher(self.node, &s).map_err(|e| e.to_string())?;
             let name = s.name.clone();
             let stamp = stamp_offset::<T>();
             let inject: Inject = Box::new(move |bytes, shift| {
                 let mut sample = publisher
                     .loan_uninit()
-                    .map_err(|e| BridgeError::ipc("cannot loan on", &name, e))?;
+                    .map_err(|e| format!("bridge: cannot loan on {name}: {e:?}"))?;
                 // SAFETY: the size was checked against T's; the bytes are a T's bytes from the
                 // sending host (same build and wire layout, checked at the handshake).
                 let mut sample = unsafe {
@@ -386,7 +382,7 @@ impl Visitor for Opener<'_> {
                 sample
                     .send()
                     .map(|_| sent)
-                    .map_err(|e| BridgeError::ipc("cannot publish on", &name, e))
+                    .map_err(|e| format!("bridge: cannot publish on {name}: {e:?}"))
             });
             self.ins.insert(
                 s.name.clone(),
@@ -400,11 +396,7 @@ impl Visitor for Opener<'_> {
         Ok(())
     }
 
-    fn slices<T: Message>(
-        &mut self,
-        s: Named<Topic<T, Slice>>,
-        l: Limits,
-    ) -> Result<(), BridgeError> {
+    fn slices<T: Message>(&mut self, s: Named<Topic<T, Slice>>, l: Limits) -> Result<(), String> {
         if self.cfg.create && !self.out {
             let sn = service_name(&s.name).map_err(err("name", &s.name))?;
             let f = pubsub_with_limits(
@@ -424,12 +416,15 @@ impl Visitor for Opener<'_> {
             s.spec.scope,
         )?;
         if !dests.is_empty() || inbound {
-            return Err(BridgeError::SliceCrosses(s.name.clone()));
+            return Err(format!(
+                "bridge: {} (slices) cannot cross hosts: its publisher and subscriber must share a host",
+                s.name
+            ));
         }
         Ok(())
     }
 
-    fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), BridgeError> {
+    fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), String> {
         let sn = service_name(&s.name).map_err(err("name", &s.name))?;
         if self.cfg.create && !self.out {
             let f: iceoryx2::service::port_factory::event::PortFactory<Svc> =
@@ -470,7 +465,7 @@ impl Visitor for Opener<'_> {
                 self.ins.insert(s.name.clone(), p);
                 return Ok(());
             }
-            let n = ports::notifier(self.node, &s).map_err(BridgeError::from)?;
+            let n = ports::notifier(self.node, &s).map_err(|e| e.to_string())?;
             self.ins.insert(s.name.clone(), InPort::Event(Box::new(n)));
         }
         Ok(())
@@ -487,7 +482,7 @@ pub const FRAME_QUEUE: usize = 4096;
 pub fn frame_publisher(
     session: &zenoh::Session,
     key: String,
-) -> Result<zenoh::pubsub::Publisher<'static>, ZenohError> {
+) -> Result<zenoh::pubsub::Publisher<'static>, String> {
     session
         .declare_publisher(key)
         .congestion_control(CongestionControl::Block)
@@ -495,7 +490,7 @@ pub fn frame_publisher(
         .express(true)
         .allowed_destination(Locality::Remote)
         .wait()
-        .map_err(|e| ZenohError::new("bridge: cannot declare a publisher", e))
+        .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))
 }
 
 /// Declares a subscriber of the frames sent to `key` with [`frame_publisher`], remote publishers
@@ -504,7 +499,7 @@ fn declare_frame_subscriber<H>(
     session: &zenoh::Session,
     key: String,
     handler: H,
-) -> Result<zenoh::pubsub::Subscriber<H::Handler>, ZenohError>
+) -> Result<zenoh::pubsub::Subscriber<H::Handler>, String>
 where
     H: zenoh::handlers::IntoHandler<zenoh::sample::Sample> + Send,
     H::Handler: Send,
@@ -514,7 +509,7 @@ where
         .with(handler)
         .allowed_origin(Locality::Remote)
         .wait()
-        .map_err(|e| ZenohError::new("bridge: cannot subscribe", e))
+        .map_err(|e| format!("bridge: cannot subscribe: {e}"))
 }
 
 /// A subscriber of frames sent to `key` with [`frame_publisher`] whose frames a thread of its
@@ -526,7 +521,7 @@ pub fn frame_subscriber(
     key: String,
 ) -> Result<
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
-    ZenohError,
+    String,
 > {
     declare_frame_subscriber(session, key, zenoh::handlers::FifoChannel::new(FRAME_QUEUE))
 }
@@ -537,7 +532,7 @@ pub fn frame_callback_subscriber(
     session: &zenoh::Session,
     key: String,
     on_frame: impl Fn(zenoh::sample::Sample) + Send + Sync + 'static,
-) -> Result<zenoh::pubsub::Subscriber<()>, ZenohError> {
+) -> Result<zenoh::pubsub::Subscriber<()>, String> {
     declare_frame_subscriber(session, key, zenoh::handlers::Callback::from(on_frame))
 }
 
@@ -617,20 +612,20 @@ pub enum Record<'a> {
 }
 
 /// Parses a frame into its records; `Err` names what is malformed.
-pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, RecordError> {
-    fn take<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a [u8], RecordError> {
+pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
+    fn take<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a [u8], String> {
         if f.len() < n {
-            return Err(RecordError::Truncated {
-                left: f.len(),
-                needed: n,
-            });
+            return Err(format!(
+                "truncated frame: {} bytes left, {n} needed",
+                f.len()
+            ));
         }
         let (a, b) = f.split_at(n);
         *f = b;
         Ok(a)
     }
-    fn text<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a str, RecordError> {
-        std::str::from_utf8(take(f, n)?).map_err(|_| RecordError::NotUtf8)
+    fn text<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a str, String> {
+        std::str::from_utf8(take(f, n)?).map_err(|_| "a name is not UTF-8".to_string())
     }
     let mut v = Vec::new();
     while !f.is_empty() {
@@ -651,7 +646,7 @@ pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, RecordError> {
             }
             KIND_EVENT => v.push(Record::Event(name)),
             KIND_FROM => v.push(Record::From(name)),
-            k => return Err(RecordError::Kind(k)),
+            k => return Err(format!("unknown record kind {k}")),
         }
     }
     Ok(v)
@@ -660,13 +655,7 @@ pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, RecordError> {
 impl Bridge {
     /// Starts the bridge; returns once every service exists on this host (`cfg.create`) and every
     /// port of the bridge is open, so role processes may start.
-    // String: net/src/daemon.rs hands it to a `String` cleanup closure; typed once the daemon moves.
     pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, String> {
-        Bridge::open(session, cfg).map_err(|e| e.to_string())
-    }
-
-    /// [`Bridge::start`], with its error typed.
-    pub fn open(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, BridgeError> {
         let stop = Arc::new(AtomicBool::new(false));
         let stats = Arc::new(Stats::default());
         let links = Arc::new(Mutex::new(BTreeMap::new()));
@@ -686,7 +675,7 @@ impl Bridge {
                 },
             )?
         };
-        let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, BridgeError>>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
         let (out_tx, out_rx) = mpsc::channel::<Replan>();
         let (link_priority, scheduling) = LinkPriority::raise(cfg.rt_priority);
         let mut bridge = Bridge {
@@ -705,9 +694,11 @@ impl Bridge {
             std::thread::Builder::new()
                 .name("bridge-out".into())
                 .spawn(move || run_out(session, cfg, hosts, stop, stats, ready_tx, out_rx))
-                .map_err(BridgeError::Thread)?,
+                .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
         );
-        let outbound = ready_rx.recv().map_err(|_| BridgeError::SendingEnded)??;
+        let outbound = ready_rx
+            .recv()
+            .map_err(|_| "bridge: the sending thread ended".to_string())??;
         bridge.forwarded.0 = outbound;
         Ok(bridge)
     }
@@ -721,18 +712,18 @@ impl Bridge {
     /// Ports of services still forwarded are kept, with their new destinations, so nothing queued
     /// in them is lost; ports of services no longer forwarded are dropped, so a sample still
     /// coming from a lost host is refused. Returns the services forwarded (out, in).
-    pub fn replan(&mut self, placement: &Placement) -> Result<(usize, usize), BridgeError> {
+    pub fn replan(&mut self, placement: &Placement) -> Result<(usize, usize), String> {
         let inbound = lock(&self.inbound)
             .as_mut()
-            .ok_or(BridgeError::Stopped)?
+            .ok_or_else(|| "bridge: stopped".to_string())?
             .replan(placement)?;
         let (ack, answer) = mpsc::channel();
         self.replan
             .send((placement.clone(), ack))
-            .map_err(|_| BridgeError::SendingGone)?;
+            .map_err(|_| "bridge: the sending thread has ended".to_string())?;
         let out = answer
             .recv_timeout(REPLAN_TIMEOUT)
-            .map_err(|_| BridgeError::ReplanTimeout(REPLAN_TIMEOUT))??;
+            .map_err(|_| format!("bridge: no re-plan within {REPLAN_TIMEOUT:?}"))??;
         self.forwarded = (out, inbound);
         Ok(self.forwarded)
     }
@@ -771,7 +762,7 @@ unsafe impl Send for Inbound {}
 impl Inbound {
     /// Creates the services (`cfg.create`) and opens the ports of the services this host
     /// receives.
-    fn open(cfg: BridgeConfig) -> Result<Inbound, BridgeError> {
+    fn open(cfg: BridgeConfig) -> Result<Inbound, String> {
         let hosts = cfg.placement.hosts();
         let offset = |h: &str| cfg.clock_offsets_ns.get(h).copied().unwrap_or(0);
         let me_offset = offset(&cfg.me);
@@ -788,7 +779,7 @@ impl Inbound {
                 )
             })
             .collect();
-        let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(BridgeError::from)?;
+        let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
         let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
         let (keep, ins) = (o.keep, o.ins);
         Ok(Inbound {
@@ -804,7 +795,7 @@ impl Inbound {
     }
 
     /// Re-plans the receiving side (see [`Bridge::replan`]); the services it receives.
-    fn replan(&mut self, placement: &Placement) -> Result<usize, BridgeError> {
+    fn replan(&mut self, placement: &Placement) -> Result<usize, String> {
         self.cfg.placement = placement.clone();
         self.cfg.create = false;
         let hosts = self.cfg.placement.hosts();
@@ -958,88 +949,6 @@ impl Inbound {
     }
 }
 
-/// Why a bridge cannot start, re-plan or forward: the service and what failed.
-#[derive(Debug, thiserror::Error)]
-pub enum BridgeError {
-    /// An iceoryx2 operation on a service failed (iceoryx2's error, in its debug form).
-    #[error("bridge: {what} {name}: {why}")]
-    Ipc {
-        /// The operation (`cannot create`, `cannot loan on`, ...).
-        what: &'static str,
-        /// The service.
-        name: String,
-        /// iceoryx2's error.
-        why: String,
-    },
-    /// The bridge's iceoryx2 node cannot be made.
-    #[error(transparent)]
-    Node(#[from] ipc::IpcError),
-    /// A port of a forwarded service cannot be opened or read.
-    #[error(transparent)]
-    Port(#[from] formation_config::node::error::PortError),
-    /// A service cannot be routed for the placement.
-    #[error(transparent)]
-    Route(#[from] PlanError),
-    /// A slice service whose publisher and subscriber are on different hosts.
-    #[error(
-        "bridge: {0} (slices) cannot cross hosts: its publisher and subscriber must share a host"
-    )]
-    SliceCrosses(String),
-    /// A frame publisher or subscriber cannot be declared.
-    #[error(transparent)]
-    Zenoh(#[from] ZenohError),
-    /// The sending thread's WaitSet cannot be made (iceoryx2's error, in its debug form).
-    #[error("bridge: cannot create a WaitSet: {0}")]
-    WaitSet(String),
-    /// The sending thread cannot be started.
-    #[error("bridge: cannot start a thread: {0}")]
-    Thread(std::io::Error),
-    /// The sending thread ended before its ports were open.
-    #[error("bridge: the sending thread ended")]
-    SendingEnded,
-    /// A re-plan of a stopped bridge.
-    #[error("bridge: stopped")]
-    Stopped,
-    /// A re-plan after the sending thread ended.
-    #[error("bridge: the sending thread has ended")]
-    SendingGone,
-    /// The sending thread did not take the re-plan in time.
-    #[error("bridge: no re-plan within {0:?}")]
-    ReplanTimeout(Duration),
-}
-
-impl BridgeError {
-    /// iceoryx2's `e` on `what` of service `name`.
-    fn ipc(what: &'static str, name: &str, e: impl std::fmt::Debug) -> BridgeError {
-        BridgeError::Ipc {
-            what,
-            name: name.to_string(),
-            why: format!("{e:?}"),
-        }
-    }
-}
-
-crate::error::into_string!(BridgeError);
-
-/// Why a frame does not parse ([`parse_frame`]).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum RecordError {
-    /// Fewer bytes than the record needs.
-    #[error("truncated frame: {left} bytes left, {needed} needed")]
-    Truncated {
-        /// Bytes left.
-        left: usize,
-        /// Bytes needed.
-        needed: usize,
-    },
-    /// A service or type name that is not UTF-8.
-    #[error("a name is not UTF-8")]
-    NotUtf8,
-    /// An unknown record kind.
-    #[error("unknown record kind {0}")]
-    Kind(u8),
-}
-
 /// Locks `m`, also after a panic of another holder (the data stays usable: every update is
 /// complete before the next record is handled).
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -1052,7 +961,7 @@ fn run_out(
     mut hosts: Vec<String>,
     stop: Arc<AtomicBool>,
     stats: Arc<Stats>,
-    ready: mpsc::Sender<Result<usize, BridgeError>>,
+    ready: mpsc::Sender<Result<usize, String>>,
     replan: mpsc::Receiver<Replan>,
 ) {
     if cfg.rt_priority > 0 {
@@ -1063,7 +972,7 @@ fn run_out(
     let node = match ipc::node(&cfg.prefix, "fm-bridge-out") {
         Ok(n) => n,
         Err(e) => {
-            let _ = ready.send(Err(e.into()));
+            let _ = ready.send(Err(e.to_string()));
             return;
         }
     };
@@ -1073,7 +982,7 @@ fn run_out(
     {
         Ok(w) => w,
         Err(e) => {
-            let _ = ready.send(Err(BridgeError::WaitSet(format!("{e:?}"))));
+            let _ = ready.send(Err(format!("bridge: cannot create a WaitSet: {e:?}")));
             return;
         }
     };
@@ -1103,7 +1012,7 @@ fn run_out(
             match waitset.attach_notification(&e.listener) {
                 Ok(g) => guards.push(g),
                 Err(x) => {
-                    let _ = ack.send(Err(BridgeError::ipc("cannot wait on", &e.name, x)));
+                    let _ = ack.send(Err(format!("bridge: cannot wait on {}: {x:?}", e.name)));
                     return;
                 }
             }

@@ -39,8 +39,7 @@
 //! sees (each payload carries its step).
 
 use crate::bridge::{wire_bytes, wire_slice_bytes};
-use crate::error::ZenohError;
-use crate::session::{Mode, OptionError, Options};
+use crate::session::{Mode, Options};
 use formation_config::node::error::PortError;
 use formation_config::node::ipc;
 use formation_config::node::ports::{self, Input, Sub, Wake};
@@ -433,37 +432,6 @@ impl Drop for Export {
     }
 }
 
-/// Why the export cannot start or read: the session, a Zenoh declaration, a service of the run.
-#[derive(Debug, thiserror::Error)]
-pub enum ExportError {
-    /// The Zenoh session does not open (an endpoint refused, credentials missing or unsafe).
-    #[error(transparent)]
-    Session(#[from] OptionError),
-    /// A queryable, publisher or matching listener cannot be declared.
-    #[error("export: {0}")]
-    Zenoh(#[from] ZenohError),
-    /// The run's iceoryx2 node cannot be made.
-    #[error("export: {0}")]
-    Node(#[from] formation_config::node::ipc::IpcError),
-    /// A service of the run cannot be opened or read.
-    #[error("export: {0}")]
-    Port(#[from] PortError),
-    /// The step records cannot be received.
-    #[error("export: {pattern}: {why}")]
-    Steps {
-        /// The service pattern.
-        pattern: &'static str,
-        /// iceoryx2's error.
-        why: String,
-    },
-    /// The export thread cannot be started.
-    #[error("export: cannot start a thread: {0}")]
-    Thread(std::io::Error),
-    /// The export thread ended before its ports were open.
-    #[error("export: the thread ended before it was ready")]
-    Ended,
-}
-
 /// The export thread's ports.
 struct Readers {
     wake: Wake,
@@ -474,14 +442,15 @@ struct Readers {
 }
 
 impl Readers {
-    fn open(node: &ports::RunNode, n: usize) -> Result<Readers, ExportError> {
+    fn open(node: &ports::RunNode, n: usize) -> Result<Readers, String> {
+        let e = |e: PortError| format!("export: {e}");
         Ok(Readers {
-            wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named())?,
-            steps: ports::slice_subscriber(node, &services::STEPS.named())?,
-            reference: ports::subscriber(node, &services::REFERENCE.named())?,
-            events: ports::subscriber(node, &services::RUNTIME_EVENTS.named())?,
+            wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named()).map_err(e)?,
+            steps: ports::slice_subscriber(node, &services::STEPS.named()).map_err(e)?,
+            reference: ports::subscriber(node, &services::REFERENCE.named()).map_err(e)?,
+            events: ports::subscriber(node, &services::RUNTIME_EVENTS.named()).map_err(e)?,
             telemetry: (0..n)
-                .map(|i| ports::subscriber(node, &services::TELEMETRY.at(i)))
+                .map(|i| ports::subscriber(node, &services::TELEMETRY.at(i)).map_err(e))
                 .collect::<Result<_, _>>()?,
         })
     }
@@ -495,13 +464,13 @@ struct Out {
 }
 
 impl Out {
-    fn declare(s: &zenoh::Session, key: String, type_name: &str) -> Result<Out, ZenohError> {
+    fn declare(s: &zenoh::Session, key: String, type_name: &str) -> Result<Out, String> {
         let publisher = s
             .declare_publisher(key)
             .encoding(encoding(type_name))
             .congestion_control(CongestionControl::Drop)
             .wait()
-            .map_err(|e| ZenohError::new("cannot declare a publisher", e))?;
+            .map_err(|e| format!("export: cannot declare a publisher: {e}"))?;
         let matching = Arc::new(AtomicBool::new(false));
         let flag = matching.clone();
         publisher
@@ -509,7 +478,7 @@ impl Out {
             .callback(move |m| flag.store(m.matching(), Ordering::Relaxed))
             .background()
             .wait()
-            .map_err(|e| ZenohError::new("cannot watch for readers", e))?;
+            .map_err(|e| format!("export: cannot watch for readers: {e}"))?;
         Ok(Out {
             publisher,
             matching,
@@ -549,7 +518,7 @@ impl Writers {
     }
 
     /// One publisher per key of [`exported`], in its order.
-    fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, ZenohError> {
+    fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, String> {
         let [state, steps, reference, events, telemetry] = exported();
         let one = |e: &Exported, agent: Option<usize>| {
             Out::declare(s, key(run_id, e.topic, agent), (e.type_name)())
@@ -557,7 +526,7 @@ impl Writers {
         let each = |e: &Exported| {
             (1..=n)
                 .map(|a| one(e, Some(a)))
-                .collect::<Result<Vec<Out>, ZenohError>>()
+                .collect::<Result<Vec<Out>, String>>()
         };
         Ok(Writers {
             states: each(&state)?,
@@ -570,12 +539,14 @@ impl Writers {
 }
 
 /// Drains every reader and puts what it held; the number of samples read.
-fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, ExportError> {
+fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
     let mut n = 0;
-    while let Some(s) = r.steps.receive().map_err(|e| ExportError::Steps {
-        pattern: services::STEPS.pattern,
-        why: format!("{e:?}"),
-    })? {
+    let e = |e: PortError| format!("export: {e}");
+    while let Some(s) = r
+        .steps
+        .receive()
+        .map_err(|e| format!("export: {}: {e:?}", services::STEPS.pattern))?
+    {
         let entries: &[StepEntry] = s.payload();
         if let Some(first) = entries.first() {
             let step = first.truth.state.step;
@@ -592,16 +563,16 @@ fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, ExportError> 
         w.steps.put(wire_slice_bytes(entries), stats);
         n += 1;
     }
-    while let Some(s) = r.reference.receive()? {
+    while let Some(s) = r.reference.receive().map_err(e)? {
         w.reference.put(wire_bytes(s.payload()), stats);
         n += 1;
     }
-    while let Some(s) = r.events.receive()? {
+    while let Some(s) = r.events.receive().map_err(e)? {
         w.events.put(wire_bytes(s.payload()), stats);
         n += 1;
     }
     for (t, p) in r.telemetry.iter().zip(&w.telemetry) {
-        while let Some(s) = t.receive()? {
+        while let Some(s) = t.receive().map_err(e)? {
             p.put(wire_bytes(s.payload()), stats);
             n += 1;
         }
@@ -623,8 +594,8 @@ impl Listening {
     /// Opens the Zenoh session listening on `cfg.listen` (a refused endpoint, a missing or
     /// unsafe credentials file, a port in use: an error naming it), declares the info queryable
     /// and the publishers.
-    pub fn open(cfg: ExportConfig) -> Result<Listening, ExportError> {
-        let session = cfg.options().open()?;
+    pub fn open(cfg: ExportConfig) -> Result<Listening, String> {
+        let session = cfg.options().open().map_err(|e| e.to_string())?;
         let info = serde_json::to_vec(&info_json(&cfg.facts)).expect("JSON of plain values");
         let stats = Arc::new(Stats::default());
         let answered = stats.clone();
@@ -638,7 +609,7 @@ impl Listening {
                 answered.queries.fetch_add(1, Ordering::Relaxed);
             })
             .wait()
-            .map_err(|e| ZenohError::new("cannot declare the info queryable", e))?;
+            .map_err(|e| format!("export: cannot declare the info queryable: {e}"))?;
         let writers = Writers::declare(&session, &cfg.facts.run_id, cfg.facts.n_agents)?;
         Ok(Listening {
             cfg,
@@ -651,13 +622,7 @@ impl Listening {
 
     /// Starts the export thread once the run's services exist; returns when its iceoryx2 ports
     /// are open, so no sample of the run's first step is missed.
-    // String: orchestrator/src/run/export.rs returns it as is from its own `Result<_, String>`.
     pub fn start(self) -> Result<Export, String> {
-        self.start_thread().map_err(|e| e.to_string())
-    }
-
-    /// [`Listening::start`], with its error typed.
-    pub fn start_thread(self) -> Result<Export, ExportError> {
         let Listening {
             cfg,
             session,
@@ -668,7 +633,7 @@ impl Listening {
         let stop = Arc::new(AtomicBool::new(false));
         let finishing = Arc::new(AtomicBool::new(false));
         let run_id = cfg.facts.run_id.clone();
-        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), ExportError>>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
         let thread = {
             let flags = Flags {
                 stop: stop.clone(),
@@ -678,7 +643,7 @@ impl Listening {
             std::thread::Builder::new()
                 .name("export".into())
                 .spawn(move || run(cfg, writers, flags, stats, ready_tx))
-                .map_err(ExportError::Thread)?
+                .map_err(|e| format!("export: cannot start a thread: {e}"))?
         };
         let mut export = Export {
             stop,
@@ -695,7 +660,7 @@ impl Listening {
             Err(_) => {
                 // The thread ended without a word: its panic, if any, is joined here.
                 export.thread.take().map(|t| t.join());
-                Err(ExportError::Ended)
+                Err("export: the thread ended before it was ready".into())
             }
         }
     }
@@ -714,7 +679,7 @@ fn run(
     writers: Writers,
     flags: Flags,
     stats: Arc<Stats>,
-    ready: mpsc::Sender<Result<(), ExportError>>,
+    ready: mpsc::Sender<Result<(), String>>,
 ) -> Writers {
     // Background priority: the role processes and the recorder go first; a starved export only
     // loses samples (its queues overflow), it never holds them back.
@@ -722,7 +687,7 @@ fn run(
     let node = match ipc::node(&cfg.prefix, "fm-export") {
         Ok(n) => n,
         Err(e) => {
-            let _ = ready.send(Err(e.into()));
+            let _ = ready.send(Err(format!("export: {e}")));
             return writers;
         }
     };

@@ -1,7 +1,6 @@
 //! Communication graphs of generated scenarios: ring, path, k-nearest, complete, random-connected;
 //! leader weights b; edge weights normalised by the largest degree.
 
-use super::GenError;
 use formation_config::scenario::Edge;
 use formation_runtime::rng::SplitMix64;
 
@@ -22,14 +21,18 @@ pub enum GraphKind {
 
 impl GraphKind {
     /// Parses `ring | path | k-nearest | complete | random-connected`.
-    pub fn parse(s: &str) -> Result<GraphKind, GenError> {
+    pub fn parse(s: &str) -> Result<GraphKind, String> {
         Ok(match s {
             "ring" => GraphKind::Ring,
             "path" => GraphKind::Path,
             "k-nearest" => GraphKind::KNearest,
             "complete" => GraphKind::Complete,
             "random-connected" => GraphKind::RandomConnected,
-            other => return Err(GenError::Graph(other.to_string())),
+            other => {
+                return Err(format!(
+                    "--graph {other}: expected ring, path, k-nearest, complete or random-connected"
+                ))
+            }
         })
     }
 
@@ -212,23 +215,19 @@ pub fn least_coupled_leader_agents(n: usize, edges: &[(usize, usize)]) -> Vec<us
 }
 
 /// Parses `--leader-agents 1,5` (1-based ids, each within 1..=n, no repeats).
-pub fn parse_leader_agents(s: &str, n: usize) -> Result<Vec<usize>, GenError> {
+pub fn parse_leader_agents(s: &str, n: usize) -> Result<Vec<usize>, String> {
     let mut out = Vec::new();
-    let list = || s.to_string();
     for part in s.split(',') {
-        let id: usize = part.trim().parse().map_err(|_| GenError::LeaderId {
-            list: list(),
-            part: part.to_string(),
+        let id: usize = part.trim().parse().map_err(|_| {
+            format!("--leader-agents '{s}': '{part}' is not an agent id (1-based integers)")
         })?;
         if !(1..=n).contains(&id) {
-            return Err(GenError::LeaderOutside {
-                list: list(),
-                id,
-                n,
-            });
+            return Err(format!(
+                "--leader-agents '{s}': agent {id} is outside 1..={n}"
+            ));
         }
         if out.contains(&id) {
-            return Err(GenError::LeaderTwice { list: list(), id });
+            return Err(format!("--leader-agents '{s}': agent {id} is listed twice"));
         }
         out.push(id);
     }
