@@ -692,7 +692,7 @@ impl Bridge {
         };
         bridge.threads.push(
             std::thread::Builder::new()
-                .name("bridge-out".into())
+                .name(crate::priority::BRIDGE_THREAD.into())
                 .spawn(move || run_out(session, cfg, hosts, stop, stats, ready_tx, out_rx))
                 .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
         );
