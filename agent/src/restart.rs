@@ -54,7 +54,8 @@ pub struct Replayed {
 /// Rebuilds `agent` (already restored from the checkpoint of `plan.checkpoint`, or fresh) up to
 /// step `plan.rejoin_at`: observes the neighbour shares the checkpoint may lack
 /// ([`shares_before`]), replays the control of [checkpoint, down_from) and observes
-/// [max(down_from, rejoin_at - capacity), rejoin_at), then re-synchronises its filters to the
+/// [max(down_from, rejoin_at - capacity), rejoin_at) (cold: [rejoin_at - capacity, rejoin_at),
+/// nothing before it having been observed), then re-synchronises its filters to the
 /// vehicle's state of rejoin_at - 1 (`Agent::resync`, under `runtime.rejoin_resync`) and re-seeds
 /// its RBFNN to the external acceleration the failsafe observed ([`observed_disturbance`],
 /// `Agent::reseed`, under `runtime.rejoin_reseed`). `reference(k)` is the reference of step k,
@@ -97,7 +98,19 @@ pub fn rebuild(
             }
         }
     }
-    let refill = plan.down_from.max(plan.rejoin_at.saturating_sub(capacity));
+    // The histories hold the last `capacity` steps: every step the control of rejoin_at may read
+    // (its delayed step, back by the staleness bound for a neighbour that was down) is in them.
+    // Warm, the replay observed everything before down_from; cold, nothing was, so the refill
+    // starts `capacity` steps back: a neighbour down over the whole window (lost with the same
+    // host) is read at its last share before it went down, which precedes down_from.
+    let window = plan
+        .rejoin_at
+        .saturating_sub(capacity)
+        .max(plan.recorded_from);
+    let refill = match plan.checkpoint {
+        Some(_) => plan.down_from.max(window),
+        None => window,
+    };
     let mut last = None;
     for k in refill..plan.rejoin_at {
         last = Some(observe(agent, k));
@@ -248,6 +261,51 @@ mod tests {
             "the replay computes every command the live controller computed"
         );
         assert!(plan.first_needed(live.history_capacity() as u64) < s - 1);
+    }
+
+    /// Agents 4 and 5 (neighbours) lost together at step 10 and taken over cold at 126: the
+    /// control of 126 reads agent 5 at its last share before it went down (step 9, within the
+    /// staleness bound of the delayed step), which the rebuilt controller holds; without it
+    /// the successor would wait for a share that no process will ever send.
+    #[test]
+    fn a_cold_successor_holds_the_last_share_of_a_neighbour_lost_with_it() {
+        let sc = Scenario::paper();
+        let (me, other) = (3, 4);
+        let (down, rejoin) = (10u64, 126u64);
+        let mut successor = Agent::new(&sc, me, Variant::Proposed);
+        assert!(successor.neighbour_ids().any(|j| j == other));
+        for i in [me, other] {
+            let t = successor.timeline_mut();
+            t.set_down(
+                i,
+                down,
+                formation_config::scenario::events::EventKind::Crash,
+            );
+            t.set_up_again(i, rejoin);
+        }
+        let kd = successor.delayed_step(rejoin);
+        assert!(
+            kd >= down && kd - (down - 1) <= sc.runtime.stale_steps(sc.simulation.dt_s),
+            "the control of {rejoin} reads agent 5 at step {} (delayed step {kd})",
+            down - 1
+        );
+        let plan = Rejoin {
+            checkpoint: None,
+            down_from: down,
+            rejoin_at: rejoin,
+            recorded_from: 0,
+        };
+        let capacity = successor.history_capacity() as u64;
+        assert!(plan.first_needed(capacity) < down - 1, "the file holds it");
+        rebuild(&mut successor, &plan, reference, moving, |_| {
+            (0.0, [0.0; 3])
+        });
+        successor.observe_reference(&reference(rejoin));
+        successor.observe_own(&moving(rejoin, me));
+        assert!(
+            successor.ready(rejoin),
+            "the successor computes its first step from what it rebuilt"
+        );
     }
 
     /// A quadrotor tilted by 0.1 rad in roll with hover thrust along its axis, accelerating at
