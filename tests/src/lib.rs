@@ -24,12 +24,45 @@ pub fn bin(name: &str) -> PathBuf {
     path
 }
 
-/// A fresh empty directory under the system temporary directory, unique to this process and `tag`.
-pub fn temp_dir(tag: &str) -> PathBuf {
+/// A fresh empty directory under the system temporary directory, unique to this process and `tag`,
+/// removed with everything in it when the test that made it passes (dropped without a panic); a
+/// failing test leaves it for inspection.
+pub fn temp_dir(tag: &str) -> TempDir {
     let dir = std::env::temp_dir().join(format!("formation-tests-{}-{tag}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("can create a temporary directory");
-    dir
+    TempDir(dir)
+}
+
+/// A test's directory ([`temp_dir`]): a path, removed on drop unless the thread is panicking.
+#[derive(Debug)]
+pub struct TempDir(PathBuf);
+
+impl std::ops::Deref for TempDir {
+    type Target = PathBuf;
+    fn deref(&self) -> &PathBuf {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for TempDir {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for TempDir {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
 }
 
 /// Runs `formation <args>` to its end, never building anything (no `CARGO` in its environment).

@@ -298,7 +298,7 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
 
 /// Starts a run of 600 s (killed when the test ends) with its own runs directory, and waits until
 /// `ps` lists its 5 agents; returns the test's directory, the runs directory and the run.
-fn start_long_run(tag: &str) -> (PathBuf, PathBuf, RunningRun) {
+fn start_long_run(tag: &str) -> (formation_tests::TempDir, PathBuf, RunningRun) {
     let dir = temp_dir(tag);
     let runs = dir.join("runs");
     let run = RunningRun::start_with_env(

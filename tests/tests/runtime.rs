@@ -303,7 +303,7 @@ fn run_beside_busy_loops(
     BusyLoops,
     RunningRun,
     String,
-    std::path::PathBuf,
+    formation_tests::TempDir,
     Vec<usize>,
 )> {
     let allowed = cpus_allowed(std::process::id());
