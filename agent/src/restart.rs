@@ -52,7 +52,7 @@ pub struct Replayed {
 }
 
 /// Rebuilds `agent` (already restored from the checkpoint of `plan.checkpoint`, or fresh) up to
-/// step `plan.rejoin_at`: observes the neighbour shares the checkpoint may lack
+/// step `plan.rejoin_at`: observes the neighbour shares and the references the checkpoint may lack
 /// ([`shares_before`]), replays the control of [checkpoint, down_from) and observes
 /// [max(down_from, rejoin_at - capacity), rejoin_at) (cold: [rejoin_at - capacity, rejoin_at),
 /// nothing before it having been observed), then re-synchronises its filters to the
@@ -72,6 +72,17 @@ pub fn rebuild(
     let me = agent.id();
     let neighbours: Vec<usize> = agent.neighbour_ids().collect();
     let capacity = agent.history_capacity() as u64;
+    if let Some(s) = plan.checkpoint {
+        for k in shares_before(s, capacity).max(plan.recorded_from)..s {
+            // The leader's frames of these steps may also have reached the process after its
+            // checkpoint (a late stream on a busy machine): a pure function of the step, observed
+            // again, unchanged where held.
+            agent.observe_reference(&reference(k));
+            for &j in &neighbours {
+                agent.observe_neighbour(&crate::agent::share_of(&state(k, j)));
+            }
+        }
+    }
     let mut observe = |agent: &mut Agent, k: u64| {
         agent.observe_reference(&reference(k));
         let own = state(k, me);
@@ -84,11 +95,6 @@ pub fn rebuild(
     };
     let mut out = Replayed::default();
     if let Some(s) = plan.checkpoint {
-        for k in shares_before(s, capacity).max(plan.recorded_from)..s {
-            for &j in &neighbours {
-                agent.observe_neighbour(&crate::agent::share_of(&state(k, j)));
-            }
-        }
         for k in s..plan.down_from {
             let own = observe(agent, k);
             let cmd = agent.step(&own);
@@ -261,6 +267,60 @@ mod tests {
             "the replay computes every command the live controller computed"
         );
         assert!(plan.first_needed(live.history_capacity() as u64) < s - 1);
+    }
+
+    /// The leader's frames of the steps just before the checkpoint reach the live process after
+    /// it wrote the checkpoint of s (its control of s reads the delayed step only): the replay
+    /// from that checkpoint still computes every command the live controller computed.
+    #[test]
+    fn references_that_came_in_after_the_checkpoint_was_written_are_in_the_rebuilt_controller() {
+        let sc = Scenario::paper();
+        let me = 2;
+        let mut live = Agent::new(&sc, me, Variant::Proposed);
+        let nb: Vec<usize> = live.neighbour_ids().collect();
+        let (s, down) = (300u64, 420u64);
+        let late = s - 5..s;
+        assert!(
+            live.delayed_step(s) < late.start,
+            "the control of s needs none of them"
+        );
+        let mut checkpoint = None;
+        let mut commands = Vec::new();
+        for k in 0..down {
+            if k == s {
+                checkpoint = Some(live.checkpoint().unwrap());
+            }
+            if k == s + 1 {
+                late.clone()
+                    .for_each(|l| live.observe_reference(&reference(l)));
+            }
+            if !late.contains(&k) {
+                live.observe_reference(&reference(k));
+            }
+            let own = moving(k, me);
+            live.observe_own(&own);
+            for &j in &nb {
+                live.observe_neighbour(&share_of(&moving(k, j)));
+            }
+            let c = live.step(&own);
+            commands.push((c.thrust_n, c.torque_nm));
+        }
+        let mut successor = Agent::new(&sc, me, Variant::Proposed);
+        successor.restore(&checkpoint.unwrap()).unwrap();
+        let plan = Rejoin {
+            checkpoint: Some(s),
+            down_from: down,
+            rejoin_at: down + 1,
+            recorded_from: 0,
+        };
+        let replayed = rebuild(&mut successor, &plan, reference, moving, |k| {
+            commands[k.min(down - 1) as usize]
+        });
+        assert_eq!(
+            (replayed.steps, replayed.mismatches),
+            (down - s, 0),
+            "the replay computes every command the live controller computed"
+        );
     }
 
     /// Agents 4 and 5 (neighbours) lost together at step 10 and taken over cold at 126: the
