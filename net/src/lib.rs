@@ -22,6 +22,7 @@
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
+//! * [`error`]: a Zenoh operation that failed, named.
 //! * [`probe`]: a plain client that puts and asks arbitrary bytes on arbitrary keys (the attacks of
 //!   the end-to-end tests).
 //! * [`survey`]: `formation hosts`, every daemon reachable through any of the given endpoints.
@@ -41,6 +42,7 @@ pub mod clock;
 pub mod cluster;
 pub mod colocate;
 pub mod daemon;
+pub mod error;
 pub mod export;
 pub mod identity;
 pub mod logs;

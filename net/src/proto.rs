@@ -291,17 +291,42 @@ pub fn frame<T: Serialize>(msg: &T, bytes: &[u8]) -> Vec<u8> {
     v
 }
 
+/// Why bytes are not a [`frame`].
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    /// Shorter than the length prefix.
+    #[error("malformed message: {0} bytes")]
+    Short(usize),
+    /// A length prefix beyond the bytes.
+    #[error("malformed message: length {len} beyond {have} bytes")]
+    Length {
+        /// The JSON length announced.
+        len: usize,
+        /// The bytes present.
+        have: usize,
+    },
+    /// The JSON is not the expected message.
+    #[error("malformed message: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
 /// Splits a [`frame`]; a clear error for anything else.
-pub fn unframe<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), String> {
+pub fn decode_frame<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), FrameError> {
     if data.len() < 4 {
-        return Err(format!("malformed message: {} bytes", data.len()));
+        return Err(FrameError::Short(data.len()));
     }
     let n = u32::from_le_bytes(data[..4].try_into().unwrap()) as usize;
-    let json = data
-        .get(4..4 + n)
-        .ok_or_else(|| format!("malformed message: length {n} beyond {} bytes", data.len()))?;
-    let msg = serde_json::from_slice(json).map_err(|e| format!("malformed message: {e}"))?;
-    Ok((msg, &data[4 + n..]))
+    let json = data.get(4..4 + n).ok_or(FrameError::Length {
+        len: n,
+        have: data.len(),
+    })?;
+    Ok((serde_json::from_slice(json)?, &data[4 + n..]))
+}
+
+/// [`decode_frame`] with the error as text.
+// String: net/src/daemon.rs pairs it with a reason as `(&str, String)`; typed once the daemon moves.
+pub fn unframe<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), String> {
+    decode_frame(data).map_err(|e| e.to_string())
 }
 
 /// Wall clock, µs since the Unix epoch.
