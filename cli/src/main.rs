@@ -15,7 +15,8 @@ use std::process::ExitCode;
 
 use formation_analysis::{check, plot, scenario_gen, sweep};
 use formation_bench as bench;
-use formation_runtime::{cli, live, role, run, schema, sim};
+use formation_live::{inject, inspect, ps, schema};
+use formation_runtime::{cli, role, run, sim};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -66,17 +67,17 @@ enum Command {
     Bench(bench::BenchArgs),
     /// List the running runs and their processes (role, agent, pid, alive, CPU share, progress).
     #[command(after_help = "Examples:\n  formation ps\n  formation ps --json")]
-    Ps(live::ps::PsArgs),
+    Ps(ps::PsArgs),
     /// Show one agent's live telemetry (agent ids are 1-based).
     #[command(
         after_help = "Examples:\n  formation inspect --agent 2\n  formation inspect --agent 2 --follow\n  formation inspect --agent 2 --run 3d2cb2b7 --json"
     )]
-    Inspect(live::inspect::InspectArgs),
+    Inspect(inspect::InspectArgs),
     /// Inject an actuator fault or a delay profile into a running run (agent ids are 1-based).
     #[command(
         after_help = "Examples:\n  formation inject fault --agent 2 --gamma 0.5,0.5,0.5 --delta 0,0,0\n  formation inject delay --agent 3 --tau '0.02+0.01*sin(0.5*t)' --at 30\n  formation inject fault --agent 1 --gamma 0.6,0.6,0.6 --delta 0.1,0,0 --json"
     )]
-    Inject(live::inject::InjectArgs),
+    Inject(inject::InjectArgs),
     /// Print every service of a run (name pattern, message type and iceoryx2 type name, size,
     /// alignment, senders, receivers, limits) from the service table.
     #[command(
@@ -97,20 +98,20 @@ enum Command {
     #[command(
         after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tls/0.0.0.0:7447 --tls /etc/formation/tls"
     )]
-    Host(formation_runtime::hosts::HostArgs),
+    Host(formation_host::HostArgs),
     /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation hosts\n  formation hosts --connect tls/10.0.0.2:7447 --tls ~/.formation/tls --json"
     )]
-    Hosts(formation_runtime::hosts::HostsArgs),
+    Hosts(formation_host::HostsArgs),
     /// Make a certificate authority and per-host certificates for mutual TLS between hosts
     /// (tls/HOST:PORT and quic/HOST:PORT endpoints, --tls DIR; docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation certs init --dir ~/formation-ca\n  formation certs issue --dir ~/formation-ca --name b --addr 10.0.0.2 --out b-tls\n  formation certs issue --dir ~/formation-ca --name a --out a-tls"
     )]
-    Certs(formation_runtime::hosts::CertsArgs),
+    Certs(formation_host::CertsArgs),
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.
     #[command(hide = true)]
@@ -145,9 +146,9 @@ fn main() -> ExitCode {
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
-        Some(Command::Ps(a)) => live::ps::main(a),
-        Some(Command::Inspect(a)) => live::inspect::main(a),
-        Some(Command::Inject(a)) => live::inject::main(a),
+        Some(Command::Ps(a)) => ps::main(a),
+        Some(Command::Inspect(a)) => inspect::main(a),
+        Some(Command::Inject(a)) => inject::main(a),
         Some(Command::Schema(a)) => schema::main(a),
         Some(Command::Completions(a)) => {
             completions(a.shell, &mut std::io::stdout());
@@ -156,11 +157,11 @@ fn main() -> ExitCode {
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
         Some(Command::Node(a)) => role::main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Host(a)) => formation_runtime::hosts::host_main(a),
+        Some(Command::Host(a)) => formation_host::host_main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Hosts(a)) => formation_runtime::hosts::hosts_main(a),
+        Some(Command::Hosts(a)) => formation_host::hosts_main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Certs(a)) => formation_runtime::hosts::certs_main(a),
+        Some(Command::Certs(a)) => formation_host::certs_main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
         None => run::main(cli::defaults::<run::RunArgs>("run")),
     }
@@ -197,7 +198,7 @@ mod tests {
         let Some(Command::Inject(a)) = cli.command else {
             panic!("inject")
         };
-        let live::inject::InjectWhat::Fault(f) = a.what else {
+        let inject::InjectWhat::Fault(f) = a.what else {
             panic!("fault")
         };
         assert_eq!(f.delta, vec![-0.1, 0.0, -0.2]);

@@ -19,7 +19,8 @@
 //!   at the run's priority, like the plant and the agents they carry messages between.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`bench`]: bare Zenoh links and the frames of a split lockstep step, for `formation bench`.
-//! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
+//! * [`daemon_link`]: the Zenoh side of a host daemon (`formation host`, crate `formation-host`,
+//!   which spawns a run's role processes on its machine): its token, requests, reports, bridges.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
 //! * [`error`]: a Zenoh operation that failed, named.
@@ -41,7 +42,7 @@ pub mod bridge;
 pub mod clock;
 pub mod cluster;
 pub mod colocate;
-pub mod daemon;
+pub mod daemon_link;
 pub mod error;
 pub mod export;
 pub mod identity;

@@ -172,7 +172,7 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
     Ok(Scenes { at: out })
 }
 
-fn rgba(c: &formation_viz::foxglove::messages::Color) -> RGBAColor {
+fn rgba(c: &formation_viz::topview::Rgba) -> RGBAColor {
     let u = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     RGBAColor(u(c.r), u(c.g), u(c.b), c.a.clamp(0.0, 1.0))
 }

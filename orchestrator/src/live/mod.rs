@@ -1,15 +1,12 @@
-//! Client commands that look at or act on a running `formation run` from another terminal:
-//! `ps` (runs and their processes), `inspect` (one agent's live telemetry) and `inject` (faults
-//! and delays at runtime).
+//! What the commands that look at or act on a running `formation run` from another terminal
+//! (`ps`, `inspect`, `inject`: crate `formation-live`) share with the run itself, which registers
+//! there and checks its injections alike.
 //!
 //! * [`registry`]: how runs are found (a small JSON file per run).
 //! * [`procstat`]: liveness and CPU time from `/proc`.
 //! * [`validate`]: injection checks and the `--tau` parser.
 
-pub mod inject;
-pub mod inspect;
 pub mod procstat;
-pub mod ps;
 pub mod registry;
 pub mod validate;
 

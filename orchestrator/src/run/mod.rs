@@ -11,7 +11,7 @@ mod driver;
 pub mod export;
 mod governor;
 pub mod host_probe;
-pub(crate) mod injections;
+pub mod injections;
 pub(crate) mod placement;
 mod proc_load;
 mod progress;
@@ -123,8 +123,10 @@ impl Mode {
     }
 }
 
-/// What every host of a run spread over hosts is told of its pacing.
+/// What every host of a run spread over hosts is told of its pacing (read by `remote` alone:
+/// without the feature `multihost` nothing reads it).
 #[derive(Debug, Clone, Copy)]
+#[cfg_attr(not(feature = "multihost"), allow(dead_code))]
 pub(crate) struct HostPacing {
     /// Wall-clock run (`--realtime`) rather than lockstep.
     pub realtime: bool,

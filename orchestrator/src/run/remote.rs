@@ -9,7 +9,7 @@
 
 use super::spawn::{RemoteProcess, RoleProcess};
 use super::HostPacing;
-use crate::hosts::LinkArgs;
+use crate::link::LinkArgs;
 use formation_config::node::args::ChildArgs;
 use formation_config::node::restart;
 use formation_config::protocol::services::Sizing;
@@ -160,7 +160,7 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
         a.connect.clone()
     };
     let opts = a.link.options(Mode::Orchestrator, vec![], connect);
-    crate::hosts::ignore_sigpipe();
+    crate::link::ignore_sigpipe();
     let cluster = Cluster::open(&opts).map_err(|e| e.to_string())?;
     let me = formation_net::identity::local();
     let infos = cluster

@@ -49,7 +49,7 @@ impl Remote {
 
 impl RemoteRun {
     /// Unreachable.
-    pub fn start_bridge(&self, _: &str, _: Sizing) -> Result<(), String> {
+    pub fn attach(&self, _: &str, _: Sizing, _: &Path) -> Result<(), String> {
         match *self {}
     }
     /// Unreachable.

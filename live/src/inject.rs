@@ -2,15 +2,15 @@
 //! nothing sent on a bad value), then sent to the run's orchestrator, which picks the apply step,
 //! forwards it and confirms by writing it to `DIR/events.jsonl`.
 
-use super::registry::{self, RunRecord};
-use super::validate;
-use crate::cli::EXIT_INVALID;
 use formation_config::node::ports::{notifier, poke, publisher, send};
 use formation_config::protocol::messages::{
     InjectRequest, INJECT_ASAP, INJECT_CRASH, INJECT_DELAY, INJECT_FAULT, INJECT_HANG,
     INJECT_LINK_DOWN, INJECT_LINK_UP,
 };
 use formation_config::protocol::services;
+use formation_runtime::cli::EXIT_INVALID;
+use formation_runtime::live::registry::{self, RunRecord};
+use formation_runtime::live::validate;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -46,7 +46,7 @@ pub enum InjectWhat {
 #[derive(clap::Args, Debug)]
 pub struct DownArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// How long the agent is down, s of simulation time.
     #[arg(long, allow_negative_numbers = true)]
@@ -89,7 +89,7 @@ pub struct LinkArgs {
 #[derive(clap::Args, Debug)]
 pub struct FaultArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// Gamma per axis, e.g. 0.5,0.5,0.5.
     #[arg(
@@ -119,7 +119,7 @@ pub struct FaultArgs {
 #[derive(clap::Args, Debug)]
 pub struct DelayArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// tau(t) in s: a constant (0.03) or base+amp*sin(w*t) (0.02+0.01*sin(0.5*t)).
     #[arg(long, allow_hyphen_values = true)]
@@ -156,8 +156,8 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         validate::at_sign(t)?;
     }
     let run = registry::find(run_id)?;
-    super::check_access(&run, "inject into")?;
-    let s = super::run_scenario(&run)?;
+    formation_runtime::live::check_access(&run, "inject into")?;
+    let s = formation_runtime::live::run_scenario(&run)?;
     validate::agent(agent, run.n_agents)?;
     let at_step = match at {
         Some(t) => {
@@ -213,7 +213,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         r.kind,
         INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP
     ) {
-        let e = super::super::run::injections::event_of(&r, s.simulation.dt_s, 0);
+        let e = formation_runtime::run::injections::event_of(&r, s.simulation.dt_s, 0);
         formation_config::scenario::validate::validate_event(&s, "inject", &e)
             .map_err(|e| e.to_string())?;
     }
@@ -237,7 +237,7 @@ pub fn main(args: InjectArgs) -> ExitCode {
         }
     };
     let result = send_and_confirm(&run, &req);
-    super::tidy_after(&run);
+    formation_runtime::live::tidy_after(&run);
     match result {
         Ok(line) => {
             let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
@@ -273,7 +273,7 @@ pub fn main(args: InjectArgs) -> ExitCode {
 /// Sends the request and waits for its line in `events.jsonl` (the publisher stays alive until
 /// then, so the sample cannot be lost).
 fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, String> {
-    let node = super::client_node(run, "inject")?;
+    let node = formation_runtime::live::client_node(run, "inject")?;
     let p = publisher::<InjectRequest>(&node, &services::INJECT_REQUEST.named())?;
     let wake = notifier(&node, &services::WAKE_ORCHESTRATOR.named())?;
     send(&p, *req)?;

@@ -18,7 +18,7 @@ use std::process::ExitCode;
 #[derive(clap::Args, Debug)]
 pub struct SchemaArgs {
     /// Number of agents the limits are sized for (1..=128).
-    #[arg(long, default_value_t = 5, value_parser = crate::cli::whole_number::<usize>)]
+    #[arg(long, default_value_t = 5, value_parser = formation_runtime::cli::whole_number::<usize>)]
     pub n: usize,
     /// Print `{"n", "services": [{"pattern", "scope", "kind", "message", ...}]}`.
     #[arg(long, conflicts_with = "markdown")]
@@ -433,7 +433,7 @@ pub fn main(args: SchemaArgs) -> ExitCode {
             args.n,
             formation_config::MAX_AGENTS
         );
-        return ExitCode::from(crate::cli::EXIT_INVALID);
+        return ExitCode::from(formation_runtime::cli::EXIT_INVALID);
     }
     let s = schema(args.n);
     if args.json {

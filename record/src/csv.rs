@@ -455,7 +455,7 @@ mod tests {
         for c in COLUMNS {
             assert!(seen.insert(*c), "duplicate column {c}");
         }
-        let doc = include_str!("../../../docs/formats.md");
+        let doc = include_str!("../../docs/formats.md");
         for c in COLUMNS {
             assert!(
                 doc.contains(&format!("`{c}"))

@@ -3,24 +3,16 @@
 //! It announces itself with a liveliness token (`formation/host/<name>`) and answers
 //! `formation/host/<name>/info` ([`HostInfo`]) and `formation/host/<name>/req` ([`Request`]).
 //! For a run it creates a private run folder (mode 0700) with the validated scenario, every
-//! iceoryx2 service of the run and the bridge ([`crate::bridge`]), then starts the agent processes
+//! iceoryx2 service of the run and the bridge ([`formation_net::bridge`]), then starts the agent processes
 //! the orchestrator asks for — only `formation node agent ...` from its own executable — and
 //! reports each one's exit. A daemon that shares the orchestrator's `/dev/shm` as its user
-//! (co-located, [`crate::colocate`]) creates no service and runs no bridge: it checks that the
+//! (co-located, [`formation_net::colocate`]) creates no service and runs no bridge: it checks that the
 //! run's services are in its `/dev/shm` and its user's, and its agents open them and join the
 //! orchestrator's membership of the run. A run ends when its orchestrator says so, or when the orchestrator's
 //! liveliness token disappears (it died, or its link was lost): the processes are stopped, the
 //! run's iceoryx2 files and its folder removed. The daemon is a single-threaded state machine:
 //! one loop serves requests, reaps children and watches the orchestrators.
 
-use crate::auth::{Purpose, Replay, RunKey};
-use crate::bridge::{Bridge, BridgeConfig};
-use crate::colocate::{self, Facts};
-use crate::identity::{self, Identity};
-use crate::logs::LogLimit;
-use crate::plan::Placement;
-use crate::proto::{self, ExitReport, HostInfo, Reply, Request, RunRequest};
-use crate::session;
 use formation_config::node::args::ChildArgs;
 use formation_config::node::ipc;
 use formation_config::node::members::Membership;
@@ -29,14 +21,21 @@ use formation_config::node::restart;
 use formation_config::protocol::messages::Role;
 use formation_config::protocol::services::{self, Sizing};
 use formation_config::{Scenario, Variant};
+use formation_net::auth::{Purpose, Replay, RunKey};
+use formation_net::bridge::{Bridge, BridgeConfig};
+use formation_net::colocate::{self, Facts};
+use formation_net::daemon_link::{DaemonLink, Orchestrator, Outbox};
+use formation_net::identity::{self, Identity};
+use formation_net::logs::LogLimit;
+use formation_net::plan::Placement;
+use formation_net::proto::{self, ExitReport, HostInfo, Reply, Request, RunRequest};
+use formation_net::session;
 use std::collections::HashMap;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use zenoh::sample::SampleKind;
-use zenoh::Wait;
 
 /// How long a prepared run waits for its orchestrator's liveliness token before it is dropped.
 pub const ORCHESTRATOR_WAIT: Duration = Duration::from_secs(10);
@@ -76,7 +75,7 @@ struct HostRun {
     scenario_hash: u64,
     /// The checkpoint file of each agent last forwarded (see [`Daemon::forward_checkpoints`]).
     forwarded: HashMap<usize, FileStamp>,
-    /// The run's keys ([`crate::auth`]).
+    /// The run's keys ([`formation_net::auth`]).
     key: RunKey,
     /// Sequence numbers of the requests about the run accepted so far.
     replay: Replay,
@@ -155,45 +154,18 @@ fn private_dir(dir: &Path) -> Result<(), String> {
 
 /// Runs the daemon until `stop` is set (SIGINT/SIGTERM). `Err`: it could not start.
 pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
-    if !proto::valid_name(&o.name) || o.name == crate::cluster::LAUNCHER {
+    if !proto::valid_name(&o.name) || o.name == formation_net::cluster::LAUNCHER {
         return Err(format!(
             "--name '{}': use 1..=32 characters of [A-Za-z0-9_-] (and not '{}')",
             o.name,
-            crate::cluster::LAUNCHER
+            formation_net::cluster::LAUNCHER
         ));
     }
     private_dir(&o.root)?;
     sweep_stale(&o.root);
-    let s = o.session.open().map_err(|e| e.to_string())?;
-    let _token = s
-        .liveliness()
-        .declare_token(proto::host_token(&o.name))
-        .wait()
-        .map_err(|e| format!("cannot declare the liveliness token: {e}"))?;
-    let queries = s
-        .declare_queryable(format!("formation/host/{}/*", o.name))
-        .with(zenoh::handlers::FifoChannel::new(64))
-        .wait()
-        .map_err(|e| format!("cannot declare the queryable: {e}"))?;
-    // The clock probe is answered at once, in Zenoh's thread: an answer queued behind the request
-    // loop would bias the offset estimate (crate::clock).
-    let _clock = s
-        .declare_queryable(proto::clock_key(&o.name))
-        .callback(|q| {
-            let now = formation_config::node::clock::now_ns();
-            let _ = q
-                .reply(q.key_expr().clone(), now.to_le_bytes().to_vec())
-                .wait();
-        })
-        .wait()
-        .map_err(|e| format!("cannot declare the clock queryable: {e}"))?;
-    let orchestrators = s
-        .liveliness()
-        .declare_subscriber("formation/run/*/orchestrator")
-        .history(true)
-        .with(zenoh::handlers::FifoChannel::new(256))
-        .wait()
-        .map_err(|e| format!("cannot watch the orchestrators: {e}"))?;
+    // The token, the requests, the clock probe (answered at once, in Zenoh's thread) and the
+    // orchestrators' tokens (formation_net::daemon_link).
+    let link = DaemonLink::open(&o.session, &o.name).map_err(|e| e.to_string())?;
     let me = identity::local();
     eprintln!(
         "formation host: {} listening on {} (pid {}, build {}, protocol {}, {} CPUs); runs in {}",
@@ -207,7 +179,7 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
     );
     let mut d = Daemon {
         o,
-        s: s.clone(),
+        out: link.outbox(),
         me,
         runs: HashMap::new(),
         log: LogLimit::default(),
@@ -216,30 +188,21 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
     // Runs whose orchestrator's token is alive (its Put may come before its run is prepared).
     let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
     while !stop.load(Ordering::SeqCst) {
-        if let Ok(Some(q)) = queries.recv_timeout(Duration::from_millis(20)) {
-            let bytes = q
-                .payload()
-                .map(|p| p.to_bytes().into_owned())
-                .unwrap_or_default();
-            let answer = if q.key_expr().as_str().ends_with("/info") {
+        if let Some(q) = link.next_query(Duration::from_millis(20)) {
+            let bytes = q.payload();
+            let answer = if q.asks_info() {
                 serde_json::to_vec(&d.info()).unwrap()
             } else {
                 d.request(&bytes)
             };
-            let _ = q.reply(q.key_expr().clone(), answer).wait();
+            q.reply(answer);
         }
-        while let Ok(Some(sample)) = orchestrators.try_recv() {
-            let key = sample.key_expr().as_str().to_string();
-            let run = key
-                .strip_prefix("formation/run/")
-                .and_then(|r| r.strip_suffix("/orchestrator"))
-                .unwrap_or("")
-                .to_string();
-            match sample.kind() {
-                SampleKind::Put => {
+        while let Some(change) = link.orchestrator() {
+            match change {
+                Orchestrator::Alive(run) => {
                     alive.insert(run);
                 }
-                SampleKind::Delete => {
+                Orchestrator::Gone(run) => {
                     alive.remove(&run);
                     if d.runs.contains_key(&run) {
                         eprintln!("formation host: run {run}: its orchestrator is gone; ending it");
@@ -298,12 +261,13 @@ fn cpus() -> usize {
 
 struct Daemon {
     o: DaemonOptions,
-    s: zenoh::Session,
+    /// Reports and bridges go out here (formation_net::daemon_link).
+    out: Outbox,
     me: Identity,
     runs: HashMap<String, HostRun>,
     /// Refusals are logged at most once a second per reason.
     log: LogLimit,
-    /// Its shared memory place, user and iceoryx2 root ([`crate::colocate`]).
+    /// Its shared memory place, user and iceoryx2 root ([`formation_net::colocate`]).
     facts: Facts,
 }
 
@@ -333,7 +297,7 @@ impl Daemon {
 
     /// Serves one request; a refusal changes nothing. A request about a run (all but `Prepare`)
     /// must carry proof of the run's secret for this host with a sequence number not seen before
-    /// ([`crate::auth`]): without it nothing is done. Replies about a run carry proof too.
+    /// ([`formation_net::auth`]): without it nothing is done. Replies about a run carry proof too.
     fn request(&mut self, bytes: &[u8]) -> Vec<u8> {
         match self.authenticated(bytes) {
             Ok((req, rest, seq)) => {
@@ -557,20 +521,17 @@ impl Daemon {
                 scenario.graph.edges.iter().map(|e| (e.a, e.b)),
             ),
         };
-        let bridge = Bridge::start(
-            self.s.clone(),
-            BridgeConfig {
-                run_id: r.run_id.clone(),
-                prefix: r.prefix.clone(),
-                me: self.o.name.clone(),
-                placement,
-                sizing: Sizing::for_scenario(&scenario, r.realtime, r.observers),
-                create: true,
-                key: r.secret.keys(&r.run_id),
-                clock_offsets_ns: r.clock_offsets_ns.clone(),
-                rt_priority: if r.realtime { r.rt_priority } else { 0 },
-            },
-        );
+        let bridge = self.out.bridge(BridgeConfig {
+            run_id: r.run_id.clone(),
+            prefix: r.prefix.clone(),
+            me: self.o.name.clone(),
+            placement,
+            sizing: Sizing::for_scenario(&scenario, r.realtime, r.observers),
+            create: true,
+            key: r.secret.keys(&r.run_id),
+            clock_offsets_ns: r.clock_offsets_ns.clone(),
+            rt_priority: if r.realtime { r.rt_priority } else { 0 },
+        });
         let bridge = match bridge {
             Ok(b) => b,
             Err(e) => {
@@ -882,11 +843,7 @@ impl Daemon {
             let Some(msg) = self.sealed_report(&id, &key, proto::frame(&note, &bytes)) else {
                 continue;
             };
-            let _ = self
-                .s
-                .put(key, msg)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .wait();
+            self.out.put(key, msg);
         }
     }
 
@@ -954,15 +911,11 @@ impl Daemon {
             let Some(msg) = self.sealed_report(&id, &key, serde_json::to_vec(&rep).unwrap()) else {
                 continue;
             };
-            let _ = self
-                .s
-                .put(key, msg)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .wait();
+            self.out.put(key, msg);
         }
     }
 
-    /// `msg` with the proof of run `id`'s secret for key expression `key` (see [`crate::auth`]).
+    /// `msg` with the proof of run `id`'s secret for key expression `key` (see [`formation_net::auth`]).
     fn sealed_report(&mut self, id: &str, key: &str, mut msg: Vec<u8>) -> Option<Vec<u8>> {
         let r = self.runs.get_mut(id)?;
         r.reports += 1;

@@ -1,10 +1,10 @@
 //! `formation inspect --agent I [--run ID] [--follow] [--json]`: one agent's live telemetry.
 
-use super::registry::{self, ProcessEntry};
-use crate::cli::EXIT_INVALID;
 use formation_config::node::ports::{subscriber, Input};
 use formation_config::protocol::services;
 use formation_config::protocol::wire::AgentTelemetry;
+use formation_runtime::cli::EXIT_INVALID;
+use formation_runtime::live::registry::{self, ProcessEntry};
 use serde_json::{json, Value};
 use std::io::Write;
 use std::process::ExitCode;
@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
     /// Agent id, 1-based (1..=N) as in the CSV, the figures and the paper.
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// Run id (see `formation ps`); may be omitted when exactly one run is running.
     #[arg(long)]
@@ -155,14 +155,14 @@ pub fn main(args: InspectArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    if let Err(e) = super::check_access(&run, "inspect")
-        .and_then(|()| super::validate::agent(args.agent, run.n_agents))
+    if let Err(e) = formation_runtime::live::check_access(&run, "inspect")
+        .and_then(|()| formation_runtime::live::validate::agent(args.agent, run.n_agents))
     {
         eprintln!("error: {e}");
         return ExitCode::from(EXIT_INVALID);
     }
     let result = follow(&run, &args);
-    super::tidy_after(&run);
+    formation_runtime::live::tidy_after(&run);
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -178,7 +178,7 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
         let flag = stop.clone();
         let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
     }
-    let node = super::client_node(run, "inspect")?;
+    let node = formation_runtime::live::client_node(run, "inspect")?;
     let sub: Input<AgentTelemetry> = subscriber(&node, &services::TELEMETRY.at(args.agent - 1))?;
     let start = Instant::now();
     let mut last_step = None;

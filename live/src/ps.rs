@@ -1,7 +1,7 @@
 //! `formation ps [--json]`: the running runs and their processes.
 
-use super::procstat::{self, ProcStat};
-use super::registry::{self, ProcessEntry, RunRecord, LOCAL_HOST};
+use formation_runtime::live::procstat::{self, ProcStat};
+use formation_runtime::live::registry::{self, ProcessEntry, RunRecord, LOCAL_HOST};
 use serde_json::{json, Value};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -94,10 +94,10 @@ pub fn main(args: PsArgs) -> ExitCode {
         Ok(r) => r,
         Err(e) => {
             eprintln!("error: {e}");
-            return ExitCode::from(crate::cli::EXIT_INVALID);
+            return ExitCode::from(formation_runtime::cli::EXIT_INVALID);
         }
     };
-    super::reap_dead_prefixes(&runs);
+    formation_runtime::live::reap_dead_prefixes(&runs);
     let before: Vec<Vec<Option<ProcStat>>> = runs
         .iter()
         .map(|r| r.processes.iter().map(read_local).collect())
