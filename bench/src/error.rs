@@ -44,10 +44,9 @@ pub enum ArgError {
     /// `--spin-us` above one second.
     #[error("--spin-us must be at most 1000000, got {0}")]
     SpinUs(u64),
-    /// `--cpu` is not a list of CPUs this process may use (the CPU-list parser's message: it
-    /// reports its errors as text).
+    /// `--cpu` is not a list of CPUs this process may use.
     #[error("{0}")]
-    Cpu(String),
+    Cpu(formation_runtime::cpus::CpuListError),
     /// A name of `--transports` that is no transport.
     #[error("unknown transport '{0}'")]
     Transport(String),

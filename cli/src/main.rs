@@ -16,6 +16,7 @@ use std::process::ExitCode;
 use formation_analysis::{check, plot, scenario_gen, sweep};
 use formation_bench as bench;
 use formation_live::{inject, inspect, ps, schema};
+use formation_runtime::error::CommandError;
 use formation_runtime::{cli, role, run, sim};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
@@ -139,8 +140,8 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     match cli.command {
-        Some(Command::Sim(a)) => sim::main(a),
-        Some(Command::Run(a)) => run::main(a),
+        Some(Command::Sim(a)) => ended(sim::main(a)),
+        Some(Command::Run(a)) => ended(run::main(a)),
         Some(Command::Scenario(a)) => scenario_gen::main(a),
         Some(Command::Sweep(a)) => sweep::main(a),
         Some(Command::Plot(a)) => plot::main(a),
@@ -155,7 +156,7 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
-        Some(Command::Node(a)) => role::main(a),
+        Some(Command::Node(a)) => ended(role::main(a)),
         #[cfg(feature = "multihost")]
         Some(Command::Host(a)) => formation_host::host_main(a),
         #[cfg(feature = "multihost")]
@@ -163,7 +164,37 @@ fn main() -> ExitCode {
         #[cfg(feature = "multihost")]
         Some(Command::Certs(a)) => formation_host::certs_main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
-        None => run::main(cli::defaults::<run::RunArgs>("run")),
+        None => ended(run::main(cli::defaults::<run::RunArgs>("run"))),
+    }
+}
+
+/// The exit code of a runner command (`sim`, `run`, `node`), its error said on stderr: the one
+/// place that maps the runtime's errors to exit codes (docs/cli.md).
+fn ended(result: Result<(), CommandError>) -> ExitCode {
+    let Err(e) = result else {
+        return ExitCode::SUCCESS;
+    };
+    if !e.already_said() {
+        eprintln!("{e}");
+    }
+    ExitCode::from(exit_code(&e))
+}
+
+/// 2 for bad input, 3 for a run that diverged, 130 after Ctrl-C, 1 for anything that failed.
+fn exit_code(e: &CommandError) -> u8 {
+    match e {
+        CommandError::Input(_)
+        | CommandError::Plan(_)
+        | CommandError::OutFolder(_)
+        | CommandError::UnknownRole(_)
+        | CommandError::NodeArgs { .. } => cli::EXIT_INVALID,
+        CommandError::Diverged(_) => cli::EXIT_RESULT_FAILED,
+        CommandError::Interrupted(_) => cli::EXIT_INTERRUPTED,
+        CommandError::WriteScenario { .. }
+        | CommandError::WriteOutputs { .. }
+        | CommandError::Run(_)
+        | CommandError::Died
+        | CommandError::Node { .. } => 1,
     }
 }
 

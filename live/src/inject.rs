@@ -155,7 +155,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         // What can be checked without the run is checked before looking for it.
         validate::at_sign(t)?;
     }
-    let run = registry::find(run_id)?;
+    let run = registry::find(run_id).map_err(|e| e.to_string())?;
     formation_runtime::live::check_access(&run, "inject into")?;
     let s = formation_runtime::live::run_scenario(&run)?;
     validate::agent(agent, run.n_agents)?;

@@ -651,13 +651,7 @@ impl Listening {
 
     /// Starts the export thread once the run's services exist; returns when its iceoryx2 ports
     /// are open, so no sample of the run's first step is missed.
-    // String: orchestrator/src/run/export.rs returns it as is from its own `Result<_, String>`.
-    pub fn start(self) -> Result<Export, String> {
-        self.start_thread().map_err(|e| e.to_string())
-    }
-
-    /// [`Listening::start`], with its error typed.
-    pub fn start_thread(self) -> Result<Export, ExportError> {
+    pub fn start(self) -> Result<Export, ExportError> {
         let Listening {
             cfg,
             session,

@@ -17,10 +17,13 @@
 //! * [`rng`]: the seeded generator of coverage samples, generated graphs and sweeps.
 //! * [`history`]: the recorded states a restarted agent rebuilds from.
 //! * [`cli`], [`cpus`]: shared command-line plumbing and CPU sets.
+//! * [`error`]: how `sim`, `run` and `node` end when they fail (the binary maps it to an exit
+//!   code).
 
 pub mod cli;
 pub mod closed_loop;
 pub mod cpus;
+pub mod error;
 pub mod history;
 #[cfg(feature = "multihost")]
 pub mod link;

@@ -347,13 +347,14 @@ fn inner_reports(
 
 /// Entry point of `formation check`.
 pub fn main(args: CheckArgs) -> ExitCode {
-    let s = match load_with_overrides(args.scenario.as_deref(), &args.sets) {
-        Ok(s) => s,
-        Err(code) => return code,
-    };
-    let variant = match formation_runtime::cli::parse_variant(&args.variant) {
+    let loaded = load_with_overrides(args.scenario.as_deref(), &args.sets)
+        .and_then(|s| Ok((s, formation_runtime::cli::parse_variant(&args.variant)?)));
+    let (s, variant) = match loaded {
         Ok(v) => v,
-        Err(code) => return code,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(formation_runtime::cli::EXIT_INVALID);
+        }
     };
     let r = report_for(&s, variant);
     if args.json {

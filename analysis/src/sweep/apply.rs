@@ -46,10 +46,9 @@ pub enum ApplyError {
     /// A negative `delay.max`.
     #[error("delay.max={0}: expected >= 0 s")]
     DelayMax(f64),
-    /// A scenario path the runtime's `--set` parser refused (its message: that parser reports
-    /// its errors as text).
+    /// A scenario path the runtime's `--set` parser refused.
     #[error("{0}")]
-    Set(String),
+    Set(formation_runtime::cli::OverrideError),
     /// The scenario built is invalid: every reason, `; `-separated.
     #[error("{}", .0.0.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))]
     Invalid(ValidationErrors),

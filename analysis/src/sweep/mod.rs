@@ -134,6 +134,7 @@ fn run(args: &SweepArgs) -> Result<ExitCode, SweepError> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("out/sweep-{}", base.name)));
     formation_runtime::out_lock::check_folder(&out)
+        .map_err(|e| e.to_string())
         .and_then(|()| {
             formation_config::node::files::ensure_private_dir(&out.join("samples"))
                 .map_err(|e| e.to_string())

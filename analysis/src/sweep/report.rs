@@ -504,7 +504,7 @@ mod tests {
         o.push(outcome(10, 50.0, true));
         o.push(Outcome {
             result: Err(SampleError::Apply(super::super::apply::ApplyError::Set(
-                "bad".into(),
+                formation_runtime::cli::OverrideError::NoEquals { set: "bad".into() },
             ))),
             ..outcome(11, 0.0, false)
         });
@@ -531,6 +531,9 @@ mod tests {
             (Some(1.0), Some(0))
         );
         assert_eq!(s.samples_per_s, 2.0);
-        assert_eq!(s.first_error.as_deref(), Some("bad"));
+        assert_eq!(
+            s.first_error.as_deref(),
+            Some("--set \"bad\": expected path=value")
+        );
     }
 }

@@ -312,11 +312,11 @@ impl Pins {
 
     /// Starts a process at `place` with `spawn` (given its CPU now, `None`: not pinned) and
     /// records it; the placement does not change meanwhile.
-    pub fn spawn(
+    pub fn spawn<E>(
         &self,
         place: Place,
-        spawn: impl FnOnce(Option<usize>) -> Result<RoleProcess, String>,
-    ) -> Result<RoleProcess, String> {
+        spawn: impl FnOnce(Option<usize>) -> Result<RoleProcess, E>,
+    ) -> Result<RoleProcess, E> {
         let mut state = self.lock();
         let child = spawn(self.cpu_of(place, state.quiet))?;
         if place != Place::Anywhere {
