@@ -11,6 +11,7 @@ use formation_config::protocol::services;
 use formation_runtime::cli::EXIT_INVALID;
 use formation_runtime::live::registry::{self, RunRecord};
 use formation_runtime::live::validate;
+use formation_runtime::live::ClientError;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -135,12 +136,60 @@ pub struct DelayArgs {
 /// How long to wait for the orchestrator's confirmation.
 const CONFIRM: Duration = Duration::from_secs(10);
 
-fn three(v: &[f64], name: &str) -> Result<[f64; 3], String> {
-    <[f64; 3]>::try_from(v).map_err(|_| format!("--{name}: expected three comma-separated values"))
+/// Why `formation inject` sends nothing: a bad value, or a run it cannot reach (exit 2).
+#[derive(Debug, thiserror::Error)]
+pub enum RequestError {
+    /// `--gamma` or `--delta` without three values (the option's name).
+    #[error("--{0}: expected three comma-separated values")]
+    Three(&'static str),
+    /// `--agents` without two ids.
+    #[error("--agents: expected two comma-separated agent ids")]
+    Agents,
+    /// A value outside its range.
+    #[error("{0}")]
+    Check(#[from] validate::InjectError),
+    /// The event breaks the rules of a timeline event.
+    #[error("{0}")]
+    Event(#[from] formation_config::scenario::validate::ValidationErrors),
+    /// No run, several, or not the one named.
+    #[error("{0}")]
+    Registry(#[from] registry::RegistryError),
+    /// The run is another user's, or its scenario cannot be read.
+    #[error("{0}")]
+    Client(#[from] ClientError),
+}
+
+/// Why an injection sent was not confirmed (exit 1).
+#[derive(Debug, thiserror::Error)]
+pub enum ConfirmError {
+    /// The client's node or the injection services cannot be opened.
+    #[error("{0}")]
+    Client(#[from] ClientError),
+    /// A port cannot be opened or sent on.
+    #[error("{0}")]
+    Port(#[from] formation_config::node::error::PortError),
+    /// The run refused it (its line in `events.jsonl`).
+    #[error("the run rejected the injection: {0}")]
+    Rejected(String),
+    /// The run ended first.
+    #[error("run {0} ended before confirming the injection")]
+    Ended(String),
+    /// No confirmation within [`CONFIRM`].
+    #[error("run {run} did not confirm the injection within {seconds} s")]
+    Timeout {
+        /// The run's id.
+        run: String,
+        /// How long it waited, s.
+        seconds: u64,
+    },
+}
+
+fn three(v: &[f64], name: &'static str) -> Result<[f64; 3], RequestError> {
+    <[f64; 3]>::try_from(v).map_err(|_| RequestError::Three(name))
 }
 
 /// Validates and builds the request (agent id 1-based on the command line, 0-based on the wire).
-fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
+fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), RequestError> {
     let (run_id, agent, at) = match what {
         InjectWhat::Fault(a) => (a.run.as_deref(), a.agent, a.at),
         InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
@@ -155,7 +204,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         // What can be checked without the run is checked before looking for it.
         validate::at_sign(t)?;
     }
-    let run = registry::find(run_id).map_err(|e| e.to_string())?;
+    let run = registry::find(run_id)?;
     formation_runtime::live::check_access(&run, "inject into")?;
     let s = formation_runtime::live::run_scenario(&run)?;
     validate::agent(agent, run.n_agents)?;
@@ -197,8 +246,8 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
             r.down_s = a.down;
         }
         InjectWhat::Link(a) => {
-            let [_, b] = <[usize; 2]>::try_from(a.agents.as_slice())
-                .map_err(|_| "--agents: expected two comma-separated agent ids".to_string())?;
+            let [_, b] =
+                <[usize; 2]>::try_from(a.agents.as_slice()).map_err(|_| RequestError::Agents)?;
             validate::agent(b, run.n_agents)?;
             r.kind = if a.state == LinkState::Down {
                 INJECT_LINK_DOWN
@@ -214,8 +263,7 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP
     ) {
         let e = formation_runtime::run::injections::event_of(&r, s.simulation.dt_s, 0);
-        formation_config::scenario::validate::validate_event(&s, "inject", &e)
-            .map_err(|e| e.to_string())?;
+        formation_config::scenario::validate::validate_event(&s, "inject", &e)?;
     }
     Ok((run, r))
 }
@@ -272,7 +320,7 @@ pub fn main(args: InjectArgs) -> ExitCode {
 
 /// Sends the request and waits for its line in `events.jsonl` (the publisher stays alive until
 /// then, so the sample cannot be lost).
-fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, String> {
+fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, ConfirmError> {
     let node = formation_runtime::live::client_node(run, "inject")?;
     let p = publisher::<InjectRequest>(&node, &services::INJECT_REQUEST.named())?;
     let wake = notifier(&node, &services::WAKE_ORCHESTRATOR.named())?;
@@ -290,22 +338,18 @@ fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, Stri
                 .find(|l| l.contains(&needle))
             {
                 if line.contains("\"event\":\"rejected\"") {
-                    return Err(format!("the run rejected the injection: {line}"));
+                    return Err(ConfirmError::Rejected(line.to_string()));
                 }
                 return Ok(line.to_string());
             }
         }
         if !run.is_live() {
-            return Err(format!(
-                "run {} ended before confirming the injection",
-                run.id
-            ));
+            return Err(ConfirmError::Ended(run.id.clone()));
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    Err(format!(
-        "run {} did not confirm the injection within {} s",
-        run.id,
-        CONFIRM.as_secs()
-    ))
+    Err(ConfirmError::Timeout {
+        run: run.id.clone(),
+        seconds: CONFIRM.as_secs(),
+    })
 }

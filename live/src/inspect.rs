@@ -1,5 +1,6 @@
 //! `formation inspect --agent I [--run ID] [--follow] [--json]`: one agent's live telemetry.
 
+use formation_config::node::error::PortError;
 use formation_config::node::ports::{subscriber, Input};
 use formation_config::protocol::services;
 use formation_config::protocol::wire::AgentTelemetry;
@@ -36,10 +37,34 @@ const FIRST_SAMPLE: Duration = Duration::from_secs(10);
 /// Refresh interval of `--follow`.
 const REFRESH: Duration = Duration::from_millis(250);
 
+/// Why `formation inspect` stopped without showing a sample (exit 1).
+#[derive(Debug, thiserror::Error)]
+pub enum InspectError {
+    /// The client's node cannot be made.
+    #[error("{0}")]
+    Client(#[from] formation_runtime::live::ClientError),
+    /// The agent's telemetry service cannot be opened.
+    #[error("{0}")]
+    Port(#[from] PortError),
+    /// A sample of the telemetry cannot be received.
+    #[error("telemetry: {0:?}")]
+    Telemetry(PortError),
+    /// No sample within [`FIRST_SAMPLE`].
+    #[error("no telemetry from agent {agent} of run {run} within {seconds} s")]
+    NoSample {
+        /// The agent, 1-based.
+        agent: usize,
+        /// The run's id.
+        run: String,
+        /// How long it waited, s.
+        seconds: u64,
+    },
+}
+
 /// The newest sample in the subscriber's queue, if any.
-fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, String> {
+fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, InspectError> {
     let mut last = None;
-    while let Some(s) = sub.receive().map_err(|e| format!("telemetry: {e:?}"))? {
+    while let Some(s) = sub.receive().map_err(InspectError::Telemetry)? {
         last = Some(*s);
     }
     Ok(last)
@@ -155,9 +180,15 @@ pub fn main(args: InspectArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    if let Err(e) = formation_runtime::live::check_access(&run, "inspect")
-        .and_then(|()| formation_runtime::live::validate::agent(args.agent, run.n_agents))
-    {
+    let refused = formation_runtime::live::check_access(&run, "inspect")
+        .err()
+        .map(|e| e.to_string())
+        .or_else(|| {
+            formation_runtime::live::validate::agent(args.agent, run.n_agents)
+                .err()
+                .map(|e| e.to_string())
+        });
+    if let Some(e) = refused {
         eprintln!("error: {e}");
         return ExitCode::from(EXIT_INVALID);
     }
@@ -172,7 +203,7 @@ pub fn main(args: InspectArgs) -> ExitCode {
     }
 }
 
-fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
+fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), InspectError> {
     let stop = Arc::new(AtomicBool::new(false));
     if args.follow {
         let flag = stop.clone();
@@ -219,12 +250,11 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
                 }
             }
         } else if last_step.is_none() && start.elapsed() > FIRST_SAMPLE {
-            return Err(format!(
-                "no telemetry from agent {} of run {} within {} s",
-                args.agent,
-                run.id,
-                FIRST_SAMPLE.as_secs()
-            ));
+            return Err(InspectError::NoSample {
+                agent: args.agent,
+                run: run.id.clone(),
+                seconds: FIRST_SAMPLE.as_secs(),
+            });
         }
         if stop.load(Ordering::SeqCst) {
             return Ok(());

@@ -58,6 +58,9 @@ pub enum RunError {
     /// The export cannot start reading the run's services.
     #[error("{0}")]
     Export(#[from] export::ExportError),
+    /// The injection services or `events.jsonl` cannot be opened.
+    #[error("{0}")]
+    Injections(#[from] injections::InjectionsError),
     /// The run's record cannot be written into the runs folder.
     #[error("{0}")]
     Registry(#[from] RegistryError),
@@ -195,8 +198,7 @@ impl<'p> Run<'p> {
         tracing::info!(placement = %pinned, "role processes started");
         let registration = register(plan, ids, &run_dir, &children.0)?;
         let live = Live {
-            injections: injections::Injections::open(&node, scenario, &run_dir)
-                .map_err(RunError::Supervision)?,
+            injections: injections::Injections::open(&node, scenario, &run_dir)?,
             registration,
         };
         let mut takeover = takeover::Takeover::open(
