@@ -61,6 +61,9 @@ pub enum RunError {
     /// The injection services or `events.jsonl` cannot be opened.
     #[error("{0}")]
     Injections(#[from] injections::InjectionsError),
+    /// A host of the run cannot be prepared or start an agent.
+    #[error("{0}")]
+    Remote(#[from] remote::RemoteError),
     /// The run's record cannot be written into the runs folder.
     #[error("{0}")]
     Registry(#[from] RegistryError),
@@ -147,8 +150,7 @@ impl<'p> Run<'p> {
         let sizing = names::Sizing::for_scenario(scenario, mode.realtime, mode.observers);
         let services = services::RunServices::create(&node, sizing)?;
         if let Some(r) = &remote {
-            r.attach(ids.prefix, sizing, &run_dir)
-                .map_err(RunError::Supervision)?;
+            r.attach(ids.prefix, sizing, &run_dir)?;
         }
         // Reads the services as an outside observer from the first step on; stopped after the
         // role processes, once it has put their last samples.
@@ -424,7 +426,7 @@ fn spawn_all(
             ..base.clone()
         };
         children.push(match remote.filter(|r| r.is_remote(i)) {
-            Some(r) => r.spawn(i, label, &args).map_err(RunError::Supervision)?,
+            Some(r) => r.spawn(i, label, &args)?,
             None => pins.spawn(governor::Place::Agent(i), |cpu| {
                 spawn::spawn(exe, Role::Agent, label, &args, cpu)
             })?,

@@ -25,6 +25,7 @@ pub(crate) mod remote;
 #[cfg(not(feature = "multihost"))]
 #[path = "remote_off.rs"]
 pub(crate) mod remote;
+mod remote_error;
 pub mod rt;
 mod services;
 mod spawn;

@@ -46,10 +46,9 @@ pub enum PlanError {
     /// The runs folder cannot be used.
     #[error("{0}")]
     RunsFolder(#[from] RegistryError),
-    /// A host cannot be reached, checked or prepared (the remote layer's message: it reports its
-    /// errors as text).
+    /// A host cannot be reached, checked or prepared.
     #[error("{0}")]
-    Hosts(String),
+    Hosts(#[from] remote::RemoteError),
     /// `--rt-priority` is refused.
     #[error("{0}")]
     Rt(#[from] rt::RtError),
@@ -105,7 +104,7 @@ impl Plan {
             .map_err(PlanError::from)?;
         // Hosts reached and checked before anything is created (exit 2 naming what is missing or
         // differs).
-        let remote = remote::connect(&args.place, &scenario).map_err(PlanError::Hosts)?;
+        let remote = remote::connect(&args.place, &scenario).map_err(PlanError::from)?;
         let mode = Mode {
             realtime: args.realtime,
             wait: args.wait,
@@ -247,8 +246,7 @@ impl Site {
             .remote
             .take()
             .map(|r| r.prepare(run_id, prefix, &plan.scenario, plan.variant.name(), pacing))
-            .transpose()
-            .map_err(PlanError::Hosts)?
+            .transpose()?
             .map(Rc::new);
         let out_lock = crate::out_lock::acquire(&plan.out, Some(run_id), "formation run")?;
         let (slot, pins, adapt) = layout(plan);
