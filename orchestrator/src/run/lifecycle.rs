@@ -67,10 +67,9 @@ pub enum RunError {
     /// The run's record cannot be written into the runs folder.
     #[error("{0}")]
     Registry(#[from] RegistryError),
-    /// The supervision (driver, injections, takeover, other hosts) failed; its layers report
-    /// their errors as text.
+    /// The supervision's takeover cannot open its ports (its layer reports its errors as text).
     #[error("{0}")]
-    Supervision(String),
+    Takeover(String),
     /// `summary.json` cannot be written.
     #[error("cannot write {}/summary.json: {source}", out.display())]
     Summary {
@@ -155,7 +154,7 @@ impl<'p> Run<'p> {
         // Reads the services as an outside observer from the first step on; stopped after the
         // role processes, once it has put their last samples.
         let export = site.export.take().map(export::Opened::start).transpose()?;
-        let ports = driver::Ports::open(&node, n, !mode.realtime).map_err(RunError::Supervision)?;
+        let ports = driver::Ports::open(&node, n, !mode.realtime)?;
         if mode.realtime {
             // Stale files of an earlier run in the same directory must not be merged.
             let _ = std::fs::remove_dir_all(formation_config::node::timing::dir(&run_dir));
@@ -213,7 +212,7 @@ impl<'p> Run<'p> {
             formation_config::protocol::pacing::PLANT_LEAD + injections::SLACK,
             remote.clone(),
         )
-        .map_err(RunError::Supervision)?;
+        .map_err(RunError::Takeover)?;
         takeover.set_realtime(mode.realtime);
         Ok(Run {
             plan,
