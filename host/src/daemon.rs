@@ -13,6 +13,7 @@
 //! run's iceoryx2 files and its folder removed. The daemon is a single-threaded state machine:
 //! one loop serves requests, reaps children and watches the orchestrators.
 
+use crate::refusal::{FolderError, Refusal, ServeError};
 use formation_config::node::args::ChildArgs;
 use formation_config::node::ipc;
 use formation_config::node::members::Membership;
@@ -134,38 +135,37 @@ pub fn default_root(name: &str) -> PathBuf {
 }
 
 /// Creates `dir` owner-only (mode 0700), refusing a symbolic link or another user's folder.
-fn private_dir(dir: &Path) -> Result<(), String> {
+fn private_dir(dir: &Path) -> Result<(), FolderError> {
     use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
     let _ = std::fs::DirBuilder::new()
         .recursive(true)
         .mode(0o700)
         .create(dir);
-    let m = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let io = |source| FolderError::Io {
+        dir: dir.to_path_buf(),
+        source,
+    };
+    let m = std::fs::symlink_metadata(dir).map_err(io)?;
     // SAFETY: getuid has no preconditions.
     if !m.is_dir() || m.uid() != unsafe { libc::getuid() } {
-        return Err(format!(
-            "{}: not a folder of this user (refusing a symbolic link or another user's folder)",
-            dir.display()
-        ));
+        return Err(FolderError::NotOwn(dir.to_path_buf()));
     }
-    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
-        .map_err(|e| format!("{}: {e}", dir.display()))
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)).map_err(io)
 }
 
 /// Runs the daemon until `stop` is set (SIGINT/SIGTERM). `Err`: it could not start.
-pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
+pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), ServeError> {
     if !proto::valid_name(&o.name) || o.name == formation_net::cluster::LAUNCHER {
-        return Err(format!(
-            "--name '{}': use 1..=32 characters of [A-Za-z0-9_-] (and not '{}')",
-            o.name,
-            formation_net::cluster::LAUNCHER
-        ));
+        return Err(ServeError::Name {
+            name: o.name.clone(),
+            launcher: formation_net::cluster::LAUNCHER,
+        });
     }
     private_dir(&o.root)?;
     sweep_stale(&o.root);
     // The token, the requests, the clock probe (answered at once, in Zenoh's thread) and the
     // orchestrators' tokens (formation_net::daemon_link).
-    let link = DaemonLink::open(&o.session, &o.name).map_err(|e| e.to_string())?;
+    let link = DaemonLink::open(&o.session, &o.name)?;
     let me = identity::local();
     eprintln!(
         "formation host: {} listening on {} (pid {}, build {}, protocol {}, {} CPUs); runs in {}",
@@ -319,7 +319,7 @@ impl Daemon {
                     self.log.eprint("requests", "refused", || {
                         format!("formation host: refused: {e}")
                     });
-                    refused(e)
+                    refused(e.to_string())
                 });
                 if let Some(k) = key {
                     k.seal(Purpose::Reply, &self.o.name, seq, &mut reply);
@@ -377,7 +377,7 @@ impl Daemon {
     }
 
     /// Does what an accepted request asks.
-    fn dispatch(&mut self, req: Request, rest: &[u8]) -> Result<Vec<u8>, String> {
+    fn dispatch(&mut self, req: Request, rest: &[u8]) -> Result<Vec<u8>, Refusal> {
         match req {
             Request::Prepare(r) => self.prepare(r).map(|_| ok(None)),
             Request::Spawn {
@@ -409,67 +409,61 @@ impl Daemon {
         }
     }
 
-    fn run(&mut self, run_id: &str) -> Result<&mut HostRun, String> {
-        self.runs
-            .get_mut(run_id)
-            .ok_or_else(|| format!("no run {run_id} on host {}", self.o.name))
+    fn run(&mut self, run_id: &str) -> Result<&mut HostRun, Refusal> {
+        self.runs.get_mut(run_id).ok_or_else(|| Refusal::NoRun {
+            run: run_id.to_string(),
+            host: self.o.name.clone(),
+        })
     }
 
-    fn prepare(&mut self, r: RunRequest) -> Result<(), String> {
+    fn prepare(&mut self, r: RunRequest) -> Result<(), Refusal> {
         let diff = identity::differences(&r.identity, &self.me);
         if !diff.is_empty() {
-            return Err(format!(
-                "the orchestrator and host {} differ: {}",
-                self.o.name,
-                diff.join("; ")
-            ));
+            return Err(Refusal::Differ {
+                host: self.o.name.clone(),
+                differences: diff,
+            });
         }
         if r.run_id.is_empty()
             || r.run_id.len() > 16
             || !r.run_id.bytes().all(|b| b.is_ascii_hexdigit())
         {
-            return Err(format!(
-                "run id '{}': expected 1..=16 hexadecimal digits",
-                r.run_id
-            ));
+            return Err(Refusal::RunId(r.run_id.clone()));
         }
         if r.prefix != services::run_prefix(&r.run_id) {
-            return Err(format!(
-                "prefix '{}' is not the run's ({})",
-                r.prefix,
-                services::run_prefix(&r.run_id)
-            ));
+            return Err(Refusal::Prefix {
+                prefix: r.prefix.clone(),
+                expected: services::run_prefix(&r.run_id),
+            });
         }
         if self.runs.contains_key(&r.run_id) {
-            return Err(format!("run {} is already prepared here", r.run_id));
+            return Err(Refusal::AlreadyPrepared(r.run_id.clone()));
         }
-        let scenario =
-            Scenario::from_toml_str(&r.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
-        formation_config::scenario::validate::validate(&scenario)
-            .map_err(|e| format!("scenario: {e}"))?;
+        let scenario = Scenario::from_toml_str(&r.scenario_toml)?;
+        formation_config::scenario::validate::validate(&scenario)?;
         let n = scenario.n_agents();
         if n > formation_config::MAX_AGENTS {
-            return Err(format!(
-                "{n} agents: at most {} are supported",
-                formation_config::MAX_AGENTS
-            ));
+            return Err(Refusal::TooManyAgents {
+                n,
+                max: formation_config::MAX_AGENTS,
+            });
         }
         let variant =
-            Variant::parse(&r.variant).ok_or_else(|| format!("unknown variant '{}'", r.variant))?;
+            Variant::parse(&r.variant).ok_or_else(|| Refusal::Variant(r.variant.clone()))?;
         if r.agent_hosts.len() != n {
-            return Err(format!(
-                "{} agent hosts for {n} agents",
-                r.agent_hosts.len()
-            ));
+            return Err(Refusal::AgentHosts {
+                hosts: r.agent_hosts.len(),
+                n,
+            });
         }
         if !r.agent_hosts.iter().all(|h| proto::valid_name(h)) || !proto::valid_name(&r.launcher) {
-            return Err("a host name of the placement is not key-safe".into());
+            return Err(Refusal::NotKeySafe);
         }
         if !r.agent_hosts.contains(&self.o.name) {
-            return Err(format!("no agent of the run is placed on {}", self.o.name));
+            return Err(Refusal::NothingHere(self.o.name.clone()));
         }
         if r.rt_priority > 99 {
-            return Err(format!("rt_priority {}: at most 99", r.rt_priority));
+            return Err(Refusal::RtPriority(r.rt_priority));
         }
         let mut r = r;
         if r.rt_priority > self.o.max_rt_priority {
@@ -480,11 +474,10 @@ impl Daemon {
             r.rt_priority = self.o.max_rt_priority;
         }
         if r.observers > services::MAX_OBSERVERS + 1 {
-            return Err(format!(
-                "{} observers: at most {}",
-                r.observers,
-                services::MAX_OBSERVERS + 1
-            ));
+            return Err(Refusal::Observers {
+                given: r.observers,
+                max: services::MAX_OBSERVERS + 1,
+            });
         }
         if let Some(c) = &r.colocated {
             self.check_colocated(&r, c)?;
@@ -493,14 +486,14 @@ impl Daemon {
         // The daemon's own log names the folder; the refusal does not.
         private_dir(&dir).map_err(|e| {
             eprintln!("formation host: run {}: {e}", r.run_id);
-            "cannot create the run's folder on this host".to_string()
+            Refusal::RunFolder
         })?;
-        let fail = |e: String, dir: &Path| {
+        let fail = |e: Refusal, dir: &Path| {
             let _ = std::fs::remove_dir_all(dir);
             e
         };
         std::fs::write(dir.join("scenario.toml"), &r.scenario_toml)
-            .map_err(|e| fail(format!("cannot write the scenario: {e}"), &dir))?;
+            .map_err(|e| fail(Refusal::WriteScenario(e), &dir))?;
         if r.colocated.is_some() {
             eprintln!(
                 "formation host: run {} prepared (co-located: the orchestrator's services in this /dev/shm, no bridge): agents {:?} here",
@@ -511,8 +504,8 @@ impl Daemon {
             return Ok(());
         }
         let membership =
-            Membership::create(&dir, &r.prefix).map_err(|e| fail(e.to_string(), &dir))?;
-        let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.to_string(), &dir))?;
+            Membership::create(&dir, &r.prefix).map_err(|e| fail(Refusal::Membership(e), &dir))?;
+        let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.into(), &dir))?;
         let placement = Placement {
             agent_hosts: r.agent_hosts.clone(),
             launcher: r.launcher.clone(),
@@ -538,7 +531,7 @@ impl Daemon {
                 drop(node);
                 drop(membership);
                 let _ = ipc::remove_residue(&r.prefix);
-                return Err(fail(e, &dir));
+                return Err(fail(e.into(), &dir));
             }
         };
         eprintln!(
@@ -563,7 +556,7 @@ impl Daemon {
     /// iceoryx2 root before anything of it is made: the orchestrator's services must be here and
     /// this user's, its iceoryx2 root this daemon's, its membership lock a private file of this
     /// user. A flag alone makes nobody's services reachable.
-    fn check_colocated(&self, r: &RunRequest, c: &proto::Colocated) -> Result<(), String> {
+    fn check_colocated(&self, r: &RunRequest, c: &proto::Colocated) -> Result<(), Refusal> {
         let euid = colocate::euid();
         let mine = self.facts.iox2_root.clone().unwrap_or_default();
         if c.iox2_root != mine {
@@ -571,15 +564,14 @@ impl Daemon {
                 theirs: c.iox2_root.clone(),
                 mine,
             }
-            .to_string());
+            .into());
         }
-        let entries = colocate::shm_entries().map_err(|e| e.to_string())?;
-        let n = colocate::check_services(&entries, &r.prefix, euid).map_err(|e| e.to_string())?;
+        let entries = colocate::shm_entries()?;
+        let n = colocate::check_services(&entries, &r.prefix, euid)?;
         colocate::check_members(&c.members, euid).map_err(|e| {
             // The daemon's own log names the path; the refusal does not.
             eprintln!("formation host: run {}: {e}", r.run_id);
-            "a co-located run whose membership lock is not a private file of this host's user"
-                .to_string()
+            Refusal::Members
         })?;
         eprintln!(
             "formation host: run {}: co-located: {n} shared memory files of {} here, uid {euid}",
@@ -624,35 +616,36 @@ impl Daemon {
         agent: usize,
         rejoin_at: Option<u64>,
         rejoin: &[u8],
-    ) -> Result<u32, String> {
+    ) -> Result<u32, Refusal> {
         let exe = self.o.exe.clone();
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(format!(
-                "agent {} of run {run_id} is not placed on {me}",
-                agent.saturating_add(1)
-            ));
+            return Err(Refusal::NotPlacedHere {
+                agent: agent.saturating_add(1),
+                run: run_id.to_string(),
+                host: me,
+            });
         }
         if r.children.contains_key(&agent) {
-            return Err(format!(
-                "agent {} of run {run_id} is already running here",
-                agent + 1
-            ));
+            return Err(Refusal::Running {
+                agent: agent + 1,
+                run: run_id.to_string(),
+            });
         }
         if let Some(at) = rejoin_at {
             // Verified like a checkpoint before it is written or any process reads it.
             let file =
                 restart::decode_rejoin(rejoin, agent, r.scenario_hash, at).map_err(|why| {
-                    format!("the rejoin file of agent {} is refused: {why}", agent + 1)
+                    Refusal::Rejoin {
+                        agent: agent + 1,
+                        why,
+                    }
                 })?;
             restart::write_rejoin(&restart::rejoin_path(&r.dir, agent), r.scenario_hash, &file)
-                .map_err(|e| {
-                    format!(
-                        "cannot write agent {}'s rejoin file: {}",
-                        agent + 1,
-                        e.kind()
-                    )
+                .map_err(|e| Refusal::WriteRejoin {
+                    agent: agent + 1,
+                    kind: e.kind(),
                 })?;
         }
         let args = ChildArgs {
@@ -679,9 +672,10 @@ impl Daemon {
                 Ok(())
             });
         }
-        let child = cmd
-            .spawn()
-            .map_err(|e| format!("cannot start agent {}: {e}", agent + 1))?;
+        let child = cmd.spawn().map_err(|source| Refusal::Start {
+            agent: agent + 1,
+            source,
+        })?;
         let pid = child.id();
         r.children.insert(agent, child);
         eprintln!(
@@ -691,7 +685,7 @@ impl Daemon {
         Ok(pid)
     }
 
-    fn kill(&mut self, run_id: &str, agent: usize) -> Result<(), String> {
+    fn kill(&mut self, run_id: &str, agent: usize) -> Result<(), Refusal> {
         // Idempotent: a run already ended has no process left to kill.
         let Some(r) = self.runs.get_mut(run_id) else {
             return Ok(());
@@ -706,28 +700,26 @@ impl Daemon {
         Ok(())
     }
 
-    fn signal(&mut self, run_id: &str, agent: usize, signal: i32) -> Result<(), String> {
+    fn signal(&mut self, run_id: &str, agent: usize, signal: i32) -> Result<(), Refusal> {
         if signal != libc::SIGSTOP && signal != libc::SIGCONT {
-            return Err(format!(
-                "signal {signal}: only SIGSTOP and SIGCONT are sent on request"
-            ));
+            return Err(Refusal::Signal(signal));
         }
         let r = self.run(run_id)?;
         let c = r
             .children
             .get(&agent)
-            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+            .ok_or(Refusal::NotRunning(agent + 1))?;
         // SAFETY: kill(2) on our own unreaped child.
         unsafe { libc::kill(c.id() as libc::pid_t, signal) };
         Ok(())
     }
 
-    fn stopped(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
+    fn stopped(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, Refusal> {
         let r = self.run(run_id)?;
         let c = r
             .children
             .get(&agent)
-            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+            .ok_or(Refusal::NotRunning(agent + 1))?;
         let stopped = formation_config::node::process::is_stopped(c.id());
         Ok(proto::frame(
             &Reply::Ok { pid: Some(c.id()) },
@@ -735,46 +727,50 @@ impl Daemon {
         ))
     }
 
-    fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
+    fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, Refusal> {
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(format!(
-                "agent {} of run {run_id} is not placed on {me}",
-                agent.saturating_add(1)
-            ));
+            return Err(Refusal::NotPlacedHere {
+                agent: agent.saturating_add(1),
+                run: run_id.to_string(),
+                host: me,
+            });
         }
         let path = restart::checkpoint_path(&r.dir, agent);
-        let bytes = std::fs::read(&path)
-            .map_err(|e| format!("agent {}'s checkpoint: {}", agent + 1, e.kind()))?;
+        let bytes = std::fs::read(&path).map_err(|e| Refusal::Checkpoint {
+            agent: agent + 1,
+            kind: e.kind(),
+        })?;
         Ok(proto::frame(&Reply::Ok { pid: None }, &bytes))
     }
 
     /// A host of the run was lost and its agents moved: re-plans this host's bridge for the new
     /// placement. Only the agents of the lost host may move, and not onto this host (a moved
     /// agent goes to the launcher, `Placement::after_loss`); its own agents stay.
-    fn replan(&mut self, run_id: &str, agent_hosts: Vec<String>) -> Result<(), String> {
+    fn replan(&mut self, run_id: &str, agent_hosts: Vec<String>) -> Result<(), Refusal> {
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         if agent_hosts.len() != r.req.agent_hosts.len()
             || !agent_hosts.iter().all(|h| proto::valid_name(h))
         {
-            return Err(format!(
-                "re-plan of run {run_id}: {} agent hosts for {} agents, or a name not key-safe",
-                agent_hosts.len(),
-                r.req.agent_hosts.len()
-            ));
+            return Err(Refusal::ReplanShape {
+                run: run_id.to_string(),
+                hosts: agent_hosts.len(),
+                agents: r.req.agent_hosts.len(),
+            });
         }
         for (i, (was, now)) in r.req.agent_hosts.iter().zip(&agent_hosts).enumerate() {
             if was != now && (*was == me || *now == me) {
-                return Err(format!(
-                    "re-plan of run {run_id}: agent {} would move from {was} to {now}; agents move off a lost host to the launcher only",
-                    i + 1
-                ));
+                return Err(Refusal::ReplanMove {
+                    run: run_id.to_string(),
+                    agent: i + 1,
+                    was: was.clone(),
+                    now: now.clone(),
+                });
             }
         }
-        let scenario =
-            Scenario::from_toml_str(&r.req.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
+        let scenario = Scenario::from_toml_str(&r.req.scenario_toml)?;
         let placement = Placement {
             agent_hosts: agent_hosts.clone(),
             launcher: r.req.launcher.clone(),
@@ -849,7 +845,7 @@ impl Daemon {
 
     /// The run's timing files on this host (its agents', once they have stopped, and its bridge's
     /// link delays as `bridge-<host>.json`).
-    fn report(&mut self, run_id: &str) -> Result<Vec<u8>, String> {
+    fn report(&mut self, run_id: &str) -> Result<Vec<u8>, Refusal> {
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         // The agents write their files when they stop: give them the grace of an ending run.
@@ -857,18 +853,20 @@ impl Daemon {
         if let Some(b) = &r.bridge {
             b.link_report()
                 .write(&r.dir, &format!("bridge-{me}"))
-                .map_err(|e| e.to_string())?;
+                .map_err(Refusal::TimingReport)?;
         }
         let mut out = proto::HostReport::default();
         let dir = formation_config::node::timing::dir(&r.dir);
         for e in std::fs::read_dir(&dir)
-            .map_err(|e| format!("the run's timing folder: {}", e.kind()))?
+            .map_err(|e| Refusal::TimingFolder(e.kind()))?
             .flatten()
         {
             let name = e.file_name().to_string_lossy().into_owned();
             if name.ends_with(".json") {
-                let text = std::fs::read_to_string(e.path())
-                    .map_err(|x| format!("timing file {name}: {}", x.kind()))?;
+                let text = std::fs::read_to_string(e.path()).map_err(|x| Refusal::TimingFile {
+                    name: name.clone(),
+                    kind: x.kind(),
+                })?;
                 out.timing.insert(name, text);
             }
         }

@@ -8,5 +8,6 @@
 
 pub mod commands;
 pub mod daemon;
+pub mod refusal;
 
 pub use commands::{certs_main, host_main, hosts_main, CertsArgs, HostArgs, HostsArgs};

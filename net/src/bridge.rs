@@ -660,13 +660,7 @@ pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, RecordError> {
 impl Bridge {
     /// Starts the bridge; returns once every service exists on this host (`cfg.create`) and every
     /// port of the bridge is open, so role processes may start.
-    // String: net/src/daemon.rs hands it to a `String` cleanup closure; typed once the daemon moves.
-    pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, String> {
-        Bridge::open(session, cfg).map_err(|e| e.to_string())
-    }
-
-    /// [`Bridge::start`], with its error typed.
-    pub fn open(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, BridgeError> {
+    pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, BridgeError> {
         let stop = Arc::new(AtomicBool::new(false));
         let stats = Arc::new(Stats::default());
         let links = Arc::new(Mutex::new(BTreeMap::new()));

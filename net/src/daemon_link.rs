@@ -4,7 +4,7 @@
 //! a state machine over these calls and names no Zenoh type; this is the only place where a
 //! daemon touches Zenoh.
 
-use crate::bridge::{Bridge, BridgeConfig};
+use crate::bridge::{Bridge, BridgeConfig, BridgeError};
 use crate::proto;
 use crate::session::{self, OptionError};
 use std::time::Duration;
@@ -155,7 +155,7 @@ impl Outbox {
     }
 
     /// Starts a run's bridge on this link ([`Bridge::start`]).
-    pub fn bridge(&self, cfg: BridgeConfig) -> Result<Bridge, String> {
+    pub fn bridge(&self, cfg: BridgeConfig) -> Result<Bridge, BridgeError> {
         Bridge::start(self.session.clone(), cfg)
     }
 }

@@ -405,7 +405,7 @@ impl RemoteRun {
         sizing: Sizing,
         placement: Placement,
     ) -> Result<(), RemoteError> {
-        let b = Bridge::open(
+        let b = Bridge::start(
             self.cluster.session(),
             BridgeConfig {
                 run_id: self.run_id.clone(),
