@@ -271,6 +271,11 @@ struct Daemon {
     facts: Facts,
 }
 
+/// A request that is no frame of a request: refused as `malformed`, saying why.
+fn malformed(e: proto::FrameError) -> (&'static str, String) {
+    ("malformed", e.to_string())
+}
+
 fn refused(why: String) -> Vec<u8> {
     serde_json::to_vec(&Reply::Refused(why)).unwrap()
 }
@@ -347,9 +352,9 @@ impl Daemon {
                 format!("a request of {} bytes (at most {MAX_REQUEST})", bytes.len()),
             ));
         }
-        let (req, _): (Request, &[u8]) = proto::unframe(bytes).map_err(|e| ("malformed", e))?;
+        let (req, _): (Request, &[u8]) = proto::decode_frame(bytes).map_err(malformed)?;
         let Some(run_id) = req.run_id().map(str::to_string) else {
-            let (req, rest) = proto::unframe::<Request>(bytes).map_err(|e| ("malformed", e))?;
+            let (req, rest) = proto::decode_frame::<Request>(bytes).map_err(malformed)?;
             return Ok((req, rest.to_vec(), 0));
         };
         let me = self.o.name.clone();
@@ -369,7 +374,7 @@ impl Daemon {
                 format!("a request about run {run_id} refused: {e}"),
             )
         })?;
-        let (req, rest) = proto::unframe::<Request>(body).map_err(|e| ("malformed", e))?;
+        let (req, rest) = proto::decode_frame::<Request>(body).map_err(malformed)?;
         if req.run_id() != Some(run_id.as_str()) {
             return Err(("malformed", "a request changed its run".into()));
         }

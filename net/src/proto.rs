@@ -323,12 +323,6 @@ pub fn decode_frame<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u
     Ok((serde_json::from_slice(json)?, &data[4 + n..]))
 }
 
-/// [`decode_frame`] with the error as text.
-// String: net/src/daemon.rs pairs it with a reason as `(&str, String)`; typed once the daemon moves.
-pub fn unframe<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), String> {
-    decode_frame(data).map_err(|e| e.to_string())
-}
-
 /// Wall clock, µs since the Unix epoch.
 pub fn now_us() -> u64 {
     std::time::SystemTime::now()
@@ -349,12 +343,12 @@ mod tests {
             rejoin_at: Some(20_500),
         };
         let f = frame(&r, &[1, 2, 3]);
-        let (back, rest): (Request, &[u8]) = unframe(&f).unwrap();
+        let (back, rest): (Request, &[u8]) = decode_frame(&f).unwrap();
         assert_eq!(back, r);
         assert_eq!(rest, &[1, 2, 3]);
-        assert!(unframe::<Request>(&[9, 0, 0, 0, b'{']).is_err());
-        assert!(unframe::<Request>(&[1]).is_err());
-        assert!(unframe::<Request>(&frame(&"x", &[])).is_err());
+        assert!(decode_frame::<Request>(&[9, 0, 0, 0, b'{']).is_err());
+        assert!(decode_frame::<Request>(&[1]).is_err());
+        assert!(decode_frame::<Request>(&frame(&"x", &[])).is_err());
     }
 
     #[test]
