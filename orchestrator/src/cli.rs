@@ -6,7 +6,8 @@
 use formation_config::scenario::validate::validate;
 use formation_config::Scenario;
 
-pub use crate::error::InputError;
+use formation_config::scenario::validate::ValidationErrors;
+use std::path::PathBuf;
 
 /// Exit code for invalid input (bad scenario, bad arguments); clap's own usage errors use it too.
 pub const EXIT_INVALID: u8 = 2;
@@ -417,6 +418,47 @@ pub fn apply_overrides(s: Scenario, sets: &[String]) -> Result<Scenario, Overrid
         })?;
     }
     root.try_into().map_err(OverrideError::Decode)
+}
+
+/// Why the scenario or the arguments of a runner (`sim`, `run`, `check`) are refused: bad input,
+/// exit 2. Each names the argument or file.
+#[derive(Debug, thiserror::Error)]
+pub enum InputError {
+    /// The scenario cannot be loaded (its name or file, and why).
+    #[error("{0}")]
+    Load(#[from] formation_config::scenario::LoadError),
+    /// A `--set` override is refused.
+    #[error("{0}")]
+    Override(#[from] OverrideError),
+    /// The scenario `name` after the overrides breaks its rules: every broken rule, one a line.
+    #[error("scenario '{name}' is invalid:\n{}", print_lines(&errors.0))]
+    Invalid {
+        /// The scenario's name or file as given.
+        name: String,
+        /// The broken rules.
+        errors: ValidationErrors,
+    },
+    /// The scenario with the runtime flags and the `--events` file breaks its rules.
+    #[error("the scenario with its runtime settings and events is invalid:\n{}", print_lines(&.0 .0))]
+    InvalidWithEvents(ValidationErrors),
+    /// `--variant` names no variant.
+    #[error("unknown variant '{0}' (expected proposed, no-rbfnn or unconstrained)")]
+    Variant(String),
+    /// The `--events` file cannot be read or holds something else than events.
+    #[error("--events {}: {source}", path.display())]
+    Events {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: EventsError,
+    },
+    /// `--ros2` or `--record rosbag2` in a build without ROS 2.
+    #[error("{}", crate::record::NO_ROS2)]
+    NoRos2,
+    /// `--ros2` in an environment that is no valid ROS 2 one.
+    #[cfg(feature = "ros2")]
+    #[error("--ros2: {0}")]
+    Ros2Env(crate::record::ros2::EnvError),
 }
 
 /// Loads a scenario, applies the overrides, validates; an [`InputError`] (exit 2) naming what is

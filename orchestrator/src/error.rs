@@ -4,56 +4,13 @@
 //! chooses one.
 //!
 //! * [`InputError`]: the scenario and the arguments every runner takes (exit 2).
-//! * [`crate::run::PlanError`]: what `formation run` checks before anything of the run exists
-//!   (exit 2).
-//! * [`crate::run::RunError`]: what failed while a run was set up, driven or written (exit 1).
+//! * [`PlanError`]: what `formation run` checks before anything of the run exists (exit 2).
+//! * [`RunError`]: what failed while a run was set up, driven or written (exit 1).
 
-use crate::cli::{print_lines, OverrideError};
+pub use crate::cli::InputError;
 use crate::record::metrics::Divergence;
 use formation_config::node::error::NodeError;
-use formation_config::scenario::validate::ValidationErrors;
 use std::path::PathBuf;
-
-/// Why the scenario or the arguments of a runner (`sim`, `run`, `check`) are refused: bad input,
-/// exit 2. Each names the argument or file.
-#[derive(Debug, thiserror::Error)]
-pub enum InputError {
-    /// The scenario cannot be loaded (its name or file, and why).
-    #[error("{0}")]
-    Load(#[from] formation_config::scenario::LoadError),
-    /// A `--set` override is refused.
-    #[error("{0}")]
-    Override(#[from] OverrideError),
-    /// The scenario `name` after the overrides breaks its rules: every broken rule, one a line.
-    #[error("scenario '{name}' is invalid:\n{}", print_lines(&errors.0))]
-    Invalid {
-        /// The scenario's name or file as given.
-        name: String,
-        /// The broken rules.
-        errors: ValidationErrors,
-    },
-    /// The scenario with the runtime flags and the `--events` file breaks its rules.
-    #[error("the scenario with its runtime settings and events is invalid:\n{}", print_lines(&.0 .0))]
-    InvalidWithEvents(ValidationErrors),
-    /// `--variant` names no variant.
-    #[error("unknown variant '{0}' (expected proposed, no-rbfnn or unconstrained)")]
-    Variant(String),
-    /// The `--events` file cannot be read or holds something else than events.
-    #[error("--events {}: {source}", path.display())]
-    Events {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong with it.
-        source: crate::cli::EventsError,
-    },
-    /// `--ros2` or `--record rosbag2` in a build without ROS 2.
-    #[error("{}", crate::record::NO_ROS2)]
-    NoRos2,
-    /// `--ros2` in an environment that is no valid ROS 2 one.
-    #[cfg(feature = "ros2")]
-    #[error("--ros2: {0}")]
-    Ros2Env(crate::record::ros2::EnvError),
-}
 
 /// How `formation sim`, `formation run` or `formation node` ended when it did not succeed; its
 /// `Display` is the message on stderr.
@@ -64,7 +21,7 @@ pub enum CommandError {
     Input(#[from] InputError),
     /// `formation run` refused before anything of the run existed (exit 2).
     #[error("error: {0}")]
-    Plan(#[from] crate::run::PlanError),
+    Plan(#[from] PlanError),
     /// The output folder of `formation sim` is in use or not this user's own (exit 2).
     #[error("error: {0}")]
     OutFolder(#[from] crate::out_lock::OutLockError),
@@ -86,7 +43,7 @@ pub enum CommandError {
     },
     /// A run failed while it was set up, driven or written (exit 1).
     #[error("error: {0}")]
-    Run(#[from] crate::run::RunError),
+    Run(#[from] RunError),
     /// A role process of a run died; it was named on stderr when it was detected (exit 1).
     #[error("a role process died")]
     Died,
@@ -125,4 +82,108 @@ impl CommandError {
     pub fn already_said(&self) -> bool {
         matches!(self, CommandError::Died)
     }
+}
+
+/// Why `formation run` refuses to start: bad input or a machine it cannot use (exit 2).
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// More agents than a run supports.
+    #[error("{n} agents: at most {max} are supported")]
+    TooManyAgents {
+        /// The scenario's agents.
+        n: usize,
+        /// The most a run supports.
+        max: usize,
+    },
+    /// More outside observers than the services support.
+    #[error("--observers {given}: at most {max} outside observers are supported")]
+    Observers {
+        /// `--observers`.
+        given: usize,
+        /// The most supported.
+        max: usize,
+    },
+    /// A realtime run with an event that takes an agent down (its index in the timeline).
+    #[error("events[{index}]: a `{kind}` event needs a lockstep run (realtime runs take faults, delays, link faults and message loss; docs/failures.md)")]
+    NeedsLockstep {
+        /// The event's index in the scenario's timeline.
+        index: usize,
+        /// The event's kind.
+        kind: String,
+    },
+    /// `--pin` is refused.
+    #[error("{0}")]
+    Pin(#[from] crate::run::placement::PinError),
+    /// The runs folder cannot be used.
+    #[error("{0}")]
+    RunsFolder(#[from] crate::live::registry::RegistryError),
+    /// A host cannot be reached, checked or prepared.
+    #[error("{0}")]
+    Hosts(#[from] crate::run::remote_error::RemoteError),
+    /// `--rt-priority` is refused.
+    #[error("{0}")]
+    Rt(#[from] crate::run::rt::RtError),
+    /// `--zenoh-listen` is refused.
+    #[error("{0}")]
+    Export(#[from] crate::run::export::ExportError),
+    /// The output folder is in use or not this user's own.
+    #[error("{0}")]
+    OutFolder(#[from] crate::out_lock::OutLockError),
+}
+
+/// What failed while a run was set up, driven or written (exit 1); each names the file, service
+/// or process.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A role process could not be started.
+    #[error("{0}")]
+    Spawn(#[from] crate::run::spawn::SpawnError),
+    /// The recorder's files cannot be created in the output folder.
+    #[error("cannot write outputs to {}: {source}", out.display())]
+    Outputs {
+        /// The output folder.
+        out: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// `scenario.toml` cannot be written into the run's folder.
+    #[error("cannot write {}/scenario.toml: {source}", dir.display())]
+    Scenario {
+        /// The run's folder.
+        dir: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The orchestrator's iceoryx2 node cannot be made.
+    #[error("{0}")]
+    Node(#[from] formation_config::node::ipc::IpcError),
+    /// A service or port of the run cannot be created or opened.
+    #[error("{0}")]
+    Port(#[from] formation_config::node::error::PortError),
+    /// The export cannot start reading the run's services.
+    #[error("{0}")]
+    Export(#[from] crate::run::export::ExportError),
+    /// The injection services or `events.jsonl` cannot be opened.
+    #[error("{0}")]
+    Injections(#[from] crate::run::injections::InjectionsError),
+    /// A host of the run cannot be prepared or start an agent.
+    #[error("{0}")]
+    Remote(#[from] crate::run::remote_error::RemoteError),
+    /// The run's record cannot be written into the runs folder.
+    #[error("{0}")]
+    Registry(#[from] crate::live::registry::RegistryError),
+    /// The supervision's takeover cannot open its ports (its layer reports its errors as text).
+    #[error("{0}")]
+    Takeover(String),
+    /// `summary.json` cannot be written.
+    #[error("cannot write {}/summary.json: {source}", out.display())]
+    Summary {
+        /// The output folder.
+        out: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The run stopped on an error the driver detected (its message).
+    #[error("{0}")]
+    Failed(String),
 }

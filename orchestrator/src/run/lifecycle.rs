@@ -9,79 +9,20 @@ use super::{
     driver, export, governor, host_probe, injections, remote, services, spawn, step_timing,
     takeover, timing, Live, STOP_GRACE,
 };
-use crate::live::registry::{
-    unix_now, ProcessEntry, Registration, RegistryError, RunRecord, LOCAL_HOST,
-};
+use crate::error::RunError;
+use crate::live::registry::{unix_now, ProcessEntry, Registration, RunRecord, LOCAL_HOST};
 use crate::record::{Recorder, Summary};
 use driver::Outcome;
 use formation_config::node::args::ChildArgs;
-use formation_config::node::error::PortError;
-use formation_config::node::ipc::{self, IpcError};
+use formation_config::node::ipc;
 use formation_config::node::ports::RunNode;
 use formation_config::protocol::messages::Role;
 use formation_config::protocol::services as names;
-use spawn::{RoleProcess, SpawnError};
+use spawn::RoleProcess;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
-
-/// What failed while a run was set up, driven or written (exit 1); each names the file, service
-/// or process.
-#[derive(Debug, thiserror::Error)]
-pub enum RunError {
-    /// A role process could not be started.
-    #[error("{0}")]
-    Spawn(#[from] SpawnError),
-    /// The recorder's files cannot be created in the output folder.
-    #[error("cannot write outputs to {}: {source}", out.display())]
-    Outputs {
-        /// The output folder.
-        out: PathBuf,
-        /// The file system's error.
-        source: std::io::Error,
-    },
-    /// `scenario.toml` cannot be written into the run's folder.
-    #[error("cannot write {}/scenario.toml: {source}", dir.display())]
-    Scenario {
-        /// The run's folder.
-        dir: PathBuf,
-        /// The file system's error.
-        source: std::io::Error,
-    },
-    /// The orchestrator's iceoryx2 node cannot be made.
-    #[error("{0}")]
-    Node(#[from] IpcError),
-    /// A service or port of the run cannot be created or opened.
-    #[error("{0}")]
-    Port(#[from] PortError),
-    /// The export cannot start reading the run's services.
-    #[error("{0}")]
-    Export(#[from] export::ExportError),
-    /// The injection services or `events.jsonl` cannot be opened.
-    #[error("{0}")]
-    Injections(#[from] injections::InjectionsError),
-    /// A host of the run cannot be prepared or start an agent.
-    #[error("{0}")]
-    Remote(#[from] remote::RemoteError),
-    /// The run's record cannot be written into the runs folder.
-    #[error("{0}")]
-    Registry(#[from] RegistryError),
-    /// The supervision's takeover cannot open its ports (its layer reports its errors as text).
-    #[error("{0}")]
-    Takeover(String),
-    /// `summary.json` cannot be written.
-    #[error("cannot write {}/summary.json: {source}", out.display())]
-    Summary {
-        /// The output folder.
-        out: PathBuf,
-        /// The file system's error.
-        source: std::io::Error,
-    },
-    /// The run stopped on an error the driver detected (its message).
-    #[error("{0}")]
-    Failed(String),
-}
 
 /// The ids of a run: its id and the iceoryx2 prefix of its services.
 #[derive(Debug, Clone, Copy)]

@@ -25,10 +25,10 @@ pub(crate) mod remote;
 #[cfg(not(feature = "multihost"))]
 #[path = "remote_off.rs"]
 pub(crate) mod remote;
-mod remote_error;
+pub(crate) mod remote_error;
 pub mod rt;
 mod services;
-mod spawn;
+pub(crate) mod spawn;
 pub(crate) mod step_timing;
 pub(crate) mod supervise;
 pub(crate) mod takeover;
@@ -44,8 +44,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-pub use lifecycle::RunError;
-pub use plan::PlanError;
+pub use crate::error::{PlanError, RunError};
 
 /// Arguments of `formation run`.
 #[derive(clap::Args, Debug)]

@@ -4,61 +4,13 @@
 //! ([`Site::claim`]). Every refusal here is a [`PlanError`] (exit 2) naming the argument.
 
 use super::{export, governor, placement, remote, rt, timing, HostPacing, Mode, RunArgs};
-use crate::error::CommandError;
-use crate::live::registry::RegistryError;
-use crate::out_lock::{OutLock, OutLockError};
+use crate::error::{CommandError, PlanError};
+use crate::out_lock::OutLock;
 use crate::record::Outputs;
 use formation_config::node::members::Membership;
 use formation_config::{Scenario, Variant};
 use std::path::PathBuf;
 use std::rc::Rc;
-
-/// Why `formation run` refuses to start: bad input or a machine it cannot use (exit 2).
-#[derive(Debug, thiserror::Error)]
-pub enum PlanError {
-    /// More agents than a run supports.
-    #[error("{n} agents: at most {max} are supported")]
-    TooManyAgents {
-        /// The scenario's agents.
-        n: usize,
-        /// The most a run supports.
-        max: usize,
-    },
-    /// More outside observers than the services support.
-    #[error("--observers {given}: at most {max} outside observers are supported")]
-    Observers {
-        /// `--observers`.
-        given: usize,
-        /// The most supported.
-        max: usize,
-    },
-    /// A realtime run with an event that takes an agent down (its index in the timeline).
-    #[error("events[{index}]: a `{kind}` event needs a lockstep run (realtime runs take faults, delays, link faults and message loss; docs/failures.md)")]
-    NeedsLockstep {
-        /// The event's index in the scenario's timeline.
-        index: usize,
-        /// The event's kind.
-        kind: String,
-    },
-    /// `--pin` is refused.
-    #[error("{0}")]
-    Pin(#[from] placement::PinError),
-    /// The runs folder cannot be used.
-    #[error("{0}")]
-    RunsFolder(#[from] RegistryError),
-    /// A host cannot be reached, checked or prepared.
-    #[error("{0}")]
-    Hosts(#[from] remote::RemoteError),
-    /// `--rt-priority` is refused.
-    #[error("{0}")]
-    Rt(#[from] rt::RtError),
-    /// `--zenoh-listen` is refused.
-    #[error("{0}")]
-    Export(#[from] export::ExportError),
-    /// The output folder is in use or not this user's own.
-    #[error("{0}")]
-    OutFolder(#[from] OutLockError),
-}
 
 /// What `formation run` runs, checked: scenario and variant, pacing, outputs, CPUs and hosts.
 pub(super) struct Plan {
