@@ -153,6 +153,8 @@ pub struct RunRequest {
 
 /// What an orchestrator asks a daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// One request per message, built and matched once: `Prepare`'s size costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 pub enum Request {
     /// Prepare a run: services, bridge; start nothing yet.
     Prepare(RunRequest),

@@ -806,10 +806,12 @@ mod tests {
         let pins = Pins::with(auto_layout(), Adapts::SchedulingAndPinning, true, None);
         assert_eq!(pins.sched(true), Some(Sched::Batch));
         assert_eq!(pins.sched(false), Some(Sched::Other { nice: BUSY_NICE }));
-        assert!(
-            BUSY_NICE < 0,
-            "busy processes must outweigh nice-0 programs"
-        );
+        const {
+            assert!(
+                BUSY_NICE < 0,
+                "busy processes must outweigh nice-0 programs"
+            )
+        };
         // Realtime runs keep their own scheduling.
         assert_eq!(Pins::fixed(auto_layout()).sched(false), None);
     }
