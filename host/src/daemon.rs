@@ -414,6 +414,20 @@ impl Daemon {
         }
     }
 
+    /// Run `run_id`, whose agent `agent` (0-based) is placed on this host.
+    fn placed_here(&mut self, run_id: &str, agent: usize) -> Result<&mut HostRun, Refusal> {
+        let me = self.o.name.clone();
+        let r = self.run(run_id)?;
+        if r.req.agent_hosts.get(agent) != Some(&me) {
+            return Err(Refusal::NotPlacedHere {
+                agent: agent.saturating_add(1),
+                run: run_id.to_string(),
+                host: me,
+            });
+        }
+        Ok(r)
+    }
+
     fn run(&mut self, run_id: &str) -> Result<&mut HostRun, Refusal> {
         self.runs.get_mut(run_id).ok_or_else(|| Refusal::NoRun {
             run: run_id.to_string(),
@@ -623,15 +637,7 @@ impl Daemon {
         rejoin: &[u8],
     ) -> Result<u32, Refusal> {
         let exe = self.o.exe.clone();
-        let me = self.o.name.clone();
-        let r = self.run(run_id)?;
-        if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(Refusal::NotPlacedHere {
-                agent: agent.saturating_add(1),
-                run: run_id.to_string(),
-                host: me,
-            });
-        }
+        let r = self.placed_here(run_id, agent)?;
         if r.children.contains_key(&agent) {
             return Err(Refusal::Running {
                 agent: agent + 1,
@@ -733,15 +739,7 @@ impl Daemon {
     }
 
     fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, Refusal> {
-        let me = self.o.name.clone();
-        let r = self.run(run_id)?;
-        if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(Refusal::NotPlacedHere {
-                agent: agent.saturating_add(1),
-                run: run_id.to_string(),
-                host: me,
-            });
-        }
+        let r = self.placed_here(run_id, agent)?;
         let path = restart::checkpoint_path(&r.dir, agent);
         let bytes = std::fs::read(&path).map_err(|e| Refusal::Checkpoint {
             agent: agent + 1,
