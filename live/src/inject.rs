@@ -174,7 +174,7 @@ pub enum ConfirmError {
     /// The run ended first.
     #[error("run {0} ended before confirming the injection")]
     Ended(String),
-    /// No confirmation within [`CONFIRM`].
+    /// No confirmation within `CONFIRM`.
     #[error("run {run} did not confirm the injection within {seconds} s")]
     Timeout {
         /// The run's id.

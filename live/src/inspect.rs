@@ -49,7 +49,7 @@ pub enum InspectError {
     /// A sample of the telemetry cannot be received.
     #[error("telemetry: {0:?}")]
     Telemetry(PortError),
-    /// No sample within [`FIRST_SAMPLE`].
+    /// No sample within `FIRST_SAMPLE`.
     #[error("no telemetry from agent {agent} of run {run} within {seconds} s")]
     NoSample {
         /// The agent, 1-based.

@@ -123,7 +123,7 @@ const PATH_GRAMMAR: &str =
     "key(.key)* where a key is [A-Za-z_][A-Za-z0-9_]* optionally followed by \
                             one index [k] (0-based) or [*] (every element)";
 
-/// Why a `--set` path is malformed ([`PATH_GRAMMAR`]); `part` is the offending segment.
+/// Why a `--set` path is malformed (`PATH_GRAMMAR`); `part` is the offending segment.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum PathError {
     /// Nothing before the `=`.
@@ -670,7 +670,7 @@ pub enum EventsError {
     /// The file cannot be read.
     #[error("{0}")]
     Read(#[from] std::io::Error),
-    /// The file is larger than [`MAX_EVENTS_FILE_BYTES`].
+    /// The file is larger than `MAX_EVENTS_FILE_BYTES`.
     #[error("larger than {} MiB; a file holds at most {MAX_EVENTS_PER_FILE} events", MAX_EVENTS_FILE_BYTES >> 20)]
     TooLarge,
     /// The file holds this many events or more, over [`MAX_EVENTS_PER_FILE`].

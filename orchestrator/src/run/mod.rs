@@ -3,10 +3,10 @@
 //!
 //! * [`services`]: every service, created here before any process starts, sized for N.
 //! * [`spawn`]: locating, starting, supervising and stopping the role processes.
-//! * [`driver`]: start barrier, pacing, and the per-step feed of the [`Recorder`].
+//! * [`driver`]: start barrier, pacing, and the per-step feed of the [`Recorder`](crate::record::Recorder).
 //! * [`cleanup`]: nothing of the run's prefix stays in /dev/shm or /tmp/iceoryx2.
-//! * [`plan`]: the run checked from its arguments (scenario, placement, hosts) and what it holds
-//!   while it lasts; [`lifecycle`]: the run itself, which owns its services, processes, recorder
+//! * `plan`: the run checked from its arguments (scenario, placement, hosts) and what it holds
+//!   while it lasts; `lifecycle`: the run itself, which owns its services, processes, recorder
 //!   and takeover from its start to its summary.
 
 mod cleanup;
