@@ -15,6 +15,7 @@ use std::process::ExitCode;
 
 use formation_analysis::{check, plot, scenario_gen, sweep};
 use formation_bench as bench;
+use formation_live::error::LiveError;
 use formation_live::{inject, inspect, ps, schema};
 use formation_runtime::error::CommandError;
 use formation_runtime::{cli, role, run, sim};
@@ -147,10 +148,10 @@ fn main() -> ExitCode {
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
-        Some(Command::Ps(a)) => ps::main(a),
-        Some(Command::Inspect(a)) => inspect::main(a),
-        Some(Command::Inject(a)) => inject::main(a),
-        Some(Command::Schema(a)) => schema::main(a),
+        Some(Command::Ps(a)) => ended(ps::main(a)),
+        Some(Command::Inspect(a)) => ended(inspect::main(a)),
+        Some(Command::Inject(a)) => ended(inject::main(a)),
+        Some(Command::Schema(a)) => ended(schema::main(a)),
         Some(Command::Completions(a)) => {
             completions(a.shell, &mut std::io::stdout());
             ExitCode::SUCCESS
@@ -168,20 +169,55 @@ fn main() -> ExitCode {
     }
 }
 
-/// The exit code of a runner command (`sim`, `run`, `node`), its error said on stderr: the one
-/// place that maps the runtime's errors to exit codes (docs/cli.md).
-fn ended(result: Result<(), CommandError>) -> ExitCode {
+/// The exit code of a command whose failure is typed (`sim`, `run`, `node`, `ps`, `inspect`,
+/// `inject`, `schema`), its error said on stderr: the one place that maps those errors to exit
+/// codes (docs/cli.md).
+fn ended<E: Failure>(result: Result<(), E>) -> ExitCode {
     let Err(e) = result else {
         return ExitCode::SUCCESS;
     };
     if !e.already_said() {
         eprintln!("{e}");
     }
-    ExitCode::from(exit_code(&e))
+    ExitCode::from(e.exit_code())
+}
+
+/// A command's failure: its message and exit code.
+trait Failure: std::fmt::Display {
+    /// 2 for bad input, 3 for a result that is a failure, 130 after Ctrl-C, 1 for anything that
+    /// failed.
+    fn exit_code(&self) -> u8;
+    /// Whether the message is on stderr already.
+    fn already_said(&self) -> bool {
+        false
+    }
+}
+
+impl Failure for LiveError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            LiveError::Registry(_)
+            | LiveError::Access(_)
+            | LiveError::Agent(_)
+            | LiveError::Request(_)
+            | LiveError::AgentCount { .. } => cli::EXIT_INVALID,
+            LiveError::Inspect(_) | LiveError::Confirm(_) | LiveError::Json(_) => 1,
+        }
+    }
+}
+
+impl Failure for CommandError {
+    fn already_said(&self) -> bool {
+        CommandError::already_said(self)
+    }
+
+    fn exit_code(&self) -> u8 {
+        command_exit_code(self)
+    }
 }
 
 /// 2 for bad input, 3 for a run that diverged, 130 after Ctrl-C, 1 for anything that failed.
-fn exit_code(e: &CommandError) -> u8 {
+fn command_exit_code(e: &CommandError) -> u8 {
     match e {
         CommandError::Input(_)
         | CommandError::Plan(_)

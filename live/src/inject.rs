@@ -2,17 +2,15 @@
 //! nothing sent on a bad value), then sent to the run's orchestrator, which picks the apply step,
 //! forwards it and confirms by writing it to `DIR/events.jsonl`.
 
+use crate::error::{ConfirmError, LiveError, RequestError};
 use formation_config::node::ports::{notifier, poke, publisher, send};
 use formation_config::protocol::messages::{
     InjectRequest, INJECT_ASAP, INJECT_CRASH, INJECT_DELAY, INJECT_FAULT, INJECT_HANG,
     INJECT_LINK_DOWN, INJECT_LINK_UP,
 };
 use formation_config::protocol::services;
-use formation_runtime::cli::EXIT_INVALID;
 use formation_runtime::live::registry::{self, RunRecord};
 use formation_runtime::live::validate;
-use formation_runtime::live::ClientError;
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 /// Arguments of `formation inject`.
@@ -136,54 +134,6 @@ pub struct DelayArgs {
 /// How long to wait for the orchestrator's confirmation.
 const CONFIRM: Duration = Duration::from_secs(10);
 
-/// Why `formation inject` sends nothing: a bad value, or a run it cannot reach (exit 2).
-#[derive(Debug, thiserror::Error)]
-pub enum RequestError {
-    /// `--gamma` or `--delta` without three values (the option's name).
-    #[error("--{0}: expected three comma-separated values")]
-    Three(&'static str),
-    /// `--agents` without two ids.
-    #[error("--agents: expected two comma-separated agent ids")]
-    Agents,
-    /// A value outside its range.
-    #[error("{0}")]
-    Check(#[from] validate::InjectError),
-    /// The event breaks the rules of a timeline event.
-    #[error("{0}")]
-    Event(#[from] formation_config::scenario::validate::ValidationErrors),
-    /// No run, several, or not the one named.
-    #[error("{0}")]
-    Registry(#[from] registry::RegistryError),
-    /// The run is another user's, or its scenario cannot be read.
-    #[error("{0}")]
-    Client(#[from] ClientError),
-}
-
-/// Why an injection sent was not confirmed (exit 1).
-#[derive(Debug, thiserror::Error)]
-pub enum ConfirmError {
-    /// The client's node or the injection services cannot be opened.
-    #[error("{0}")]
-    Client(#[from] ClientError),
-    /// A port cannot be opened or sent on.
-    #[error("{0}")]
-    Port(#[from] formation_config::node::error::PortError),
-    /// The run refused it (its line in `events.jsonl`).
-    #[error("the run rejected the injection: {0}")]
-    Rejected(String),
-    /// The run ended first.
-    #[error("run {0} ended before confirming the injection")]
-    Ended(String),
-    /// No confirmation within `CONFIRM`.
-    #[error("run {run} did not confirm the injection within {seconds} s")]
-    Timeout {
-        /// The run's id.
-        run: String,
-        /// How long it waited, s.
-        seconds: u64,
-    },
-}
-
 fn three(v: &[f64], name: &'static str) -> Result<[f64; 3], RequestError> {
     <[f64; 3]>::try_from(v).map_err(|_| RequestError::Three(name))
 }
@@ -276,46 +226,33 @@ fn nonce() -> u64 {
 }
 
 /// Entry point of `formation inject`.
-pub fn main(args: InjectArgs) -> ExitCode {
-    let (run, req) = match request(&args.what) {
-        Ok(x) => x,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
-        }
-    };
+pub fn main(args: InjectArgs) -> Result<(), LiveError> {
+    let (run, req) = request(&args.what)?;
     let result = send_and_confirm(&run, &req);
     formation_runtime::live::tidy_after(&run);
-    match result {
-        Ok(line) => {
-            let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
-            if args.json {
-                if let Some(o) = v.as_object_mut() {
-                    o.insert("run".into(), run.id.clone().into());
-                }
-                println!("{v}");
-                return ExitCode::SUCCESS;
-            }
-            println!(
-                "{} injection for agent {} of run {} applies at step {} (t = {:.3} s){}",
-                v["event"].as_str().unwrap_or("?"),
-                req.agent + 1,
-                run.id,
-                v["step"],
-                v["t"].as_f64().unwrap_or(f64::NAN),
-                if v["after_end"].as_bool() == Some(true) {
-                    ", after the end of the run"
-                } else {
-                    ""
-                }
-            );
-            ExitCode::SUCCESS
+    let line = result?;
+    let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
+    if args.json {
+        if let Some(o) = v.as_object_mut() {
+            o.insert("run".into(), run.id.clone().into());
         }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(1)
-        }
+        println!("{v}");
+        return Ok(());
     }
+    println!(
+        "{} injection for agent {} of run {} applies at step {} (t = {:.3} s){}",
+        v["event"].as_str().unwrap_or("?"),
+        req.agent + 1,
+        run.id,
+        v["step"],
+        v["t"].as_f64().unwrap_or(f64::NAN),
+        if v["after_end"].as_bool() == Some(true) {
+            ", after the end of the run"
+        } else {
+            ""
+        }
+    );
+    Ok(())
 }
 
 /// Sends the request and waits for its line in `events.jsonl` (the publisher stays alive until

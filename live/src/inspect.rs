@@ -1,14 +1,12 @@
 //! `formation inspect --agent I [--run ID] [--follow] [--json]`: one agent's live telemetry.
 
-use formation_config::node::error::PortError;
+use crate::error::{InspectError, LiveError};
 use formation_config::node::ports::{subscriber, Input};
 use formation_config::protocol::services;
 use formation_config::protocol::wire::AgentTelemetry;
-use formation_runtime::cli::EXIT_INVALID;
 use formation_runtime::live::registry::{self, ProcessEntry};
 use serde_json::{json, Value};
 use std::io::Write;
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -36,30 +34,6 @@ pub struct InspectArgs {
 const FIRST_SAMPLE: Duration = Duration::from_secs(10);
 /// Refresh interval of `--follow`.
 const REFRESH: Duration = Duration::from_millis(250);
-
-/// Why `formation inspect` stopped without showing a sample (exit 1).
-#[derive(Debug, thiserror::Error)]
-pub enum InspectError {
-    /// The client's node cannot be made.
-    #[error("{0}")]
-    Client(#[from] formation_runtime::live::ClientError),
-    /// The agent's telemetry service cannot be opened.
-    #[error("{0}")]
-    Port(#[from] PortError),
-    /// A sample of the telemetry cannot be received.
-    #[error("telemetry: {0:?}")]
-    Telemetry(PortError),
-    /// No sample within `FIRST_SAMPLE`.
-    #[error("no telemetry from agent {agent} of run {run} within {seconds} s")]
-    NoSample {
-        /// The agent, 1-based.
-        agent: usize,
-        /// The run's id.
-        run: String,
-        /// How long it waited, s.
-        seconds: u64,
-    },
-}
 
 /// The newest sample in the subscriber's queue, if any.
 fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, InspectError> {
@@ -172,35 +146,13 @@ pub fn to_text(run: &str, n: usize, process: Option<&ProcessEntry>, s: &AgentTel
 }
 
 /// Entry point of `formation inspect`.
-pub fn main(args: InspectArgs) -> ExitCode {
-    let run = match registry::find(args.run.as_deref()) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
-        }
-    };
-    let refused = formation_runtime::live::check_access(&run, "inspect")
-        .err()
-        .map(|e| e.to_string())
-        .or_else(|| {
-            formation_runtime::live::validate::agent(args.agent, run.n_agents)
-                .err()
-                .map(|e| e.to_string())
-        });
-    if let Some(e) = refused {
-        eprintln!("error: {e}");
-        return ExitCode::from(EXIT_INVALID);
-    }
+pub fn main(args: InspectArgs) -> Result<(), LiveError> {
+    let run = registry::find(args.run.as_deref())?;
+    formation_runtime::live::check_access(&run, "inspect")?;
+    formation_runtime::live::validate::agent(args.agent, run.n_agents)?;
     let result = follow(&run, &args);
     formation_runtime::live::tidy_after(&run);
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(1)
-        }
-    }
+    Ok(result?)
 }
 
 fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), InspectError> {
