@@ -476,7 +476,8 @@ pub fn load_with_overrides(name: Option<&str>, sets: &[String]) -> Result<Scenar
 /// Most errors printed for one input; the rest are counted.
 pub const MAX_PRINTED_ERRORS: usize = 20;
 
-/// The lines [`print_errors`] prints: the first [`MAX_PRINTED_ERRORS`], then how many more.
+/// The lines of a list of validation errors, indented: the first [`MAX_PRINTED_ERRORS`], then
+/// how many more.
 pub fn error_lines<T: std::fmt::Display>(errors: &[T]) -> Vec<String> {
     let mut out: Vec<String> = errors
         .iter()
@@ -493,14 +494,7 @@ pub fn error_lines<T: std::fmt::Display>(errors: &[T]) -> Vec<String> {
     out
 }
 
-/// Prints validation errors on stderr, indented: at most [`MAX_PRINTED_ERRORS`] and a count.
-pub fn print_errors<T: std::fmt::Display>(errors: &[T]) {
-    for l in error_lines(errors) {
-        eprintln!("{l}");
-    }
-}
-
-/// The lines [`print_errors`] prints, as one text (no line break at its end).
+/// [`error_lines`] as one text (no line break at its end).
 pub fn print_lines<T: std::fmt::Display>(errors: &[T]) -> String {
     error_lines(errors).join("\n")
 }

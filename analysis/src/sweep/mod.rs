@@ -48,9 +48,9 @@ pub struct SweepArgs {
 /// Why a sweep cannot run or produced nothing: the option, file or folder and what failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SweepError {
-    /// The base scenario does not load or is invalid (the loader has said why).
-    #[error("invalid base scenario")]
-    Base,
+    /// The base scenario does not load or is invalid: why, then that the base is refused.
+    #[error("{0}\nerror: invalid base scenario")]
+    Base(cli::InputError),
     /// A `--vary` is malformed, or a `--grid` set is not finite.
     #[error(transparent)]
     Spec(#[from] spec::SpecError),
@@ -105,7 +105,7 @@ pub fn main(args: SweepArgs) -> ExitCode {
 }
 
 fn run(args: &SweepArgs) -> Result<ExitCode, SweepError> {
-    let (base, variant) = args.common.load().map_err(|_| SweepError::Base)?;
+    let (base, variant) = args.common.load().map_err(SweepError::Base)?;
     let vary = args
         .vary
         .iter()
