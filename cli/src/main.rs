@@ -243,6 +243,43 @@ mod tests {
     }
 
     #[test]
+    fn each_failure_has_the_exit_code_docs_cli_md_gives_it() {
+        use formation_live::error::ConfirmError;
+        use formation_runtime::cli::InputError;
+        use formation_runtime::record::metrics::Divergence;
+        let bad = CommandError::Input(InputError::Variant("x".into()));
+        assert_eq!((bad.exit_code(), bad.already_said()), (2, false));
+        let diverged = CommandError::Diverged(Divergence {
+            time_s: 1.0,
+            agent: 2,
+            cause: "nn_norm".into(),
+        });
+        assert_eq!(diverged.exit_code(), 3);
+        assert!(diverged
+            .to_string()
+            .starts_with("diverged: t = 1.000 s, agent 2"));
+        let stopped = CommandError::Interrupted("out".into());
+        assert_eq!(stopped.exit_code(), 130);
+        assert_eq!(
+            (
+                CommandError::Died.exit_code(),
+                CommandError::Died.already_said()
+            ),
+            (1, true)
+        );
+        let count = LiveError::AgentCount { n: 0, max: 128 };
+        assert_eq!(count.exit_code(), 2);
+        assert_eq!(
+            count.to_string(),
+            "error: --n 0: must be within 1..=128 agents"
+        );
+        assert_eq!(
+            LiveError::Confirm(ConfirmError::Ended("r".into())).exit_code(),
+            1
+        );
+    }
+
+    #[test]
     fn the_command_line_definition_is_consistent() {
         Cli::command().debug_assert();
     }
