@@ -6,6 +6,7 @@ use super::link::{self, Budget, Link, Sizes, Wait};
 use super::plan::{Case, Transport};
 use super::procs::{self, Peers};
 use super::sock::{self, SockLink};
+use crate::error::{CaseError, ResultExt};
 use hdrhistogram::Histogram;
 use iceoryx2::prelude::*;
 use std::cell::{Cell, RefCell};
@@ -76,12 +77,12 @@ fn agent_args(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Vec<
 }
 
 /// Measures case number `idx`; the histogram holds one value (ns) per round trip or step.
-pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String> {
+pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, CaseError> {
     if let Some(cpu) = case.placement.cpu_of(0) {
-        procs::set_affinity(&[cpu]).map_err(|e| format!("pin to cpu {cpu}: {e}"))?;
+        procs::set_affinity(&[cpu]).ctx(format!("pin to cpu {cpu}"))?;
     }
     if case.batch {
-        formation_config::node::sched::batch_policy()?;
+        formation_config::node::sched::batch_policy().map_err(CaseError::below)?;
     }
     let result = run_pinned(ctx, idx, case);
     let _ = procs::set_affinity(ctx.allowed);
@@ -91,20 +92,18 @@ pub fn run(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String>
     result
 }
 
-fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, String> {
+fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, CaseError> {
     match case.transport {
         Transport::IoxEvent | Transport::IoxWaitSet | Transport::IoxPoll => {
-            let services =
-                Services::create(ctx.node, idx, case.n).map_err(|e| format!("iceoryx2: {e}"))?;
+            let services = Services::create(ctx.node, idx, case.n).ctx("iceoryx2")?;
             let notify = case.transport != Transport::IoxPoll;
-            let ports = Ports::plant(&services, ctx.sizes.down, notify)
-                .map_err(|e| format!("iceoryx2: {e}"))?;
+            let ports = Ports::plant(&services, ctx.sizes.down, notify).ctx("iceoryx2")?;
             let peers = spawn(ctx, idx, case, None)?;
             if case.transport == Transport::IoxWaitSet {
-                let ws = iox::waitset().map_err(|e| format!("iceoryx2: {e}"))?;
+                let ws = iox::waitset().ctx("iceoryx2")?;
                 let _guard = ws
                     .attach_notification(&ports.listener)
-                    .map_err(|e| format!("iceoryx2: attach listener: {e:?}"))?;
+                    .map_err(|e| CaseError::op("iceoryx2", format!("attach listener: {e:?}")))?;
                 let mut link = IoxLink::new(&ports, Some(&ws), u32::MAX, ctx.sizes.down);
                 measure(ctx, case, &mut link, peers)
             } else {
@@ -113,28 +112,25 @@ fn run_pinned(ctx: &Ctx, idx: usize, case: &Case) -> Result<Histogram<u64>, Stri
             }
         }
         Transport::Uds => {
-            let addr = sock::uds_addr(ctx.prefix, idx, None).map_err(|e| format!("uds: {e}"))?;
-            let s = sock::bind_uds(&addr).map_err(|e| format!("uds bind: {e}"))?;
-            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait)
-                .map_err(|e| format!("uds: {e}"))?;
+            let addr = sock::uds_addr(ctx.prefix, idx, None).ctx("uds")?;
+            let s = sock::bind_uds(&addr).ctx("uds bind")?;
+            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait).ctx("uds")?;
             let peers = spawn(ctx, idx, case, None)?;
             measure(ctx, case, &mut link, peers)
         }
         Transport::Udp => {
-            let s = sock::bind_udp(0).map_err(|e| format!("udp bind: {e}"))?;
-            let port = s.local_addr().map_err(|e| format!("udp: {e}"))?.port();
-            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait)
-                .map_err(|e| format!("udp: {e}"))?;
+            let s = sock::bind_udp(0).ctx("udp bind")?;
+            let port = s.local_addr().ctx("udp")?.port();
+            let mut link = SockLink::plant(s, case.n, ctx.sizes.down, case.wait).ctx("udp")?;
             let peers = spawn(ctx, idx, case, Some(port))?;
             measure(ctx, case, &mut link, peers)
         }
-        Transport::Zenoh => Err("zenoh is measured by its own cases (bench::zenoh)".into()),
+        Transport::Zenoh => Err(CaseError::ZenohCase),
     }
 }
 
-fn spawn(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Result<Peers, String> {
-    Peers::spawn(agent_args(ctx, idx, case, udp_port))
-        .map_err(|e| format!("spawn peer processes: {e}"))
+fn spawn(ctx: &Ctx, idx: usize, case: &Case, udp_port: Option<u16>) -> Result<Peers, CaseError> {
+    Peers::spawn(agent_args(ctx, idx, case, udp_port)).ctx("spawn peer processes")
 }
 
 fn measure(
@@ -142,7 +138,7 @@ fn measure(
     case: &Case,
     link: &mut dyn Link,
     peers: Peers,
-) -> Result<Histogram<u64>, String> {
+) -> Result<Histogram<u64>, CaseError> {
     let grace = EXIT_GRACE + EXIT_GRACE_PER_PEER * case.n as u32;
     measure_with(ctx, (case.n, case.wait), link, peers, grace)
 }
@@ -155,7 +151,7 @@ pub fn measure_with(
     link: &mut dyn Link,
     peers: Peers,
     grace: Duration,
-) -> Result<Histogram<u64>, String> {
+) -> Result<Histogram<u64>, CaseError> {
     let peers = RefCell::new(peers);
     let last_check = Cell::new(Instant::now());
     let alive = || {
@@ -167,9 +163,6 @@ pub fn measure_with(
         peers.borrow_mut().all_alive()
     };
     let hist = link::run_plant(link, replies, wait, ctx.budget, &alive)?;
-    peers
-        .into_inner()
-        .finish(grace)
-        .map_err(|e| format!("peers: {e}"))?;
+    peers.into_inner().finish(grace).ctx("peers")?;
     Ok(hist)
 }

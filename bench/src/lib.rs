@@ -17,6 +17,7 @@
 //!   `formation host` daemon on loopback); [`versus`]: the split step against that fan-out.
 
 mod case;
+pub mod error;
 mod iox;
 mod link;
 mod lockstep;
@@ -36,6 +37,7 @@ mod zenoh;
 
 pub use peer::{main as peer_main, PeerArgs};
 
+use error::ArgError;
 use formation_config::node::ipc as fipc;
 use formation_config::protocol::services::run_prefix;
 use formation_runtime::cli::EXIT_INVALID;
@@ -164,57 +166,57 @@ fn host_main(args: &BenchArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-fn parse_transports(s: &str) -> Result<Vec<Transport>, String> {
+fn parse_transports(s: &str) -> Result<Vec<Transport>, ArgError> {
     s.split(',')
         .map(str::trim)
         .filter(|p| !p.is_empty())
-        .map(|p| Transport::parse(p).ok_or_else(|| format!("unknown transport '{p}'")))
+        .map(|p| Transport::parse(p).ok_or_else(|| ArgError::Transport(p.to_string())))
         .collect()
 }
 
 /// The plan input of each N of `--n`, in order (a repeated N counts once).
-fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<Vec<PlanInput>, String> {
+fn validate(a: &BenchArgs, allowed: &[usize]) -> Result<Vec<PlanInput>, ArgError> {
     if a.n.is_empty() {
-        return Err("--n needs at least one number".into());
+        return Err(ArgError::NoN);
     }
-    if let Some(n) = a.n.iter().find(|&&n| n == 0 || n > MAX_N) {
-        return Err(format!("--n must be in 1..={MAX_N}, got {n}"));
+    if let Some(&n) = a.n.iter().find(|&&n| n == 0 || n > MAX_N) {
+        return Err(ArgError::N { n, max: MAX_N });
     }
-    if let Some(p) = a
+    if let Some(got) = a
         .payload
         .filter(|p| !(MIN_PAYLOAD..=MAX_PAYLOAD).contains(p))
     {
-        return Err(format!(
-            "--payload must be in {MIN_PAYLOAD}..={MAX_PAYLOAD} bytes, got {p}"
-        ));
+        return Err(ArgError::Payload {
+            got,
+            min: MIN_PAYLOAD,
+            max: MAX_PAYLOAD,
+        });
     }
     if !a.seconds.is_finite() || a.seconds <= 0.0 || a.seconds > 3600.0 {
-        return Err(format!("--seconds must be in (0, 3600], got {}", a.seconds));
+        return Err(ArgError::Seconds(a.seconds));
     }
     if !(1..=MAX_ROUNDS).contains(&a.rounds) {
-        return Err(format!(
-            "--rounds must be in 1..={MAX_ROUNDS}, got {}",
-            a.rounds
-        ));
+        return Err(ArgError::Rounds {
+            got: a.rounds,
+            max: MAX_ROUNDS,
+        });
     }
     if a.spin_us > 1_000_000 {
-        return Err(format!(
-            "--spin-us must be at most 1000000, got {}",
-            a.spin_us
-        ));
+        return Err(ArgError::SpinUs(a.spin_us));
     }
     let cpus = a
         .cpu
         .as_deref()
         .map(|s| formation_runtime::cpus::parse_list(s, allowed))
-        .transpose()?;
+        .transpose()
+        .map_err(ArgError::Cpu)?;
     let only = match a.transports.as_deref() {
         Some(s) => parse_transports(s)?,
         None => Vec::new(),
     };
     #[cfg(not(feature = "multihost"))]
     if only.contains(&Transport::Zenoh) {
-        return Err(ZENOH_NEEDS_MULTIHOST.into());
+        return Err(ArgError::ZenohNeedsMultihost);
     }
     let mut ns: Vec<usize> = Vec::new();
     for &n in &a.n {
@@ -277,7 +279,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         Ok(i) => i,
         Err(e) => {
             eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
+            return ExitCode::from(e.exit_code());
         }
     };
     let (cases, skipped) = plan_all(&inputs);

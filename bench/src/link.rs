@@ -3,6 +3,7 @@
 //! step, reply).
 
 use super::procs;
+use crate::error::{CaseError, ResultExt};
 use hdrhistogram::Histogram;
 use std::io;
 use std::time::{Duration, Instant};
@@ -160,7 +161,7 @@ pub fn run_plant(
     wait: Wait,
     budget: Budget,
     peers_alive: &dyn Fn() -> bool,
-) -> Result<Histogram<u64>, String> {
+) -> Result<Histogram<u64>, CaseError> {
     let give_up = || procs::aborted() || !peers_alive();
     collect(
         link,
@@ -170,24 +171,21 @@ pub fn run_plant(
         Instant::now() + STEP_TIMEOUT * 4,
         &give_up,
     )
-    .map_err(|e| format!("handshake: {e}"))?;
-    let mut hist = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3)
-        .map_err(|e| format!("histogram: {e}"))?;
+    .ctx("handshake")?;
+    let mut hist = Histogram::<u64>::new_with_bounds(1, 60_000_000_000, 3).ctx("histogram")?;
     let start = Instant::now();
     let mut seq: u64 = 0;
     let mut measuring_since: Option<Instant> = None;
     loop {
         let t0 = Instant::now();
-        link.send(seq)
-            .map_err(|e| format!("send step {seq}: {e}"))?;
-        collect(link, seq, n, wait, t0 + STEP_TIMEOUT, &give_up)
-            .map_err(|e| format!("step {seq}: {e}"))?;
+        link.send(seq).ctx(format!("send step {seq}"))?;
+        collect(link, seq, n, wait, t0 + STEP_TIMEOUT, &give_up).ctx(format!("step {seq}"))?;
         let dt = t0.elapsed();
         let now = Instant::now();
         match measuring_since {
             Some(since) => {
                 hist.record((dt.as_nanos() as u64).max(1))
-                    .map_err(|e| format!("histogram: {e}"))?;
+                    .ctx("histogram")?;
                 if now.duration_since(since) >= budget.measure {
                     break;
                 }
@@ -202,7 +200,7 @@ pub fn run_plant(
         }
         seq += 1;
     }
-    link.send(STOP).map_err(|e| format!("send stop: {e}"))?;
+    link.send(STOP).ctx("send stop")?;
     Ok(hist)
 }
 
@@ -214,18 +212,14 @@ fn collect(
     wait: Wait,
     deadline: Instant,
     give_up: &dyn Fn() -> bool,
-) -> Result<(), String> {
+) -> Result<(), CaseError> {
     let mut got = 0;
     while got < n {
-        match recv(link, wait, deadline, give_up).map_err(|e| format!("receive: {e}"))? {
+        match recv(link, wait, deadline, give_up).ctx("receive")? {
             Some(m) if m.seq == seq => got += 1,
             Some(_) => {}
-            None if procs::aborted() => return Err("interrupted".into()),
-            None => {
-                return Err(format!(
-                    "{got} of {n} replies arrived (timeout or a peer process died)"
-                ))
-            }
+            None if procs::aborted() => return Err(CaseError::Interrupted),
+            None => return Err(CaseError::Replies { got, n }),
         }
     }
     Ok(())
@@ -233,20 +227,18 @@ fn collect(
 
 /// Agent side of a case: sends HELLO, then replies to every step until STOP, until the parent
 /// process is gone, or until no step came for [`AGENT_IDLE_TIMEOUT`].
-pub fn run_agent(link: &mut dyn Link, wait: Wait) -> Result<(), String> {
+pub fn run_agent(link: &mut dyn Link, wait: Wait) -> Result<(), CaseError> {
     let parent = procs::parent_pid();
     let orphaned = move || procs::parent_pid() != parent;
-    link.send(HELLO).map_err(|e| format!("send hello: {e}"))?;
+    link.send(HELLO).ctx("send hello")?;
     loop {
         let deadline = Instant::now() + AGENT_IDLE_TIMEOUT;
-        match recv(link, wait, deadline, &orphaned).map_err(|e| format!("receive: {e}"))? {
+        match recv(link, wait, deadline, &orphaned).ctx("receive")? {
             Some(m) if m.seq == STOP => return Ok(()),
             Some(m) if m.seq == HELLO => {}
-            Some(m) => link
-                .send(m.seq)
-                .map_err(|e| format!("reply {}: {e}", m.seq))?,
-            None if orphaned() => return Err("parent process is gone".into()),
-            None => return Err("no step arrived in time".into()),
+            Some(m) => link.send(m.seq).ctx(format!("reply {}", m.seq))?,
+            None if orphaned() => return Err(CaseError::Orphaned),
+            None => return Err(CaseError::Idle),
         }
     }
 }

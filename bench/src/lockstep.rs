@@ -5,6 +5,7 @@
 
 use super::link::Sizes;
 use super::row::Row;
+use crate::error::{CaseError, ResultExt};
 use formation_runtime::WARMUP_STEPS;
 use serde::Serialize;
 use serde_json::Value;
@@ -23,10 +24,10 @@ const BENCH_STALL_TIMEOUT_MS: u64 = 60_000;
 /// Runs `formation run` with `n` agents for about `seconds` of steady state (plus the warm-up) in
 /// `scratch`, and returns its row. `n = 5` runs the paper scenario; other `n` a generated path
 /// scenario (`formation scenario --n N`).
-pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
+pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, CaseError> {
     let out = scratch.join(format!("lockstep-n{n}"));
     let _ = std::fs::remove_dir_all(&out);
-    std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+    std::fs::create_dir_all(&out).map_err(|e| CaseError::file(&out, e))?;
     let mut args: Vec<OsString> = Vec::new();
     if n != 5 {
         let scenario = formation_analysis::scenario_gen::generate(
@@ -34,18 +35,20 @@ pub fn run(n: usize, seconds: f64, scratch: &Path) -> Result<Row, String> {
                 n,
                 formation_analysis::scenario_gen::graphs::GraphKind::Path,
             ),
-        )?;
+        )
+        .map_err(CaseError::below)?;
         let path = out.join("scenario-in.toml");
-        let text = toml::to_string(&scenario).map_err(|e| format!("scenario: {e}"))?;
-        std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let text = toml::to_string(&scenario).ctx("scenario")?;
+        std::fs::write(&path, text).map_err(|e| CaseError::file(&path, e))?;
         args.push(path.into());
     }
     // Placed like the fan-out it is set against (`block/pinned/batch`), whatever the load.
     args.extend(["--pin".into(), "always".into()]);
     let steps = WARMUP_STEPS as f64 + seconds * EXPECTED_AGENT_STEPS_PER_S / n as f64;
     let (summary, _) = run_formation(args, steps, &out)?;
-    let row = row(n, &summary["timing"])
-        .ok_or_else(|| format!("{} has no lockstep step timing", out.display()))?;
+    let row = row(n, &summary["timing"]).ok_or_else(|| CaseError::NoTiming {
+        what: out.display().to_string(),
+    })?;
     let _ = std::fs::remove_dir_all(&out);
     Ok(row)
 }
@@ -57,8 +60,8 @@ pub fn run_formation(
     args: Vec<OsString>,
     steps: f64,
     out: &Path,
-) -> Result<(Value, String), String> {
-    let exe = std::env::current_exe().map_err(|e| format!("cannot locate formation: {e}"))?;
+) -> Result<(Value, String), CaseError> {
+    let exe = std::env::current_exe().ctx("cannot locate formation")?;
     let dt = formation_config::Scenario::paper().simulation.dt_s;
     let duration_s = (steps * dt).ceil();
     let output = Command::new(exe)
@@ -76,16 +79,18 @@ pub fn run_formation(
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .output()
-        .map_err(|e| format!("cannot start formation run: {e}"))?;
+        .ctx("cannot start formation run")?;
     let err = String::from_utf8_lossy(&output.stderr).into_owned();
     if !output.status.success() {
         let last = err.lines().last().unwrap_or("").trim();
-        return Err(format!("formation run failed ({}): {last}", output.status));
+        return Err(CaseError::RunFailed {
+            status: output.status,
+            last: last.to_string(),
+        });
     }
     let summary = out.join("summary.json");
-    let text =
-        std::fs::read_to_string(&summary).map_err(|e| format!("{}: {e}", summary.display()))?;
-    let v: Value = serde_json::from_str(&text).map_err(|e| format!("summary.json: {e}"))?;
+    let text = std::fs::read_to_string(&summary).map_err(|e| CaseError::file(&summary, e))?;
+    let v: Value = serde_json::from_str(&text).ctx("summary.json")?;
     Ok((v, err))
 }
 

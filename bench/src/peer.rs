@@ -5,6 +5,7 @@ use super::link::{self, Wait, MAX_PAYLOAD, MIN_PAYLOAD};
 use super::plan::Transport;
 use super::procs;
 use super::sock::{self, SockLink};
+use crate::error::{CaseError, ResultExt};
 use formation_config::node::ipc as fipc;
 use std::net::SocketAddr;
 use std::process::ExitCode;
@@ -100,19 +101,19 @@ pub fn main(a: PeerArgs) -> ExitCode {
     }
 }
 
-fn run(a: &PeerArgs, transport: Transport, wait: Wait) -> Result<(), String> {
+fn run(a: &PeerArgs, transport: Transport, wait: Wait) -> Result<(), CaseError> {
     match transport {
         Transport::IoxEvent | Transport::IoxWaitSet | Transport::IoxPoll => {
             let node = fipc::node(&a.prefix, &format!("bench-agent-{}", a.index))
-                .map_err(|e| e.to_string())?;
-            let services = Services::open(&node, a.case).map_err(|e| e.to_string())?;
+                .map_err(CaseError::below)?;
+            let services = Services::open(&node, a.case).map_err(CaseError::below)?;
             let notify = transport != Transport::IoxPoll;
-            let ports = Ports::agent(&services, a.payload, notify).map_err(|e| e.to_string())?;
+            let ports = Ports::agent(&services, a.payload, notify).map_err(CaseError::below)?;
             if transport == Transport::IoxWaitSet {
-                let ws = iox::waitset().map_err(|e| e.to_string())?;
+                let ws = iox::waitset().map_err(CaseError::below)?;
                 let _guard = ws
                     .attach_notification(&ports.listener)
-                    .map_err(|e| format!("attach listener: {e:?}"))?;
+                    .map_err(|e| CaseError::below(format!("attach listener: {e:?}")))?;
                 link::run_agent(
                     &mut IoxLink::new(&ports, Some(&ws), a.index, a.payload),
                     wait,
@@ -123,24 +124,26 @@ fn run(a: &PeerArgs, transport: Transport, wait: Wait) -> Result<(), String> {
         }
         Transport::Uds => {
             let me = sock::uds_addr(&a.prefix, a.case, Some(a.index as usize))
-                .map_err(|e| e.to_string())?;
-            let plant = sock::uds_addr(&a.prefix, a.case, None).map_err(|e| e.to_string())?;
-            let s = sock::bind_uds(&me).map_err(|e| format!("uds bind: {e}"))?;
+                .map_err(CaseError::below)?;
+            let plant = sock::uds_addr(&a.prefix, a.case, None).map_err(CaseError::below)?;
+            let s = sock::bind_uds(&me).ctx("uds bind")?;
             let mut l =
-                SockLink::agent(s, plant, a.index, a.payload, wait).map_err(|e| e.to_string())?;
+                SockLink::agent(s, plant, a.index, a.payload, wait).map_err(CaseError::below)?;
             link::run_agent(&mut l, wait)
         }
         Transport::Udp => {
-            let port = a.plant_port.ok_or("--plant-port is required for udp")?;
+            let port = a
+                .plant_port
+                .ok_or(CaseError::Missing("--plant-port is required for udp"))?;
             let plant = SocketAddr::from(([127, 0, 0, 1], port));
-            let s = sock::bind_udp(0).map_err(|e| format!("udp bind: {e}"))?;
+            let s = sock::bind_udp(0).ctx("udp bind")?;
             let mut l =
-                SockLink::agent(s, plant, a.index, a.payload, wait).map_err(|e| e.to_string())?;
+                SockLink::agent(s, plant, a.index, a.payload, wait).map_err(CaseError::below)?;
             link::run_agent(&mut l, wait)
         }
         #[cfg(feature = "multihost")]
         Transport::Zenoh => super::zenoh::peer(a),
         #[cfg(not(feature = "multihost"))]
-        Transport::Zenoh => Err(super::ZENOH_NEEDS_MULTIHOST.into()),
+        Transport::Zenoh => Err(CaseError::Missing(super::ZENOH_NEEDS_MULTIHOST)),
     }
 }

@@ -4,6 +4,7 @@
 //! Children die with the parent (`PR_SET_PDEATHSIG` = SIGKILL, set before `exec`), ignore SIGINT
 //! (the parent decides), and time out by themselves if no step arrives.
 
+use crate::error::CaseError;
 use std::io;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
@@ -120,7 +121,7 @@ impl Peers {
 
     /// Waits up to `timeout` for every peer to exit by itself, then kills the rest. Returns an
     /// error naming the peers that failed or had to be killed.
-    pub fn finish(mut self, timeout: Duration) -> Result<(), String> {
+    pub fn finish(mut self, timeout: Duration) -> Result<(), CaseError> {
         let deadline = Instant::now() + timeout;
         let mut failures = Vec::new();
         for (i, c) in std::mem::take(&mut self.children).into_iter().enumerate() {
@@ -133,7 +134,7 @@ impl Peers {
         if failures.is_empty() {
             Ok(())
         } else {
-            Err(failures.join("; "))
+            Err(CaseError::Peers(failures))
         }
     }
 }

@@ -105,6 +105,18 @@ pub fn table(
             "{rounds} rounds: each row is the case's round with the median p50.\n"
         ));
     }
+    push_comparisons(&mut s, all);
+    if let Some(c) = split {
+        s.push_str(&super::versus::text(c));
+    }
+    for (what, why) in skipped {
+        s.push_str(&format!("skipped {what}: {why}\n"));
+    }
+    s
+}
+
+/// The lockstep step against the bare fan-out: one line per comparison, then the fastest per n.
+fn push_comparisons(s: &mut String, all: &[super::lockstep::Comparison]) {
     for (k, c) in all.iter().enumerate() {
         let fastest = k == 0 || all[k - 1].n != c.n;
         let what = if fastest { "fastest bare" } else { "bare" };
@@ -165,11 +177,4 @@ pub fn table(
              (1 ms steps).\n",
         );
     }
-    if let Some(c) = split {
-        s.push_str(&super::versus::text(c));
-    }
-    for (what, why) in skipped {
-        s.push_str(&format!("skipped {what}: {why}\n"));
-    }
-    s
 }

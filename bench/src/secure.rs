@@ -4,6 +4,7 @@
 //! a `user:password` file for `tcp`, a CA and the two hosts' certificate folders for `tls` and
 //! `quic`.
 
+use crate::error::{CaseError, ResultExt};
 use formation_net::bench::SPLIT_HOST;
 use formation_net::cluster::LAUNCHER;
 use formation_net::tls;
@@ -41,9 +42,9 @@ pub struct Secured {
 
 impl Secured {
     /// Makes the credentials of `link` in `dir` (created owner-only; removed on drop).
-    pub fn make(link: ZenohLink, dir: &Path) -> Result<Secured, String> {
+    pub fn make(link: ZenohLink, dir: &Path) -> Result<Secured, CaseError> {
         let _ = std::fs::remove_dir_all(dir);
-        formation_config::node::files::ensure_private_dir(dir).map_err(|e| e.to_string())?;
+        formation_config::node::files::ensure_private_dir(dir).map_err(CaseError::below)?;
         let s = Secured {
             link,
             dir: dir.to_path_buf(),
@@ -53,23 +54,23 @@ impl Secured {
                 let mut secret = [0u8; 16];
                 std::fs::File::open("/dev/urandom")
                     .and_then(|mut f| f.read_exact(&mut secret))
-                    .map_err(|e| format!("/dev/urandom: {e}"))?;
+                    .ctx("/dev/urandom")?;
                 let hex: String = secret.iter().map(|b| format!("{b:02x}")).collect();
                 let mut f = formation_config::node::files::create_new(&s.auth_file(), 0o600)
-                    .map_err(|e| format!("{}: {e}", s.auth_file().display()))?;
+                    .map_err(|e| CaseError::file(&s.auth_file(), e))?;
                 std::io::Write::write_all(&mut f, format!("bench:{hex}\n").as_bytes())
-                    .map_err(|e| format!("{}: {e}", s.auth_file().display()))?;
+                    .map_err(|e| CaseError::file(&s.auth_file(), e))?;
             }
             ZenohLink::Tls | ZenohLink::Quic => {
                 let ca = dir.join("ca");
-                tls::init(&ca).map_err(|e| e.to_string())?;
+                tls::init(&ca).map_err(CaseError::below)?;
                 for name in [LAUNCHER, SPLIT_HOST] {
                     let what = tls::Issue {
                         name: name.to_string(),
                         addrs: vec![std::net::IpAddr::from([127, 0, 0, 1])],
                         dns: vec![],
                     };
-                    tls::issue(&ca, &what, &dir.join(name)).map_err(|e| e.to_string())?;
+                    tls::issue(&ca, &what, &dir.join(name)).map_err(CaseError::below)?;
                 }
             }
         }
@@ -82,7 +83,7 @@ impl Secured {
 
     /// An endpoint of 127.0.0.1 on a port free a moment ago (a UDP port for `quic`, TCP
     /// otherwise): the peer listens on it.
-    pub fn free_endpoint(&self) -> Result<String, String> {
+    pub fn free_endpoint(&self) -> Result<String, CaseError> {
         let any = ("127.0.0.1", 0);
         let port = match self.link {
             ZenohLink::Quic => std::net::UdpSocket::bind(any).and_then(|s| s.local_addr()),
@@ -91,7 +92,7 @@ impl Secured {
             }
         }
         .map(|a| a.port())
-        .map_err(|e| format!("no free port on 127.0.0.1: {e}"))?;
+        .ctx("no free port on 127.0.0.1")?;
         Ok(format!("{}/127.0.0.1:{port}", self.link.name()))
     }
 

@@ -16,6 +16,7 @@
 use super::lockstep::{self, row_as};
 use super::row::Row;
 use super::secure::Secured;
+use crate::error::{CaseError, ResultExt};
 use formation_net::bench::{SPLIT_AGENTS, SPLIT_HOST};
 use formation_runtime::WARMUP_STEPS;
 use std::ffi::OsString;
@@ -61,17 +62,22 @@ struct Daemon {
 }
 
 impl Daemon {
-    fn start(exe: &Path, endpoint: &str, creds: &[String], dir: &Path) -> Result<Daemon, String> {
+    fn start(
+        exe: &Path,
+        endpoint: &str,
+        creds: &[String],
+        dir: &Path,
+    ) -> Result<Daemon, CaseError> {
         let runtime = dir.join("runtime");
         std::fs::DirBuilder::new()
             .recursive(true)
             .mode(0o700)
             .create(&runtime)
-            .map_err(|e| format!("{}: {e}", runtime.display()))?;
+            .map_err(|e| CaseError::file(&runtime, e))?;
         std::fs::set_permissions(&runtime, std::fs::Permissions::from_mode(0o700))
-            .map_err(|e| format!("{}: {e}", runtime.display()))?;
+            .map_err(|e| CaseError::file(&runtime, e))?;
         let log = dir.join("daemon.log");
-        let file = std::fs::File::create(&log).map_err(|e| format!("{}: {e}", log.display()))?;
+        let file = std::fs::File::create(&log).map_err(|e| CaseError::file(&log, e))?;
         let mut cmd = Command::new("unshare");
         // SAFETY: geteuid has no preconditions.
         if unsafe { libc::geteuid() } != 0 {
@@ -96,7 +102,7 @@ impl Daemon {
         super::procs::die_with_bench(&mut cmd, std::process::id() as i32);
         let child = cmd
             .spawn()
-            .map_err(|e| format!("cannot start `unshare` for the host daemon: {e}"))?;
+            .ctx("cannot start `unshare` for the host daemon")?;
         let mut d = Daemon { child, log };
         let t0 = Instant::now();
         loop {
@@ -111,13 +117,10 @@ impl Daemon {
                 } else {
                     last()
                 };
-                return Err(format!("the host daemon exited ({st}): {why}"));
+                return Err(CaseError::DaemonExited { status: st, why });
             }
             if t0.elapsed() > DAEMON_START || super::procs::aborted() {
-                return Err(format!(
-                    "the host daemon did not listen in time: {}",
-                    last()
-                ));
+                return Err(CaseError::DaemonSlow(last()));
             }
             std::thread::sleep(Duration::from_millis(20));
         }
@@ -159,17 +162,17 @@ fn prefix_of(stderr: &str) -> Option<String> {
 }
 
 /// Runs the split lockstep for about `seconds` of steady state (plus the warm-up) in `scratch`.
-pub fn run(seconds: f64, scratch: &Path, sec: &Secured) -> Result<Split, String> {
-    let exe = std::env::current_exe().map_err(|e| format!("cannot locate formation: {e}"))?;
+pub fn run(seconds: f64, scratch: &Path, sec: &Secured) -> Result<Split, CaseError> {
+    let exe = std::env::current_exe().ctx("cannot locate formation")?;
     let dir = scratch.join("split");
     let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(|e| CaseError::file(&dir, e))?;
     let result = run_in(&exe, seconds, &dir, sec);
     let _ = std::fs::remove_dir_all(&dir);
     result
 }
 
-fn run_in(exe: &Path, seconds: f64, dir: &Path, sec: &Secured) -> Result<Split, String> {
+fn run_in(exe: &Path, seconds: f64, dir: &Path, sec: &Secured) -> Result<Split, CaseError> {
     let endpoint = sec.free_endpoint()?;
     let daemon = Daemon::start(exe, &endpoint, &sec.args(SPLIT_HOST), dir)?;
     let out = dir.join("run");
@@ -192,20 +195,22 @@ fn run_in(exe: &Path, seconds: f64, dir: &Path, sec: &Secured) -> Result<Split, 
         let mut log = String::new();
         let _ = std::fs::File::open(&daemon.log).and_then(|mut f| f.read_to_string(&mut log));
         let last = log.lines().last().unwrap_or("").trim().to_string();
-        format!("{e} (host daemon: {last})")
+        CaseError::Split {
+            run: Box::new(e),
+            last,
+        }
     })?;
     drop(daemon);
     if !left.is_empty() {
-        return Err(format!(
-            "the run left {} file(s) in the host daemon's /dev/shm: {}",
-            left.len(),
-            left.join(" ")
-        ));
+        return Err(CaseError::Residue(left));
     }
     let n = formation_net::bench::paper_split().agent_hosts.len();
     let wait = format!("{}{}", super::versus::SPLIT_WAIT, place_arg());
-    let row = row_as((super::versus::ZENOH, &wait), n, &summary["timing"])
-        .ok_or_else(|| "the split run's summary.json has no lockstep step timing".to_string())?;
+    let row = row_as((super::versus::ZENOH, &wait), n, &summary["timing"]).ok_or_else(|| {
+        CaseError::NoTiming {
+            what: "the split run's summary.json".to_string(),
+        }
+    })?;
     Ok(Split {
         row,
         prefix: prefix_of(&stderr),

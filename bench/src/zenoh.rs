@@ -18,6 +18,7 @@ use super::procs::Peers;
 use super::row::Row;
 use super::secure::Secured;
 use super::PeerArgs;
+use crate::error::{CaseError, ResultExt};
 use formation_net::bench::{self as zb, Records, Side, StepPattern};
 use formation_net::cluster::LAUNCHER;
 use std::io;
@@ -61,7 +62,7 @@ struct ZenohLink {
     hello: bool,
 }
 
-fn other(e: String) -> io::Error {
+fn other(e: impl Into<crate::error::Source>) -> io::Error {
     io::Error::other(e)
 }
 
@@ -69,7 +70,7 @@ impl ZenohLink {
     fn read(&mut self, frame: Option<Vec<u8>>) -> io::Result<Option<Msg>> {
         let Some(f) = frame else { return Ok(None) };
         self.hello = false;
-        let m = Msg::decode(&f).ok_or_else(|| other("a message shorter than its header".into()))?;
+        let m = Msg::decode(&f).ok_or_else(|| other("a message shorter than its header"))?;
         if let (Some(expect), true) = (&self.expect, m.seq < link::HELLO) {
             expect
                 .check(f.get(HEADER..).unwrap_or_default())
@@ -126,13 +127,13 @@ fn tag(prefix: &str, idx: usize) -> String {
 }
 
 /// The step pattern of the paper's split placement.
-fn split_step() -> Result<StepPattern, String> {
-    StepPattern::of(&zb::paper_split(), zb::SPLIT_HOST)
+fn split_step() -> Result<StepPattern, CaseError> {
+    StepPattern::of(&zb::paper_split(), zb::SPLIT_HOST).map_err(CaseError::below)
 }
 
 /// Measures bare Zenoh case number `idx`; its row (`n`: 1 for ping-pong, the split run's N for
 /// the fan-out; sizes: the frames' for the fan-out).
-pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern, sec: &Secured) -> Result<Row, String> {
+pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern, sec: &Secured) -> Result<Row, CaseError> {
     let endpoint = sec.free_endpoint()?;
     let (body, expect, sizes, n) = match pattern {
         Pattern::PingPong => (Body::Filler(ctx.sizes.down), None, ctx.sizes, 1),
@@ -167,11 +168,12 @@ pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern, sec: &Secured) -> Result<Row
     .into_iter()
     .chain(sec.args(zb::SPLIT_HOST))
     .collect();
-    let peers = Peers::spawn(vec![args]).map_err(|e| format!("spawn the peer process: {e}"))?;
+    let peers = Peers::spawn(vec![args]).ctx("spawn the peer process")?;
     let mut l = ZenohLink {
         link: {
             let (auth, tls) = sec.of(LAUNCHER);
-            zb::Link::open(Side::Launcher, &endpoint, &tag(ctx.prefix, idx), auth, tls)?
+            zb::Link::open(Side::Launcher, &endpoint, &tag(ctx.prefix, idx), auth, tls)
+                .map_err(CaseError::below)?
         },
         body,
         expect,
@@ -188,16 +190,18 @@ pub fn run(ctx: &Ctx, idx: usize, pattern: Pattern, sec: &Secured) -> Result<Row
 }
 
 /// The peer side (`formation bench-peer --transport zenoh`): the other host of the case.
-pub fn peer(a: &PeerArgs) -> Result<(), String> {
+pub fn peer(a: &PeerArgs) -> Result<(), CaseError> {
     let endpoint = a
         .endpoint
         .as_deref()
-        .ok_or("--endpoint is required for zenoh")?;
+        .ok_or(CaseError::Missing("--endpoint is required for zenoh"))?;
     let pattern = a
         .pattern
         .as_deref()
         .and_then(parse_pattern)
-        .ok_or("--pattern ping-pong or fan-out is required for zenoh")?;
+        .ok_or(CaseError::Missing(
+            "--pattern ping-pong or fan-out is required for zenoh",
+        ))?;
     let (body, expect) = match pattern {
         Pattern::PingPong => (Body::Filler(a.payload), None),
         Pattern::FanOut => {
@@ -212,7 +216,8 @@ pub fn peer(a: &PeerArgs) -> Result<(), String> {
             &tag(&a.prefix, a.case),
             a.auth.clone(),
             a.tls.clone(),
-        )?,
+        )
+        .map_err(CaseError::below)?,
         body,
         expect,
         from: a.index,

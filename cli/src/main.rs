@@ -15,7 +15,10 @@ use std::process::ExitCode;
 
 use formation_analysis::{check, plot, scenario_gen, sweep};
 use formation_bench as bench;
-use formation_runtime::{cli, live, role, run, schema, sim};
+use formation_live::error::LiveError;
+use formation_live::{inject, inspect, ps, schema};
+use formation_runtime::error::CommandError;
+use formation_runtime::{cli, role, run, sim};
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -66,17 +69,17 @@ enum Command {
     Bench(bench::BenchArgs),
     /// List the running runs and their processes (role, agent, pid, alive, CPU share, progress).
     #[command(after_help = "Examples:\n  formation ps\n  formation ps --json")]
-    Ps(live::ps::PsArgs),
+    Ps(ps::PsArgs),
     /// Show one agent's live telemetry (agent ids are 1-based).
     #[command(
         after_help = "Examples:\n  formation inspect --agent 2\n  formation inspect --agent 2 --follow\n  formation inspect --agent 2 --run 3d2cb2b7 --json"
     )]
-    Inspect(live::inspect::InspectArgs),
+    Inspect(inspect::InspectArgs),
     /// Inject an actuator fault or a delay profile into a running run (agent ids are 1-based).
     #[command(
         after_help = "Examples:\n  formation inject fault --agent 2 --gamma 0.5,0.5,0.5 --delta 0,0,0\n  formation inject delay --agent 3 --tau '0.02+0.01*sin(0.5*t)' --at 30\n  formation inject fault --agent 1 --gamma 0.6,0.6,0.6 --delta 0.1,0,0 --json"
     )]
-    Inject(live::inject::InjectArgs),
+    Inject(inject::InjectArgs),
     /// Print every service of a run (name pattern, message type and iceoryx2 type name, size,
     /// alignment, senders, receivers, limits) from the service table.
     #[command(
@@ -97,20 +100,20 @@ enum Command {
     #[command(
         after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tls/0.0.0.0:7447 --tls /etc/formation/tls"
     )]
-    Host(formation_runtime::hosts::HostArgs),
+    Host(formation_host::HostArgs),
     /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation hosts\n  formation hosts --connect tls/10.0.0.2:7447 --tls ~/.formation/tls --json"
     )]
-    Hosts(formation_runtime::hosts::HostsArgs),
+    Hosts(formation_host::HostsArgs),
     /// Make a certificate authority and per-host certificates for mutual TLS between hosts
     /// (tls/HOST:PORT and quic/HOST:PORT endpoints, --tls DIR; docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[command(
         after_help = "Examples:\n  formation certs init --dir ~/formation-ca\n  formation certs issue --dir ~/formation-ca --name b --addr 10.0.0.2 --out b-tls\n  formation certs issue --dir ~/formation-ca --name a --out a-tls"
     )]
-    Certs(formation_runtime::hosts::CertsArgs),
+    Certs(formation_host::CertsArgs),
     /// Internal: one role process of `formation run` (plant, leader or agent), started by the
     /// orchestrator from this same executable.
     #[command(hide = true)]
@@ -138,31 +141,96 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     match cli.command {
-        Some(Command::Sim(a)) => sim::main(a),
-        Some(Command::Run(a)) => run::main(a),
+        Some(Command::Sim(a)) => ended(sim::main(a)),
+        Some(Command::Run(a)) => ended(run::main(a)),
         Some(Command::Scenario(a)) => scenario_gen::main(a),
         Some(Command::Sweep(a)) => sweep::main(a),
         Some(Command::Plot(a)) => plot::main(a),
         Some(Command::Check(a)) => check::main(a),
         Some(Command::Bench(a)) => bench::main(a),
-        Some(Command::Ps(a)) => live::ps::main(a),
-        Some(Command::Inspect(a)) => live::inspect::main(a),
-        Some(Command::Inject(a)) => live::inject::main(a),
-        Some(Command::Schema(a)) => schema::main(a),
+        Some(Command::Ps(a)) => ended(ps::main(a)),
+        Some(Command::Inspect(a)) => ended(inspect::main(a)),
+        Some(Command::Inject(a)) => ended(inject::main(a)),
+        Some(Command::Schema(a)) => ended(schema::main(a)),
         Some(Command::Completions(a)) => {
             completions(a.shell, &mut std::io::stdout());
             ExitCode::SUCCESS
         }
         Some(Command::BenchPeer(a)) => bench::peer_main(a),
-        Some(Command::Node(a)) => role::main(a),
+        Some(Command::Node(a)) => ended(role::main(a)),
         #[cfg(feature = "multihost")]
-        Some(Command::Host(a)) => formation_runtime::hosts::host_main(a),
+        Some(Command::Host(a)) => formation_host::host_main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Hosts(a)) => formation_runtime::hosts::hosts_main(a),
+        Some(Command::Hosts(a)) => formation_host::hosts_main(a),
         #[cfg(feature = "multihost")]
-        Some(Command::Certs(a)) => formation_runtime::hosts::certs_main(a),
+        Some(Command::Certs(a)) => formation_host::certs_main(a),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
-        None => run::main(cli::defaults::<run::RunArgs>("run")),
+        None => ended(run::main(cli::defaults::<run::RunArgs>("run"))),
+    }
+}
+
+/// The exit code of a command whose failure is typed (`sim`, `run`, `node`, `ps`, `inspect`,
+/// `inject`, `schema`), its error said on stderr: the one place that maps those errors to exit
+/// codes (docs/cli.md).
+fn ended<E: Failure>(result: Result<(), E>) -> ExitCode {
+    let Err(e) = result else {
+        return ExitCode::SUCCESS;
+    };
+    if !e.already_said() {
+        eprintln!("{e}");
+    }
+    ExitCode::from(e.exit_code())
+}
+
+/// A command's failure: its message and exit code.
+trait Failure: std::fmt::Display {
+    /// 2 for bad input, 3 for a result that is a failure, 130 after Ctrl-C, 1 for anything that
+    /// failed.
+    fn exit_code(&self) -> u8;
+    /// Whether the message is on stderr already.
+    fn already_said(&self) -> bool {
+        false
+    }
+}
+
+impl Failure for LiveError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            LiveError::Registry(_)
+            | LiveError::Access(_)
+            | LiveError::Agent(_)
+            | LiveError::Request(_)
+            | LiveError::AgentCount { .. } => cli::EXIT_INVALID,
+            LiveError::Inspect(_) | LiveError::Confirm(_) | LiveError::Json(_) => 1,
+        }
+    }
+}
+
+impl Failure for CommandError {
+    fn already_said(&self) -> bool {
+        CommandError::already_said(self)
+    }
+
+    fn exit_code(&self) -> u8 {
+        command_exit_code(self)
+    }
+}
+
+/// 2 for bad input, 3 for a run that diverged, 130 after Ctrl-C, 1 for anything that failed.
+fn command_exit_code(e: &CommandError) -> u8 {
+    match e {
+        CommandError::Input(_)
+        | CommandError::Plan(_)
+        | CommandError::OutFolder(_)
+        | CommandError::UnknownRole(_)
+        | CommandError::NodeArgs { .. } => cli::EXIT_INVALID,
+        CommandError::Diverged(_) => cli::EXIT_RESULT_FAILED,
+        CommandError::Interrupted(_) => cli::EXIT_INTERRUPTED,
+        CommandError::WriteScenario { .. }
+        | CommandError::WriteOutputs { .. }
+        | CommandError::Run(_)
+        | CommandError::Died
+        | CommandError::Node { .. } => 1,
     }
 }
 
@@ -172,6 +240,43 @@ mod tests {
 
     fn parse(args: &[&str]) -> Result<Cli, clap::Error> {
         Cli::try_parse_from(std::iter::once("formation").chain(args.iter().copied()))
+    }
+
+    #[test]
+    fn each_failure_has_the_exit_code_docs_cli_md_gives_it() {
+        use formation_live::error::ConfirmError;
+        use formation_runtime::cli::InputError;
+        use formation_runtime::record::metrics::Divergence;
+        let bad = CommandError::Input(InputError::Variant("x".into()));
+        assert_eq!((bad.exit_code(), bad.already_said()), (2, false));
+        let diverged = CommandError::Diverged(Divergence {
+            time_s: 1.0,
+            agent: 2,
+            cause: "nn_norm".into(),
+        });
+        assert_eq!(diverged.exit_code(), 3);
+        assert!(diverged
+            .to_string()
+            .starts_with("diverged: t = 1.000 s, agent 2"));
+        let stopped = CommandError::Interrupted("out".into());
+        assert_eq!(stopped.exit_code(), 130);
+        assert_eq!(
+            (
+                CommandError::Died.exit_code(),
+                CommandError::Died.already_said()
+            ),
+            (1, true)
+        );
+        let count = LiveError::AgentCount { n: 0, max: 128 };
+        assert_eq!(count.exit_code(), 2);
+        assert_eq!(
+            count.to_string(),
+            "error: --n 0: must be within 1..=128 agents"
+        );
+        assert_eq!(
+            LiveError::Confirm(ConfirmError::Ended("r".into())).exit_code(),
+            1
+        );
     }
 
     #[test]
@@ -197,7 +302,7 @@ mod tests {
         let Some(Command::Inject(a)) = cli.command else {
             panic!("inject")
         };
-        let live::inject::InjectWhat::Fault(f) = a.what else {
+        let inject::InjectWhat::Fault(f) = a.what else {
             panic!("fault")
         };
         assert_eq!(f.delta, vec![-0.1, 0.0, -0.2]);

@@ -58,6 +58,8 @@ impl std::fmt::Display for SecretError {
     }
 }
 
+impl std::error::Error for SecretError {}
+
 impl RunSecret {
     /// A new secret from the operating system's generator (`getrandom`).
     pub fn generate() -> Result<RunSecret, SecretError> {
@@ -148,6 +150,8 @@ impl std::fmt::Display for ProofError {
         }
     }
 }
+
+impl std::error::Error for ProofError {}
 
 /// The keys of one run (see the module documentation).
 #[derive(Clone)]

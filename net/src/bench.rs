@@ -14,6 +14,53 @@
 //!   reads it).
 
 use crate::bridge::{self, parse_frame, Record};
+use crate::error::ZenohError;
+
+/// A frame that is not the one a [`StepPattern`] expects: what differs.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FrameMismatch {
+    /// The body does not parse as a bridge frame.
+    #[error(transparent)]
+    Parse(#[from] bridge::RecordError),
+    /// The first record is not the sending host.
+    #[error("a frame without its sending host")]
+    NoSender,
+    /// Another record where a sample or event of a service was expected.
+    #[error("expected {what} of {name}, got {got}")]
+    Expected {
+        /// `a sample` or `an event`.
+        what: &'static str,
+        /// The service expected.
+        name: String,
+        /// The record found (or `None`).
+        got: String,
+    },
+    /// A record after the expected ones.
+    #[error("an unexpected record {0}")]
+    Unexpected(String),
+}
+
+/// Why the step pattern of a host cannot be made.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StepError {
+    /// The host holds no agent of the placement.
+    #[error("no agent of the placement is on host {0}")]
+    NoAgentOn(String),
+    /// A service cannot be routed.
+    #[error(transparent)]
+    Route(#[from] crate::plan::PlanError),
+}
+
+/// Why a bare Zenoh link cannot be opened: the session, or a key's publisher or subscriber.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The session does not open.
+    #[error(transparent)]
+    Session(#[from] crate::session::OptionError),
+    /// A publisher or subscriber cannot be declared.
+    #[error(transparent)]
+    Declare(#[from] ZenohError),
+}
 use crate::cluster::LAUNCHER;
 use crate::plan::{agent_index, Placement};
 use crate::session::{self, Mode, Options};
@@ -96,11 +143,11 @@ impl Records {
 
     /// Reads a frame body as a bridge's receiving side does ([`parse_frame`]) and checks that it
     /// holds exactly these records, in order.
-    pub fn check(&self, body: &[u8]) -> Result<(), String> {
-        let records = parse_frame(body)?;
+    pub fn check(&self, body: &[u8]) -> Result<(), FrameMismatch> {
+        let records = parse_frame(body).map_err(FrameMismatch::Parse)?;
         let mut it = records.iter();
         if !matches!(it.next(), Some(Record::From(_))) {
-            return Err("a frame without its sending host".into());
+            return Err(FrameMismatch::NoSender);
         }
         for (name, type_name, size) in &self.samples {
             match it.next() {
@@ -109,18 +156,30 @@ impl Records {
                     type_name: t,
                     bytes,
                 }) if n == name && t == type_name && bytes.len() == *size => {}
-                other => return Err(format!("expected a sample of {name}, got {other:?}")),
+                other => {
+                    return Err(FrameMismatch::Expected {
+                        what: "a sample",
+                        name: name.clone(),
+                        got: format!("{other:?}"),
+                    })
+                }
             }
         }
         for name in &self.events {
             match it.next() {
                 Some(Record::Event(n)) if n == name => {}
-                other => return Err(format!("expected an event of {name}, got {other:?}")),
+                other => {
+                    return Err(FrameMismatch::Expected {
+                        what: "an event",
+                        name: name.clone(),
+                        got: format!("{other:?}"),
+                    })
+                }
             }
         }
         match it.next() {
             None => Ok(()),
-            Some(r) => Err(format!("an unexpected record {r:?}")),
+            Some(r) => Err(FrameMismatch::Unexpected(format!("{r:?}"))),
         }
     }
 }
@@ -144,7 +203,7 @@ struct PerStep<'a> {
 }
 
 impl PerStep<'_> {
-    fn add<T: Message>(&mut self, s: Named<Topic<T>>) -> Result<(), String> {
+    fn add<T: Message>(&mut self, s: Named<Topic<T>>) -> Result<(), crate::plan::PlanError> {
         let i = agent_index(s.spec.pattern, &s.name);
         let route = |me: &str| {
             self.placement.route(
@@ -179,9 +238,9 @@ impl StepPattern {
     /// wake-up with the commands (an agent wakes the plant after its command). A neighbour's
     /// wake-up after a share crosses only at step 0 or when that neighbour's delay is under one
     /// step (docs/runtime.md, "Pacing"), so it is not part of a step.
-    pub fn of(placement: &Placement, host: &str) -> Result<StepPattern, String> {
+    pub fn of(placement: &Placement, host: &str) -> Result<StepPattern, StepError> {
         if host == placement.launcher || !placement.agent_hosts.iter().any(|h| h == host) {
-            return Err(format!("no agent of the placement is on host {host}"));
+            return Err(StepError::NoAgentOn(host.to_string()));
         }
         let mut p = PerStep {
             placement,
@@ -251,7 +310,7 @@ impl Link {
         tag: &str,
         auth: Option<std::path::PathBuf>,
         tls: Option<std::path::PathBuf>,
-    ) -> Result<Link, String> {
+    ) -> Result<Link, LinkError> {
         let (mode, listen, connect) = match side {
             Side::Launcher => (Mode::Orchestrator, vec![], vec![endpoint.to_string()]),
             Side::Host => (Mode::Daemon, vec![endpoint.to_string()], vec![]),
@@ -264,7 +323,7 @@ impl Link {
             tls,
             lease_ms: session::DEFAULT_LEASE_MS,
         };
-        let s = opts.open().map_err(|e| e.to_string())?;
+        let s = opts.open()?;
         let other = match side {
             Side::Launcher => Side::Host,
             Side::Host => Side::Launcher,
@@ -278,27 +337,27 @@ impl Link {
     }
 
     /// Sends one frame to the other end.
-    pub fn send(&self, frame: Vec<u8>) -> Result<(), String> {
+    pub fn send(&self, frame: Vec<u8>) -> Result<(), ZenohError> {
         self.publisher
             .put(frame)
             .wait()
-            .map_err(|e| format!("zenoh put: {e}"))
+            .map_err(|e| ZenohError::new("zenoh put", e))
     }
 
     /// A frame that is already there, without blocking.
-    pub fn try_recv(&self) -> Result<Option<Vec<u8>>, String> {
+    pub fn try_recv(&self) -> Result<Option<Vec<u8>>, ZenohError> {
         self.subscriber
             .try_recv()
             .map(|s| s.map(|s| s.payload().to_bytes().into_owned()))
-            .map_err(|e| format!("zenoh receive: {e}"))
+            .map_err(|e| ZenohError::new("zenoh receive", e))
     }
 
     /// The next frame, waiting at most `timeout`.
-    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Vec<u8>>, String> {
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<Vec<u8>>, ZenohError> {
         self.subscriber
             .recv_timeout(timeout)
             .map(|s| s.map(|s| s.payload().to_bytes().into_owned()))
-            .map_err(|e| format!("zenoh receive: {e}"))
+            .map_err(|e| ZenohError::new("zenoh receive", e))
     }
 }
 

@@ -41,7 +41,9 @@
 
 use crate::auth::{Purpose, Replay, RunKey};
 use crate::clock::{self, LinkDelays};
+use crate::error::ZenohError;
 use crate::logs::LogLimit;
+use crate::plan::PlanError;
 use crate::plan::{agent_index, Placement};
 use crate::priority::{LinkPriority, Raised};
 use crate::proto;
@@ -158,7 +160,7 @@ impl Bridge {
 }
 
 /// A new placement for a thread, and where it answers (services it forwards, or why not).
-type Replan = (Placement, mpsc::Sender<Result<usize, String>>);
+type Replan = (Placement, mpsc::Sender<Result<usize, BridgeError>>);
 
 /// How long a re-plan of the sending thread may take (it looks between two cycles, at least every
 /// [`IDLE_WAKE`]).
@@ -177,10 +179,10 @@ impl Drop for Bridge {
     }
 }
 
-type Drain = Box<dyn FnMut(&mut dyn FnMut(&[u8])) -> Result<usize, String>>;
+type Drain = Box<dyn FnMut(&mut dyn FnMut(&[u8])) -> Result<usize, BridgeError>>;
 /// Publishes a sample's bytes, its send stamp (if it has one) shifted by the given ns; returns
 /// the shifted stamp (0: none).
-type Inject = Box<dyn FnMut(&[u8], i64) -> Result<u64, String>>;
+type Inject = Box<dyn FnMut(&[u8], i64) -> Result<u64, BridgeError>>;
 
 /// Offset of the send stamp (`sent_ns`) in the stamped wire types, `None` for the others.
 fn stamp_offset<T: Message>() -> Option<usize> {
@@ -246,9 +248,11 @@ struct Ports {
     ins: HashMap<String, InPort>,
 }
 
-fn err<'a, E: std::fmt::Debug>(what: &'a str, name: &'a str) -> impl FnOnce(E) -> String + 'a {
-    let what = what.to_string();
-    move |e| format!("bridge: {what} {name}: {e:?}")
+fn err<'a, E: std::fmt::Debug>(
+    what: &'static str,
+    name: &'a str,
+) -> impl FnOnce(E) -> BridgeError + 'a {
+    move |e| BridgeError::ipc(what, name, e)
 }
 
 impl<'a> Opener<'a> {
@@ -260,7 +264,7 @@ impl<'a> Opener<'a> {
         hosts: &'a [String],
         out: bool,
         old: Ports,
-    ) -> Result<Opener<'a>, String> {
+    ) -> Result<Opener<'a>, BridgeError> {
         let mut o = Opener {
             node,
             cfg,
@@ -283,7 +287,7 @@ impl<'a> Opener<'a> {
         senders: &[services::Party],
         receivers: &[services::Party],
         scope: services::Scope,
-    ) -> Result<(Vec<usize>, bool), String> {
+    ) -> Result<(Vec<usize>, bool), BridgeError> {
         let r = self.cfg.placement.route(
             &self.cfg.me,
             name,
@@ -307,9 +311,9 @@ impl<'a> Opener<'a> {
 }
 
 impl Visitor for Opener<'_> {
-    type Error = String;
+    type Error = BridgeError;
 
-    fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), String> {
+    fn topic<T: Message>(&mut self, s: Named<Topic<T>>, l: Limits) -> Result<(), BridgeError> {
         if self.cfg.create && !self.out {
             let sn = service_name(&s.name).map_err(err("name", &s.name))?;
             let f = pubsub_with_limits(self.node.service_builder(&sn).publish_subscribe::<T>(), &l)
@@ -332,10 +336,10 @@ impl Visitor for Opener<'_> {
                 self.topics.push(t);
                 return Ok(());
             }
-            let sub = ports::subscriber(self.node, &s).map_err(|e| e.to_string())?;
+            let sub = ports::subscriber(self.node, &s).map_err(BridgeError::from)?;
             let drain: Drain = Box::new(move |f| {
                 let mut n = 0;
-                while let Some(sample) = sub.receive().map_err(|e| e.to_string())? {
+                while let Some(sample) = sub.receive()? {
                     f(wire_bytes(sample.payload()));
                     n += 1;
                 }
@@ -352,13 +356,13 @@ impl Visitor for Opener<'_> {
                 self.ins.insert(s.name.clone(), p);
                 return Ok(());
             }
-            let publisher = ports::publisher(self.node, &s).map_err(|e| e.to_string())?;
+            let publisher = ports::publisher(self.node, &s).map_err(BridgeError::from)?;
             let name = s.name.clone();
             let stamp = stamp_offset::<T>();
             let inject: Inject = Box::new(move |bytes, shift| {
                 let mut sample = publisher
                     .loan_uninit()
-                    .map_err(|e| format!("bridge: cannot loan on {name}: {e:?}"))?;
+                    .map_err(|e| BridgeError::ipc("cannot loan on", &name, e))?;
                 // SAFETY: the size was checked against T's; the bytes are a T's bytes from the
                 // sending host (same build and wire layout, checked at the handshake).
                 let mut sample = unsafe {
@@ -382,7 +386,7 @@ impl Visitor for Opener<'_> {
                 sample
                     .send()
                     .map(|_| sent)
-                    .map_err(|e| format!("bridge: cannot publish on {name}: {e:?}"))
+                    .map_err(|e| BridgeError::ipc("cannot publish on", &name, e))
             });
             self.ins.insert(
                 s.name.clone(),
@@ -396,7 +400,11 @@ impl Visitor for Opener<'_> {
         Ok(())
     }
 
-    fn slices<T: Message>(&mut self, s: Named<Topic<T, Slice>>, l: Limits) -> Result<(), String> {
+    fn slices<T: Message>(
+        &mut self,
+        s: Named<Topic<T, Slice>>,
+        l: Limits,
+    ) -> Result<(), BridgeError> {
         if self.cfg.create && !self.out {
             let sn = service_name(&s.name).map_err(err("name", &s.name))?;
             let f = pubsub_with_limits(
@@ -416,15 +424,12 @@ impl Visitor for Opener<'_> {
             s.spec.scope,
         )?;
         if !dests.is_empty() || inbound {
-            return Err(format!(
-                "bridge: {} (slices) cannot cross hosts: its publisher and subscriber must share a host",
-                s.name
-            ));
+            return Err(BridgeError::SliceCrosses(s.name.clone()));
         }
         Ok(())
     }
 
-    fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), String> {
+    fn event(&mut self, s: Named<Event>, l: Limits) -> Result<(), BridgeError> {
         let sn = service_name(&s.name).map_err(err("name", &s.name))?;
         if self.cfg.create && !self.out {
             let f: iceoryx2::service::port_factory::event::PortFactory<Svc> =
@@ -465,7 +470,7 @@ impl Visitor for Opener<'_> {
                 self.ins.insert(s.name.clone(), p);
                 return Ok(());
             }
-            let n = ports::notifier(self.node, &s).map_err(|e| e.to_string())?;
+            let n = ports::notifier(self.node, &s).map_err(BridgeError::from)?;
             self.ins.insert(s.name.clone(), InPort::Event(Box::new(n)));
         }
         Ok(())
@@ -482,7 +487,7 @@ pub const FRAME_QUEUE: usize = 4096;
 pub fn frame_publisher(
     session: &zenoh::Session,
     key: String,
-) -> Result<zenoh::pubsub::Publisher<'static>, String> {
+) -> Result<zenoh::pubsub::Publisher<'static>, ZenohError> {
     session
         .declare_publisher(key)
         .congestion_control(CongestionControl::Block)
@@ -490,7 +495,7 @@ pub fn frame_publisher(
         .express(true)
         .allowed_destination(Locality::Remote)
         .wait()
-        .map_err(|e| format!("bridge: cannot declare a publisher: {e}"))
+        .map_err(|e| ZenohError::new("bridge: cannot declare a publisher", e))
 }
 
 /// Declares a subscriber of the frames sent to `key` with [`frame_publisher`], remote publishers
@@ -499,7 +504,7 @@ fn declare_frame_subscriber<H>(
     session: &zenoh::Session,
     key: String,
     handler: H,
-) -> Result<zenoh::pubsub::Subscriber<H::Handler>, String>
+) -> Result<zenoh::pubsub::Subscriber<H::Handler>, ZenohError>
 where
     H: zenoh::handlers::IntoHandler<zenoh::sample::Sample> + Send,
     H::Handler: Send,
@@ -509,7 +514,7 @@ where
         .with(handler)
         .allowed_origin(Locality::Remote)
         .wait()
-        .map_err(|e| format!("bridge: cannot subscribe: {e}"))
+        .map_err(|e| ZenohError::new("bridge: cannot subscribe", e))
 }
 
 /// A subscriber of frames sent to `key` with [`frame_publisher`] whose frames a thread of its
@@ -521,7 +526,7 @@ pub fn frame_subscriber(
     key: String,
 ) -> Result<
     zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
-    String,
+    ZenohError,
 > {
     declare_frame_subscriber(session, key, zenoh::handlers::FifoChannel::new(FRAME_QUEUE))
 }
@@ -532,7 +537,7 @@ pub fn frame_callback_subscriber(
     session: &zenoh::Session,
     key: String,
     on_frame: impl Fn(zenoh::sample::Sample) + Send + Sync + 'static,
-) -> Result<zenoh::pubsub::Subscriber<()>, String> {
+) -> Result<zenoh::pubsub::Subscriber<()>, ZenohError> {
     declare_frame_subscriber(session, key, zenoh::handlers::Callback::from(on_frame))
 }
 
@@ -612,20 +617,20 @@ pub enum Record<'a> {
 }
 
 /// Parses a frame into its records; `Err` names what is malformed.
-pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
-    fn take<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a [u8], String> {
+pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, RecordError> {
+    fn take<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a [u8], RecordError> {
         if f.len() < n {
-            return Err(format!(
-                "truncated frame: {} bytes left, {n} needed",
-                f.len()
-            ));
+            return Err(RecordError::Truncated {
+                left: f.len(),
+                needed: n,
+            });
         }
         let (a, b) = f.split_at(n);
         *f = b;
         Ok(a)
     }
-    fn text<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a str, String> {
-        std::str::from_utf8(take(f, n)?).map_err(|_| "a name is not UTF-8".to_string())
+    fn text<'a>(f: &mut &'a [u8], n: usize) -> Result<&'a str, RecordError> {
+        std::str::from_utf8(take(f, n)?).map_err(|_| RecordError::NotUtf8)
     }
     let mut v = Vec::new();
     while !f.is_empty() {
@@ -646,7 +651,7 @@ pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
             }
             KIND_EVENT => v.push(Record::Event(name)),
             KIND_FROM => v.push(Record::From(name)),
-            k => return Err(format!("unknown record kind {k}")),
+            k => return Err(RecordError::Kind(k)),
         }
     }
     Ok(v)
@@ -655,7 +660,7 @@ pub fn parse_frame(mut f: &[u8]) -> Result<Vec<Record<'_>>, String> {
 impl Bridge {
     /// Starts the bridge; returns once every service exists on this host (`cfg.create`) and every
     /// port of the bridge is open, so role processes may start.
-    pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, String> {
+    pub fn start(session: zenoh::Session, cfg: BridgeConfig) -> Result<Bridge, BridgeError> {
         let stop = Arc::new(AtomicBool::new(false));
         let stats = Arc::new(Stats::default());
         let links = Arc::new(Mutex::new(BTreeMap::new()));
@@ -675,7 +680,7 @@ impl Bridge {
                 },
             )?
         };
-        let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, BridgeError>>();
         let (out_tx, out_rx) = mpsc::channel::<Replan>();
         let (link_priority, scheduling) = LinkPriority::raise(cfg.rt_priority);
         let mut bridge = Bridge {
@@ -694,11 +699,9 @@ impl Bridge {
             std::thread::Builder::new()
                 .name(crate::priority::BRIDGE_THREAD.into())
                 .spawn(move || run_out(session, cfg, hosts, stop, stats, ready_tx, out_rx))
-                .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
+                .map_err(BridgeError::Thread)?,
         );
-        let outbound = ready_rx
-            .recv()
-            .map_err(|_| "bridge: the sending thread ended".to_string())??;
+        let outbound = ready_rx.recv().map_err(|_| BridgeError::SendingEnded)??;
         bridge.forwarded.0 = outbound;
         Ok(bridge)
     }
@@ -712,18 +715,18 @@ impl Bridge {
     /// Ports of services still forwarded are kept, with their new destinations, so nothing queued
     /// in them is lost; ports of services no longer forwarded are dropped, so a sample still
     /// coming from a lost host is refused. Returns the services forwarded (out, in).
-    pub fn replan(&mut self, placement: &Placement) -> Result<(usize, usize), String> {
+    pub fn replan(&mut self, placement: &Placement) -> Result<(usize, usize), BridgeError> {
         let inbound = lock(&self.inbound)
             .as_mut()
-            .ok_or_else(|| "bridge: stopped".to_string())?
+            .ok_or(BridgeError::Stopped)?
             .replan(placement)?;
         let (ack, answer) = mpsc::channel();
         self.replan
             .send((placement.clone(), ack))
-            .map_err(|_| "bridge: the sending thread has ended".to_string())?;
+            .map_err(|_| BridgeError::SendingGone)?;
         let out = answer
             .recv_timeout(REPLAN_TIMEOUT)
-            .map_err(|_| format!("bridge: no re-plan within {REPLAN_TIMEOUT:?}"))??;
+            .map_err(|_| BridgeError::ReplanTimeout(REPLAN_TIMEOUT))??;
         self.forwarded = (out, inbound);
         Ok(self.forwarded)
     }
@@ -762,7 +765,7 @@ unsafe impl Send for Inbound {}
 impl Inbound {
     /// Creates the services (`cfg.create`) and opens the ports of the services this host
     /// receives.
-    fn open(cfg: BridgeConfig) -> Result<Inbound, String> {
+    fn open(cfg: BridgeConfig) -> Result<Inbound, BridgeError> {
         let hosts = cfg.placement.hosts();
         let offset = |h: &str| cfg.clock_offsets_ns.get(h).copied().unwrap_or(0);
         let me_offset = offset(&cfg.me);
@@ -779,7 +782,7 @@ impl Inbound {
                 )
             })
             .collect();
-        let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(|e| e.to_string())?;
+        let node = ipc::node(&cfg.prefix, "fm-bridge-in").map_err(BridgeError::from)?;
         let o = Opener::visit_all(&node, &cfg, &hosts, false, Ports::default())?;
         let (keep, ins) = (o.keep, o.ins);
         Ok(Inbound {
@@ -795,7 +798,7 @@ impl Inbound {
     }
 
     /// Re-plans the receiving side (see [`Bridge::replan`]); the services it receives.
-    fn replan(&mut self, placement: &Placement) -> Result<usize, String> {
+    fn replan(&mut self, placement: &Placement) -> Result<usize, BridgeError> {
         self.cfg.placement = placement.clone();
         self.cfg.create = false;
         let hosts = self.cfg.placement.hosts();
@@ -949,6 +952,88 @@ impl Inbound {
     }
 }
 
+/// Why a bridge cannot start, re-plan or forward: the service and what failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BridgeError {
+    /// An iceoryx2 operation on a service failed (iceoryx2's error, in its debug form).
+    #[error("bridge: {what} {name}: {why}")]
+    Ipc {
+        /// The operation (`cannot create`, `cannot loan on`, ...).
+        what: &'static str,
+        /// The service.
+        name: String,
+        /// iceoryx2's error.
+        why: String,
+    },
+    /// The bridge's iceoryx2 node cannot be made.
+    #[error(transparent)]
+    Node(#[from] ipc::IpcError),
+    /// A port of a forwarded service cannot be opened or read.
+    #[error(transparent)]
+    Port(#[from] formation_config::node::error::PortError),
+    /// A service cannot be routed for the placement.
+    #[error(transparent)]
+    Route(#[from] PlanError),
+    /// A slice service whose publisher and subscriber are on different hosts.
+    #[error(
+        "bridge: {0} (slices) cannot cross hosts: its publisher and subscriber must share a host"
+    )]
+    SliceCrosses(String),
+    /// A frame publisher or subscriber cannot be declared.
+    #[error(transparent)]
+    Zenoh(#[from] ZenohError),
+    /// The sending thread's WaitSet cannot be made (iceoryx2's error, in its debug form).
+    #[error("bridge: cannot create a WaitSet: {0}")]
+    WaitSet(String),
+    /// The sending thread cannot be started.
+    #[error("bridge: cannot start a thread: {0}")]
+    Thread(std::io::Error),
+    /// The sending thread ended before its ports were open.
+    #[error("bridge: the sending thread ended")]
+    SendingEnded,
+    /// A re-plan of a stopped bridge.
+    #[error("bridge: stopped")]
+    Stopped,
+    /// A re-plan after the sending thread ended.
+    #[error("bridge: the sending thread has ended")]
+    SendingGone,
+    /// The sending thread did not take the re-plan in time.
+    #[error("bridge: no re-plan within {0:?}")]
+    ReplanTimeout(Duration),
+}
+
+impl BridgeError {
+    /// iceoryx2's `e` on `what` of service `name`.
+    fn ipc(what: &'static str, name: &str, e: impl std::fmt::Debug) -> BridgeError {
+        BridgeError::Ipc {
+            what,
+            name: name.to_string(),
+            why: format!("{e:?}"),
+        }
+    }
+}
+
+crate::error::into_string!(BridgeError);
+
+/// Why a frame does not parse ([`parse_frame`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RecordError {
+    /// Fewer bytes than the record needs.
+    #[error("truncated frame: {left} bytes left, {needed} needed")]
+    Truncated {
+        /// Bytes left.
+        left: usize,
+        /// Bytes needed.
+        needed: usize,
+    },
+    /// A service or type name that is not UTF-8.
+    #[error("a name is not UTF-8")]
+    NotUtf8,
+    /// An unknown record kind.
+    #[error("unknown record kind {0}")]
+    Kind(u8),
+}
+
 /// Locks `m`, also after a panic of another holder (the data stays usable: every update is
 /// complete before the next record is handled).
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -961,7 +1046,7 @@ fn run_out(
     mut hosts: Vec<String>,
     stop: Arc<AtomicBool>,
     stats: Arc<Stats>,
-    ready: mpsc::Sender<Result<usize, String>>,
+    ready: mpsc::Sender<Result<usize, BridgeError>>,
     replan: mpsc::Receiver<Replan>,
 ) {
     if cfg.rt_priority > 0 {
@@ -972,7 +1057,7 @@ fn run_out(
     let node = match ipc::node(&cfg.prefix, "fm-bridge-out") {
         Ok(n) => n,
         Err(e) => {
-            let _ = ready.send(Err(e.to_string()));
+            let _ = ready.send(Err(e.into()));
             return;
         }
     };
@@ -982,7 +1067,7 @@ fn run_out(
     {
         Ok(w) => w,
         Err(e) => {
-            let _ = ready.send(Err(format!("bridge: cannot create a WaitSet: {e:?}")));
+            let _ = ready.send(Err(BridgeError::WaitSet(format!("{e:?}"))));
             return;
         }
     };
@@ -1012,7 +1097,7 @@ fn run_out(
             match waitset.attach_notification(&e.listener) {
                 Ok(g) => guards.push(g),
                 Err(x) => {
-                    let _ = ack.send(Err(format!("bridge: cannot wait on {}: {x:?}", e.name)));
+                    let _ = ack.send(Err(BridgeError::ipc("cannot wait on", &e.name, x)));
                     return;
                 }
             }

@@ -3,6 +3,7 @@
 
 use crate::auth::{Purpose, Replay, RunKey, RunSecret};
 use crate::clock;
+use crate::error::ZenohError;
 use crate::identity::{self, Identity};
 use crate::proto::{self, ExitReport, HostInfo, Reply, Request};
 use crate::session;
@@ -50,6 +51,8 @@ impl std::fmt::Display for HandshakeError {
         }
     }
 }
+
+impl std::error::Error for HandshakeError {}
 
 /// A host's link state as the orchestrator sees it (liveliness).
 #[derive(Debug, Default)]
@@ -252,14 +255,11 @@ impl Cluster {
         req: &Request,
         bytes: &[u8],
         timeout: Duration,
-    ) -> Result<(Reply, Vec<u8>), String> {
+    ) -> Result<(Reply, Vec<u8>), RequestError> {
         let mut payload = proto::frame(req, bytes);
         let mut seq = 0;
         if req.run_id().is_some() {
-            let a = self
-                .auth
-                .as_ref()
-                .ok_or_else(|| "a request about a run before the run was announced".to_string())?;
+            let a = self.auth.as_ref().ok_or(RequestError::NotAnnounced)?;
             seq = a.seq.fetch_add(1, Ordering::SeqCst) + 1;
             a.key.seal(Purpose::Request, host, seq, &mut payload);
         }
@@ -269,27 +269,33 @@ impl Cluster {
             .payload(payload)
             .timeout(timeout)
             .wait()
-            .map_err(|e| format!("host {host}: {e}"))?;
+            .map_err(|e| RequestError::Query {
+                host: host.to_string(),
+                why: e.to_string(),
+            })?;
         match replies.recv() {
             Ok(r) => match r.result() {
                 Ok(s) => self.reply(host, seq, &s.payload().to_bytes()),
-                Err(e) => Err(format!(
-                    "host {host}: {}",
-                    String::from_utf8_lossy(&e.payload().to_bytes())
-                )),
+                Err(e) => Err(RequestError::Query {
+                    host: host.to_string(),
+                    why: String::from_utf8_lossy(&e.payload().to_bytes()).into_owned(),
+                }),
             },
-            Err(_) => Err(format!("host {host} did not answer within {timeout:?}")),
+            Err(_) => Err(RequestError::NoAnswer {
+                host: host.to_string(),
+                timeout,
+            }),
         }
     }
 
     /// A daemon's reply to request `seq`: a plain JSON [`Reply`] or one framed with bytes, with
     /// the proof of the run's secret once the run is announced.
-    fn reply(&self, host: &str, seq: u64, data: &[u8]) -> Result<(Reply, Vec<u8>), String> {
-        let parse = |data: &[u8]| -> Result<(Reply, Vec<u8>), String> {
+    fn reply(&self, host: &str, seq: u64, data: &[u8]) -> Result<(Reply, Vec<u8>), RequestError> {
+        let parse = |data: &[u8]| -> Result<(Reply, Vec<u8>), RequestError> {
             if let Ok(reply) = serde_json::from_slice::<Reply>(data) {
                 return Ok((reply, Vec::new()));
             }
-            let (reply, rest): (Reply, &[u8]) = proto::unframe(data)?;
+            let (reply, rest): (Reply, &[u8]) = proto::decode_frame(data)?;
             Ok((reply, rest.to_vec()))
         };
         let Some(a) = &self.auth else {
@@ -297,13 +303,18 @@ impl Cluster {
         };
         match a.key.open(Purpose::Reply, host, data) {
             Ok((body, s)) if s == seq => parse(body),
-            Ok((_, s)) => Err(format!(
-                "host {host} answered request {seq} with the reply to request {s}"
-            )),
+            Ok((_, s)) => Err(RequestError::OtherReply {
+                host: host.to_string(),
+                seq,
+                answered: s,
+            }),
             // A refusal without proof changes nothing (the daemon may not hold the run).
             Err(e) => match serde_json::from_slice::<Reply>(data) {
                 Ok(Reply::Refused(why)) => Ok((Reply::Refused(why), Vec::new())),
-                _ => Err(format!("host {host}'s reply was refused: {e}")),
+                _ => Err(RequestError::NoProof {
+                    host: host.to_string(),
+                    why: e,
+                }),
             },
         }
     }
@@ -322,8 +333,8 @@ impl Cluster {
     /// disappears) and starts hearing exit reports and lost hosts.
     /// Makes the run's secret first ([`crate::auth`]): exit reports and checkpoints are taken
     /// only with proof of it.
-    pub fn announce(&mut self, run_id: &str) -> Result<(), String> {
-        let secret = RunSecret::generate().map_err(|e| e.to_string())?;
+    pub fn announce(&mut self, run_id: &str) -> Result<(), AnnounceError> {
+        let secret = RunSecret::generate()?;
         let key = secret.keys(run_id);
         self.auth = Some(Arc::new(RunAuth {
             secret,
@@ -335,7 +346,7 @@ impl Cluster {
                 .liveliness()
                 .declare_token(proto::run_token(run_id))
                 .wait()
-                .map_err(|e| format!("cannot declare the run's token: {e}"))?,
+                .map_err(|e| ZenohError::new("cannot declare the run's token", e))?,
         );
         let seen = self.seen.clone();
         let exits_key = proto::run_exit(run_id);
@@ -346,8 +357,7 @@ impl Cluster {
             .callback(move |s| {
                 let data = s.payload().to_bytes();
                 let r = exits_check.open(&data, |body| {
-                    let r =
-                        serde_json::from_slice::<ExitReport>(body).map_err(|e| e.to_string())?;
+                    let r = serde_json::from_slice::<ExitReport>(body)?;
                     Ok((r.host.clone(), r))
                 });
                 if let Some(r) = r {
@@ -355,7 +365,7 @@ impl Cluster {
                 }
             })
             .wait()
-            .map_err(|e| format!("cannot subscribe to exits: {e}"))?;
+            .map_err(|e| ZenohError::new("cannot subscribe to exits", e))?;
         let seen = self.seen.clone();
         let checkpoints_key = proto::run_checkpoint(run_id);
         let checkpoints_check = Reports::new(key, checkpoints_key.clone());
@@ -365,7 +375,7 @@ impl Cluster {
             .callback(move |s| {
                 let data = s.payload().to_bytes();
                 let note = checkpoints_check.open(&data, |body| {
-                    let (n, bytes) = proto::unframe::<proto::CheckpointNote>(body)?;
+                    let (n, bytes) = proto::decode_frame::<proto::CheckpointNote>(body)?;
                     Ok((n.host.clone(), (n, bytes.to_vec())))
                 });
                 if let Some((n, bytes)) = note {
@@ -376,7 +386,7 @@ impl Cluster {
                 }
             })
             .wait()
-            .map_err(|e| format!("cannot subscribe to checkpoints: {e}"))?;
+            .map_err(|e| ZenohError::new("cannot subscribe to checkpoints", e))?;
         self._subs.push(checkpoints);
         let seen = self.seen.clone();
         let hosts = self
@@ -394,7 +404,7 @@ impl Cluster {
                 }
             })
             .wait()
-            .map_err(|e| format!("cannot watch the hosts: {e}"))?;
+            .map_err(|e| ZenohError::new("cannot watch the hosts", e))?;
         self._subs.push(exits);
         self._subs.push(hosts);
         Ok(())
@@ -454,7 +464,7 @@ impl Reports {
     fn open<T>(
         &self,
         data: &[u8],
-        parse: impl FnOnce(&[u8]) -> Result<(String, T), String>,
+        parse: impl FnOnce(&[u8]) -> Result<(String, T), Box<dyn std::error::Error>>,
     ) -> Option<T> {
         let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
         let (replays, log) = &mut *st;
@@ -483,6 +493,64 @@ impl Reports {
         Some(v)
     }
 }
+
+/// Why a request to a host daemon got no usable reply: the host and what failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RequestError {
+    /// A request about the run before [`Cluster::announce`].
+    #[error("a request about a run before the run was announced")]
+    NotAnnounced,
+    /// The query failed, or the host answered with an error.
+    #[error("host {host}: {why}")]
+    Query {
+        /// The host.
+        host: String,
+        /// Zenoh's error or the host's error reply.
+        why: String,
+    },
+    /// No answer within the timeout.
+    #[error("host {host} did not answer within {timeout:?}")]
+    NoAnswer {
+        /// The host.
+        host: String,
+        /// How long it was given.
+        timeout: Duration,
+    },
+    /// The reply to another request.
+    #[error("host {host} answered request {seq} with the reply to request {answered}")]
+    OtherReply {
+        /// The host.
+        host: String,
+        /// The request's sequence number.
+        seq: u64,
+        /// The sequence number the reply proves.
+        answered: u64,
+    },
+    /// A reply without proof of the run's secret.
+    #[error("host {host}'s reply was refused: {why}")]
+    NoProof {
+        /// The host.
+        host: String,
+        /// What the proof check said.
+        why: crate::auth::ProofError,
+    },
+    /// A reply that is not a protocol message.
+    #[error(transparent)]
+    Frame(#[from] proto::FrameError),
+}
+
+/// Why a run cannot be announced: its secret, or a Zenoh declaration.
+#[derive(Debug, thiserror::Error)]
+pub enum AnnounceError {
+    /// The run's secret cannot be made.
+    #[error(transparent)]
+    Secret(#[from] crate::auth::SecretError),
+    /// The run's token or a subscriber cannot be declared.
+    #[error(transparent)]
+    Zenoh(#[from] ZenohError),
+}
+
+crate::error::into_string!(RequestError, AnnounceError);
 
 #[cfg(test)]
 mod tests {

@@ -39,7 +39,8 @@
 //! sees (each payload carries its step).
 
 use crate::bridge::{wire_bytes, wire_slice_bytes};
-use crate::session::{Mode, Options};
+use crate::error::ZenohError;
+use crate::session::{Mode, OptionError, Options};
 use formation_config::node::error::PortError;
 use formation_config::node::ipc;
 use formation_config::node::ports::{self, Input, Sub, Wake};
@@ -432,6 +433,37 @@ impl Drop for Export {
     }
 }
 
+/// Why the export cannot start or read: the session, a Zenoh declaration, a service of the run.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// The Zenoh session does not open (an endpoint refused, credentials missing or unsafe).
+    #[error(transparent)]
+    Session(#[from] OptionError),
+    /// A queryable, publisher or matching listener cannot be declared.
+    #[error("export: {0}")]
+    Zenoh(#[from] ZenohError),
+    /// The run's iceoryx2 node cannot be made.
+    #[error("export: {0}")]
+    Node(#[from] formation_config::node::ipc::IpcError),
+    /// A service of the run cannot be opened or read.
+    #[error("export: {0}")]
+    Port(#[from] PortError),
+    /// The step records cannot be received.
+    #[error("export: {pattern}: {why}")]
+    Steps {
+        /// The service pattern.
+        pattern: &'static str,
+        /// iceoryx2's error.
+        why: String,
+    },
+    /// The export thread cannot be started.
+    #[error("export: cannot start a thread: {0}")]
+    Thread(std::io::Error),
+    /// The export thread ended before its ports were open.
+    #[error("export: the thread ended before it was ready")]
+    Ended,
+}
+
 /// The export thread's ports.
 struct Readers {
     wake: Wake,
@@ -442,15 +474,14 @@ struct Readers {
 }
 
 impl Readers {
-    fn open(node: &ports::RunNode, n: usize) -> Result<Readers, String> {
-        let e = |e: PortError| format!("export: {e}");
+    fn open(node: &ports::RunNode, n: usize) -> Result<Readers, ExportError> {
         Ok(Readers {
-            wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named()).map_err(e)?,
-            steps: ports::slice_subscriber(node, &services::STEPS.named()).map_err(e)?,
-            reference: ports::subscriber(node, &services::REFERENCE.named()).map_err(e)?,
-            events: ports::subscriber(node, &services::RUNTIME_EVENTS.named()).map_err(e)?,
+            wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named())?,
+            steps: ports::slice_subscriber(node, &services::STEPS.named())?,
+            reference: ports::subscriber(node, &services::REFERENCE.named())?,
+            events: ports::subscriber(node, &services::RUNTIME_EVENTS.named())?,
             telemetry: (0..n)
-                .map(|i| ports::subscriber(node, &services::TELEMETRY.at(i)).map_err(e))
+                .map(|i| ports::subscriber(node, &services::TELEMETRY.at(i)))
                 .collect::<Result<_, _>>()?,
         })
     }
@@ -464,13 +495,13 @@ struct Out {
 }
 
 impl Out {
-    fn declare(s: &zenoh::Session, key: String, type_name: &str) -> Result<Out, String> {
+    fn declare(s: &zenoh::Session, key: String, type_name: &str) -> Result<Out, ZenohError> {
         let publisher = s
             .declare_publisher(key)
             .encoding(encoding(type_name))
             .congestion_control(CongestionControl::Drop)
             .wait()
-            .map_err(|e| format!("export: cannot declare a publisher: {e}"))?;
+            .map_err(|e| ZenohError::new("cannot declare a publisher", e))?;
         let matching = Arc::new(AtomicBool::new(false));
         let flag = matching.clone();
         publisher
@@ -478,7 +509,7 @@ impl Out {
             .callback(move |m| flag.store(m.matching(), Ordering::Relaxed))
             .background()
             .wait()
-            .map_err(|e| format!("export: cannot watch for readers: {e}"))?;
+            .map_err(|e| ZenohError::new("cannot watch for readers", e))?;
         Ok(Out {
             publisher,
             matching,
@@ -518,7 +549,7 @@ impl Writers {
     }
 
     /// One publisher per key of [`exported`], in its order.
-    fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, String> {
+    fn declare(s: &zenoh::Session, run_id: &str, n: usize) -> Result<Writers, ZenohError> {
         let [state, steps, reference, events, telemetry] = exported();
         let one = |e: &Exported, agent: Option<usize>| {
             Out::declare(s, key(run_id, e.topic, agent), (e.type_name)())
@@ -526,7 +557,7 @@ impl Writers {
         let each = |e: &Exported| {
             (1..=n)
                 .map(|a| one(e, Some(a)))
-                .collect::<Result<Vec<Out>, String>>()
+                .collect::<Result<Vec<Out>, ZenohError>>()
         };
         Ok(Writers {
             states: each(&state)?,
@@ -539,14 +570,12 @@ impl Writers {
 }
 
 /// Drains every reader and puts what it held; the number of samples read.
-fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
+fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, ExportError> {
     let mut n = 0;
-    let e = |e: PortError| format!("export: {e}");
-    while let Some(s) = r
-        .steps
-        .receive()
-        .map_err(|e| format!("export: {}: {e:?}", services::STEPS.pattern))?
-    {
+    while let Some(s) = r.steps.receive().map_err(|e| ExportError::Steps {
+        pattern: services::STEPS.pattern,
+        why: format!("{e:?}"),
+    })? {
         let entries: &[StepEntry] = s.payload();
         if let Some(first) = entries.first() {
             let step = first.truth.state.step;
@@ -563,16 +592,16 @@ fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, String> {
         w.steps.put(wire_slice_bytes(entries), stats);
         n += 1;
     }
-    while let Some(s) = r.reference.receive().map_err(e)? {
+    while let Some(s) = r.reference.receive()? {
         w.reference.put(wire_bytes(s.payload()), stats);
         n += 1;
     }
-    while let Some(s) = r.events.receive().map_err(e)? {
+    while let Some(s) = r.events.receive()? {
         w.events.put(wire_bytes(s.payload()), stats);
         n += 1;
     }
     for (t, p) in r.telemetry.iter().zip(&w.telemetry) {
-        while let Some(s) = t.receive().map_err(e)? {
+        while let Some(s) = t.receive()? {
             p.put(wire_bytes(s.payload()), stats);
             n += 1;
         }
@@ -594,8 +623,8 @@ impl Listening {
     /// Opens the Zenoh session listening on `cfg.listen` (a refused endpoint, a missing or
     /// unsafe credentials file, a port in use: an error naming it), declares the info queryable
     /// and the publishers.
-    pub fn open(cfg: ExportConfig) -> Result<Listening, String> {
-        let session = cfg.options().open().map_err(|e| e.to_string())?;
+    pub fn open(cfg: ExportConfig) -> Result<Listening, ExportError> {
+        let session = cfg.options().open()?;
         let info = serde_json::to_vec(&info_json(&cfg.facts)).expect("JSON of plain values");
         let stats = Arc::new(Stats::default());
         let answered = stats.clone();
@@ -609,7 +638,7 @@ impl Listening {
                 answered.queries.fetch_add(1, Ordering::Relaxed);
             })
             .wait()
-            .map_err(|e| format!("export: cannot declare the info queryable: {e}"))?;
+            .map_err(|e| ZenohError::new("cannot declare the info queryable", e))?;
         let writers = Writers::declare(&session, &cfg.facts.run_id, cfg.facts.n_agents)?;
         Ok(Listening {
             cfg,
@@ -622,7 +651,7 @@ impl Listening {
 
     /// Starts the export thread once the run's services exist; returns when its iceoryx2 ports
     /// are open, so no sample of the run's first step is missed.
-    pub fn start(self) -> Result<Export, String> {
+    pub fn start(self) -> Result<Export, ExportError> {
         let Listening {
             cfg,
             session,
@@ -633,7 +662,7 @@ impl Listening {
         let stop = Arc::new(AtomicBool::new(false));
         let finishing = Arc::new(AtomicBool::new(false));
         let run_id = cfg.facts.run_id.clone();
-        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
+        let (ready_tx, ready_rx) = mpsc::channel::<Result<(), ExportError>>();
         let thread = {
             let flags = Flags {
                 stop: stop.clone(),
@@ -643,7 +672,7 @@ impl Listening {
             std::thread::Builder::new()
                 .name("export".into())
                 .spawn(move || run(cfg, writers, flags, stats, ready_tx))
-                .map_err(|e| format!("export: cannot start a thread: {e}"))?
+                .map_err(ExportError::Thread)?
         };
         let mut export = Export {
             stop,
@@ -660,7 +689,7 @@ impl Listening {
             Err(_) => {
                 // The thread ended without a word: its panic, if any, is joined here.
                 export.thread.take().map(|t| t.join());
-                Err("export: the thread ended before it was ready".into())
+                Err(ExportError::Ended)
             }
         }
     }
@@ -679,7 +708,7 @@ fn run(
     writers: Writers,
     flags: Flags,
     stats: Arc<Stats>,
-    ready: mpsc::Sender<Result<(), String>>,
+    ready: mpsc::Sender<Result<(), ExportError>>,
 ) -> Writers {
     // Background priority: the role processes and the recorder go first; a starved export only
     // loses samples (its queues overflow), it never holds them back.
@@ -687,7 +716,7 @@ fn run(
     let node = match ipc::node(&cfg.prefix, "fm-export") {
         Ok(n) => n,
         Err(e) => {
-            let _ = ready.send(Err(format!("export: {e}")));
+            let _ = ready.send(Err(e.into()));
             return writers;
         }
     };

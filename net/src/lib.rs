@@ -19,9 +19,11 @@
 //!   at the run's priority, like the plant and the agents they carry messages between.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`bench`]: bare Zenoh links and the frames of a split lockstep step, for `formation bench`.
-//! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
+//! * [`daemon_link`]: the Zenoh side of a host daemon (`formation host`, crate `formation-host`,
+//!   which spawns a run's role processes on its machine): its token, requests, reports, bridges.
 //! * [`cluster`]: the orchestrator's side: listing hosts, the handshake, remote processes.
 //! * [`export`]: a run's telemetry for outside readers over Zenoh (`formation run --zenoh-listen`).
+//! * [`error`]: a Zenoh operation that failed, named.
 //! * [`probe`]: a plain client that puts and asks arbitrary bytes on arbitrary keys (the attacks of
 //!   the end-to-end tests).
 //! * [`survey`]: `formation hosts`, every daemon reachable through any of the given endpoints.
@@ -40,7 +42,8 @@ pub mod bridge;
 pub mod clock;
 pub mod cluster;
 pub mod colocate;
-pub mod daemon;
+pub mod daemon_link;
+pub mod error;
 pub mod export;
 pub mod identity;
 pub mod logs;

@@ -94,15 +94,13 @@ impl Placement {
     /// The placement once `lost` is gone: its agents move to [`Placement::takeover_host`];
     /// returns it with the moved agents (0-based, ascending). `Err` for the launcher itself (the
     /// run ends with it) or a host the placement does not use (already handled).
-    pub fn after_loss(&self, lost: &str) -> Result<(Placement, Vec<usize>), String> {
+    pub fn after_loss(&self, lost: &str) -> Result<(Placement, Vec<usize>), PlanError> {
         if lost == self.launcher {
-            return Err(format!(
-                "host {lost} is the launcher: the run cannot survive its loss"
-            ));
+            return Err(PlanError::LauncherLost(lost.to_string()));
         }
         let moved = self.agents_on(lost);
         if moved.is_empty() {
-            return Err(format!("no agent of the run is placed on {lost}"));
+            return Err(PlanError::NoAgentOn(lost.to_string()));
         }
         let mut next = self.clone();
         for &i in &moved {
@@ -164,7 +162,7 @@ impl Placement {
         receivers: &[Party],
         scope: Scope,
         i: Option<usize>,
-    ) -> Result<Route, String> {
+    ) -> Result<Route, PlanError> {
         let from = self.hosts_of(senders, scope, i);
         let to = self.hosts_of(receivers, scope, i);
         let mut r = Route::default();
@@ -177,13 +175,41 @@ impl Placement {
         }
         r.inbound = to.contains(me) && from.iter().any(|h| *h != me);
         if r.inbound && !r.out_to.is_empty() {
-            return Err(format!(
-                "service {name}: host {me} would both forward and receive it (senders on {from:?}, receivers on {to:?})"
-            ));
+            return Err(PlanError::BothWays {
+                service: name.to_string(),
+                host: me.to_string(),
+                from: format!("{from:?}"),
+                to: format!("{to:?}"),
+            });
         }
         Ok(r)
     }
 }
+
+/// Why a placement cannot be re-planned or routed: the host or service and what failed.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PlanError {
+    /// The launcher was lost: the run ends with it.
+    #[error("host {0} is the launcher: the run cannot survive its loss")]
+    LauncherLost(String),
+    /// A lost host with no agent of the run (already handled).
+    #[error("no agent of the run is placed on {0}")]
+    NoAgentOn(String),
+    /// A service a host would both forward and receive.
+    #[error("service {service}: host {host} would both forward and receive it (senders on {from}, receivers on {to})")]
+    BothWays {
+        /// The service.
+        service: String,
+        /// The host.
+        host: String,
+        /// The senders' hosts.
+        from: String,
+        /// The receivers' hosts.
+        to: String,
+    },
+}
+
+crate::error::into_string!(PlanError);
 
 #[cfg(test)]
 mod tests {
@@ -326,7 +352,11 @@ mod tests {
         assert_eq!(next.agent_hosts, ["a", "a", "c", "a", "c"]);
         assert_eq!(next.hosts(), ["a", "c"], "b is gone from the run");
         assert_eq!(next.launcher, "a");
-        assert!(p.after_loss("a").unwrap_err().contains("launcher"));
+        assert!(p
+            .after_loss("a")
+            .unwrap_err()
+            .to_string()
+            .contains("launcher"));
         assert!(
             next.after_loss("b").is_err(),
             "a host already handled moves nothing"

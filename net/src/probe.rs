@@ -2,7 +2,8 @@
 //! daemon's credentials can: what the end-to-end tests attack a daemon and a run with (a second
 //! tenant, forged frames, fuzzed keys). Nothing of Zenoh appears in its API.
 
-use crate::session::{Mode, Options};
+use crate::error::ZenohError;
+use crate::session::{Mode, OptionError, Options};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use zenoh::Wait;
@@ -14,7 +15,7 @@ pub struct Probe {
 
 impl Probe {
     /// Connects to `endpoint` with the `user:password` file `auth`, if given.
-    pub fn open(endpoint: &str, auth: Option<PathBuf>) -> Result<Probe, String> {
+    pub fn open(endpoint: &str, auth: Option<PathBuf>) -> Result<Probe, OptionError> {
         let o = Options {
             mode: Mode::Client,
             listen: vec![],
@@ -23,33 +24,34 @@ impl Probe {
             tls: None,
             lease_ms: crate::session::DEFAULT_LEASE_MS,
         };
-        Ok(Probe {
-            session: o.open().map_err(|e| e.to_string())?,
-        })
+        Ok(Probe { session: o.open()? })
     }
 
     /// Puts `bytes` on `key` (reliably: blocks rather than drops).
-    pub fn put(&self, key: &str, bytes: Vec<u8>) -> Result<(), String> {
+    pub fn put(&self, key: &str, bytes: Vec<u8>) -> Result<(), ZenohError> {
         self.session
             .put(key, bytes)
             .congestion_control(zenoh::qos::CongestionControl::Block)
             .wait()
-            .map_err(|e| format!("put on {key}: {e}"))
+            .map_err(|e| ZenohError::new(format!("put on {key}"), e))
     }
 
     /// Asks `key` with `bytes` (none: no payload); every answer's bytes within `timeout`, an
-    /// error reply as `Err` text.
+    /// error reply as `Err` text (the answering side's bytes, shown as UTF-8).
     pub fn query(
         &self,
         key: &str,
         bytes: Option<Vec<u8>>,
         timeout: Duration,
-    ) -> Result<Vec<Result<Vec<u8>, String>>, String> {
+    ) -> Result<Vec<Result<Vec<u8>, String>>, ZenohError> {
+        // Inner String: an error reply is the answering side's bytes, shown as text, not an error here.
         let mut g = self.session.get(key).timeout(timeout);
         if let Some(b) = bytes {
             g = g.payload(b);
         }
-        let replies = g.wait().map_err(|e| format!("query on {key}: {e}"))?;
+        let replies = g
+            .wait()
+            .map_err(|e| ZenohError::new(format!("query on {key}"), e))?;
         let mut out = Vec::new();
         while let Ok(r) = replies.recv() {
             out.push(match r.result() {
@@ -61,7 +63,7 @@ impl Probe {
     }
 
     /// Starts keeping every sample put on `key` (at most `max`), for [`Capture::take`].
-    pub fn capture(&self, key: &str, max: usize) -> Result<Capture, String> {
+    pub fn capture(&self, key: &str, max: usize) -> Result<Capture, ZenohError> {
         let kept = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let k = kept.clone();
         let sub = self
@@ -74,7 +76,7 @@ impl Probe {
                 }
             })
             .wait()
-            .map_err(|e| format!("subscribe to {key}: {e}"))?;
+            .map_err(|e| ZenohError::new(format!("subscribe to {key}"), e))?;
         Ok(Capture { kept, _sub: sub })
     }
 

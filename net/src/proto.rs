@@ -153,6 +153,8 @@ pub struct RunRequest {
 
 /// What an orchestrator asks a daemon.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+// One request per message, built and matched once: `Prepare`'s size costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
 pub enum Request {
     /// Prepare a run: services, bridge; start nothing yet.
     Prepare(RunRequest),
@@ -291,17 +293,36 @@ pub fn frame<T: Serialize>(msg: &T, bytes: &[u8]) -> Vec<u8> {
     v
 }
 
+/// Why bytes are not a [`frame`].
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    /// Shorter than the length prefix.
+    #[error("malformed message: {0} bytes")]
+    Short(usize),
+    /// A length prefix beyond the bytes.
+    #[error("malformed message: length {len} beyond {have} bytes")]
+    Length {
+        /// The JSON length announced.
+        len: usize,
+        /// The bytes present.
+        have: usize,
+    },
+    /// The JSON is not the expected message.
+    #[error("malformed message: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
 /// Splits a [`frame`]; a clear error for anything else.
-pub fn unframe<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), String> {
+pub fn decode_frame<T: for<'de> Deserialize<'de>>(data: &[u8]) -> Result<(T, &[u8]), FrameError> {
     if data.len() < 4 {
-        return Err(format!("malformed message: {} bytes", data.len()));
+        return Err(FrameError::Short(data.len()));
     }
     let n = u32::from_le_bytes(data[..4].try_into().unwrap()) as usize;
-    let json = data
-        .get(4..4 + n)
-        .ok_or_else(|| format!("malformed message: length {n} beyond {} bytes", data.len()))?;
-    let msg = serde_json::from_slice(json).map_err(|e| format!("malformed message: {e}"))?;
-    Ok((msg, &data[4 + n..]))
+    let json = data.get(4..4 + n).ok_or(FrameError::Length {
+        len: n,
+        have: data.len(),
+    })?;
+    Ok((serde_json::from_slice(json)?, &data[4 + n..]))
 }
 
 /// Wall clock, µs since the Unix epoch.
@@ -324,12 +345,12 @@ mod tests {
             rejoin_at: Some(20_500),
         };
         let f = frame(&r, &[1, 2, 3]);
-        let (back, rest): (Request, &[u8]) = unframe(&f).unwrap();
+        let (back, rest): (Request, &[u8]) = decode_frame(&f).unwrap();
         assert_eq!(back, r);
         assert_eq!(rest, &[1, 2, 3]);
-        assert!(unframe::<Request>(&[9, 0, 0, 0, b'{']).is_err());
-        assert!(unframe::<Request>(&[1]).is_err());
-        assert!(unframe::<Request>(&frame(&"x", &[])).is_err());
+        assert!(decode_frame::<Request>(&[9, 0, 0, 0, b'{']).is_err());
+        assert!(decode_frame::<Request>(&[1]).is_err());
+        assert!(decode_frame::<Request>(&frame(&"x", &[])).is_err());
     }
 
     #[test]

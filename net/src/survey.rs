@@ -58,7 +58,19 @@ pub struct Survey {
     /// Every daemon that answered, once each, by name then pid.
     pub hosts: Vec<Listed>,
     /// Endpoints whose session could not be opened, with why.
-    pub failed: Vec<(String, String)>,
+    pub failed: Vec<(String, SurveyError)>,
+}
+
+/// Why an endpoint could not be surveyed.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum SurveyError {
+    /// The endpoint is unreachable or refused this host: the diagnosis of its link
+    /// ([`session::diagnose`]).
+    #[error("{0}")]
+    Diagnosed(String),
+    /// The client session did not open (and the link showed no problem).
+    #[error(transparent)]
+    Session(#[from] HandshakeError),
 }
 
 /// Merges the answers per endpoint (in the order the endpoints were given) into one entry per
@@ -83,7 +95,7 @@ pub fn merge(answers: Vec<(String, Vec<HostInfo>)>) -> Vec<Listed> {
 
 /// The daemons one client session to `endpoint` sees, each asked for its info within `timeout`;
 /// a session that cannot be opened is diagnosed.
-fn ask(o: &Options, endpoint: &str, timeout: Duration) -> Result<Vec<HostInfo>, String> {
+fn ask(o: &Options, endpoint: &str, timeout: Duration) -> Result<Vec<HostInfo>, SurveyError> {
     let opts = Options {
         mode: Mode::Client,
         listen: vec![],
@@ -94,8 +106,8 @@ fn ask(o: &Options, endpoint: &str, timeout: Duration) -> Result<Vec<HostInfo>, 
         Ok(c) => c,
         Err(e) => {
             return Err(match session::diagnose(&opts, endpoint) {
-                Some(f) => f.problem_text(),
-                None => e.to_string(),
+                Some(f) => SurveyError::Diagnosed(f.problem_text()),
+                None => SurveyError::Session(e),
             })
         }
     };
@@ -110,7 +122,7 @@ fn ask(o: &Options, endpoint: &str, timeout: Duration) -> Result<Vec<HostInfo>, 
 /// credentials) and merges the answers.
 pub fn survey(o: &Options, timeout: Duration) -> Survey {
     let endpoints = &o.connect;
-    let results: Vec<(String, Result<Vec<HostInfo>, String>)> = std::thread::scope(|s| {
+    let results: Vec<(String, Result<Vec<HostInfo>, SurveyError>)> = std::thread::scope(|s| {
         let handles: Vec<_> = endpoints
             .iter()
             .map(|ep| s.spawn(move || ask(o, ep, timeout)))
@@ -121,7 +133,7 @@ pub fn survey(o: &Options, timeout: Duration) -> Survey {
             .zip(handles)
             .map(|(ep, h)| {
                 let r = h.join().unwrap_or_else(|_| {
-                    Err(HandshakeError::Session("the survey thread panicked".into()).to_string())
+                    Err(HandshakeError::Session("the survey thread panicked".into()).into())
                 });
                 (ep, r)
             })

@@ -82,6 +82,8 @@ pub enum CertError {
     Name(String),
     /// The certificate could not be made (rcgen's reason).
     Generate(String),
+    /// rustls refused the material for a client configuration (its reason).
+    Client(String),
 }
 
 impl std::fmt::Display for CertError {
@@ -97,6 +99,7 @@ impl std::fmt::Display for CertError {
             CertError::Content { path, why } => write!(f, "{}: {why}", path.display()),
             CertError::Name(why) => f.write_str(why),
             CertError::Generate(why) => write!(f, "cannot make the certificate: {why}"),
+            CertError::Client(why) => f.write_str(why),
         }
     }
 }
@@ -230,7 +233,7 @@ impl Material {
     pub fn load(dir: &Path) -> Result<Material, CertError> {
         files::check_private_dir(dir).map_err(|why| CertError::Folder {
             dir: dir.to_path_buf(),
-            why,
+            why: why.to_string(),
         })?;
         let ca = dir.join(CA_CERT);
         let cert = dir.join(CERT);
@@ -252,34 +255,38 @@ impl Material {
         &self.key_pem
     }
 
-    fn client_config(&self, seen: Arc<Mutex<Seen>>) -> Result<rustls::ClientConfig, String> {
+    fn client_config(&self, seen: Arc<Mutex<Seen>>) -> Result<rustls::ClientConfig, CertError> {
         let provider = Arc::new(rustls::crypto::ring::default_provider());
         let mut roots = rustls::RootCertStore::empty();
         let ca_path = self.dir.join(CA_CERT);
-        for c in certs_of(&ca_path, &self.ca_pem).map_err(|e| e.to_string())? {
-            roots
-                .add(c)
-                .map_err(|e| format!("{}: {e}", ca_path.display()))?;
+        for c in certs_of(&ca_path, &self.ca_pem)? {
+            roots.add(c).map_err(|e| CertError::Content {
+                path: ca_path.clone(),
+                why: e.to_string(),
+            })?;
         }
         let webpki = rustls::client::WebPkiServerVerifier::builder_with_provider(
             Arc::new(roots),
             provider.clone(),
         )
         .build()
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| CertError::Client(e.to_string()))?;
         let verifier = Arc::new(Recording {
             inner: webpki,
             seen,
         });
-        let certs = certs_of(&self.dir.join(CERT), &self.cert_pem).map_err(|e| e.to_string())?;
-        let key = key_of(&self.dir.join(KEY), &self.key_pem).map_err(|e| e.to_string())?;
+        let certs = certs_of(&self.dir.join(CERT), &self.cert_pem)?;
+        let key = key_of(&self.dir.join(KEY), &self.key_pem)?;
         rustls::ClientConfig::builder_with_provider(provider)
             .with_protocol_versions(&[&rustls::version::TLS13])
-            .map_err(|e| e.to_string())?
+            .map_err(|e| CertError::Client(e.to_string()))?
             .dangerous()
             .with_custom_certificate_verifier(verifier)
             .with_client_auth_cert(certs, key)
-            .map_err(|e| format!("{}: {e}", self.dir.join(CERT).display()))
+            .map_err(|e| CertError::Content {
+                path: self.dir.join(CERT),
+                why: e.to_string(),
+            })
     }
 }
 
@@ -457,7 +464,7 @@ pub fn preflight(host: &str, port: u16, m: &Material) -> Result<(), TlsRefusal> 
     let seen = Arc::new(Mutex::new(Seen::default()));
     let cfg = m
         .client_config(seen.clone())
-        .map_err(TlsRefusal::Handshake)?;
+        .map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
     let (name, addr) = resolve(host, port)?;
     let mut sock = std::net::TcpStream::connect_timeout(&addr, PREFLIGHT_TIMEOUT)
         .map_err(|e| TlsRefusal::Unreachable(e.to_string()))?;
@@ -539,7 +546,7 @@ pub fn preflight_quic(host: &str, port: u16, m: &Material) -> Result<(), TlsRefu
     let seen = Arc::new(Mutex::new(Seen::default()));
     let mut cfg = m
         .client_config(seen.clone())
-        .map_err(TlsRefusal::Handshake)?;
+        .map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
     cfg.alpn_protocols = ZENOH_QUIC_ALPN.iter().map(|p| p.to_vec()).collect();
     let crypto = quinn::crypto::rustls::QuicClientConfig::try_from(cfg)
         .map_err(|e| TlsRefusal::Handshake(e.to_string()))?;
@@ -675,7 +682,7 @@ pub fn issue(ca_dir: &Path, what: &Issue, out: &Path) -> Result<Vec<PathBuf>, Ce
     check_name(&what.name)?;
     files::check_private_dir(ca_dir).map_err(|why| CertError::Folder {
         dir: ca_dir.to_path_buf(),
-        why,
+        why: why.to_string(),
     })?;
     let ca_cert_path = ca_dir.join(CA_CERT);
     let ca_key_path = ca_dir.join(CA_KEY);

@@ -5,7 +5,9 @@
 
 use formation_config::scenario::validate::validate;
 use formation_config::Scenario;
-use std::process::ExitCode;
+
+use formation_config::scenario::validate::ValidationErrors;
+use std::path::PathBuf;
 
 /// Exit code for invalid input (bad scenario, bad arguments); clap's own usage errors use it too.
 pub const EXIT_INVALID: u8 = 2;
@@ -28,33 +30,65 @@ pub fn defaults<T: clap::Args + clap::FromArgMatches>(name: &'static str) -> T {
 /// Value parser of a whole-number argument (counts, ids, microseconds). Negative values reach it
 /// (the argument sets `allow_negative_numbers`) so that the error names the argument and says what
 /// is wrong instead of clap's `unexpected argument '-3'`.
-pub fn whole_number<T: TryFrom<u64>>(text: &str) -> Result<T, String> {
-    let expected = "expected a whole number >= 0";
+pub fn whole_number<T: TryFrom<u64>>(text: &str) -> Result<T, NumberError> {
     match text.trim().parse::<i128>() {
-        Ok(v) if v < 0 => Err(format!("{v} is negative: {expected}")),
+        Ok(v) if v < 0 => Err(NumberError::Negative(v)),
         Ok(v) => u64::try_from(v)
             .ok()
             .and_then(|v| T::try_from(v).ok())
-            .ok_or_else(|| format!("{v} is too large")),
-        Err(_) => Err(format!("'{text}' is not a whole number: {expected}")),
+            .ok_or(NumberError::TooLarge(v)),
+        Err(_) => Err(NumberError::NotANumber(text.to_string())),
     }
 }
 
+/// Why a whole-number argument is refused ([`whole_number`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NumberError {
+    /// Below zero.
+    #[error("{0} is negative: expected a whole number >= 0")]
+    Negative(i128),
+    /// Above what the argument's type holds.
+    #[error("{0} is too large")]
+    TooLarge(i128),
+    /// Not a whole number at all (the text given).
+    #[error("'{0}' is not a whole number: expected a whole number >= 0")]
+    NotANumber(String),
+}
+
+/// Why `--foxglove ADDR` is refused ([`foxglove_addr`]).
+#[derive(Debug, thiserror::Error)]
+pub enum AddrError {
+    /// This build has no Foxglove server.
+    #[error("{}", crate::record::NO_FOXGLOVE)]
+    NoFoxglove,
+    /// The address does not resolve (the text given and the resolver's error).
+    #[error(
+        "'{text}': {source}; expected HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one)"
+    )]
+    Resolve {
+        /// The address given.
+        text: String,
+        /// The resolver's error.
+        source: std::io::Error,
+    },
+    /// The address resolves to nothing.
+    #[error("'{0}': resolves to no address; expected HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one)")]
+    NoAddress(String),
+}
+
 /// Value parser of `--foxglove ADDR`: `HOST:PORT` (a name is resolved; port 0 picks a free one).
-pub fn foxglove_addr(text: &str) -> Result<std::net::SocketAddr, String> {
+pub fn foxglove_addr(text: &str) -> Result<std::net::SocketAddr, AddrError> {
     if !cfg!(feature = "foxglove") {
-        return Err(crate::record::NO_FOXGLOVE.into());
+        return Err(AddrError::NoFoxglove);
     }
     use std::net::ToSocketAddrs;
-    let bad = |why: String| {
-        format!(
-            "'{text}': {why}; expected HOST:PORT, e.g. 127.0.0.1:8765 (port 0 picks a free one)"
-        )
-    };
     text.to_socket_addrs()
-        .map_err(|e| bad(e.to_string()))?
+        .map_err(|source| AddrError::Resolve {
+            text: text.to_string(),
+            source,
+        })?
         .next()
-        .ok_or_else(|| bad("resolves to no address".into()))
+        .ok_or_else(|| AddrError::NoAddress(text.to_string()))
 }
 
 /// Which elements of an array a `--set` path segment selects.
@@ -89,50 +123,175 @@ const PATH_GRAMMAR: &str =
     "key(.key)* where a key is [A-Za-z_][A-Za-z0-9_]* optionally followed by \
                             one index [k] (0-based) or [*] (every element)";
 
+/// Why a `--set` path is malformed (`PATH_GRAMMAR`); `part` is the offending segment.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PathError {
+    /// Nothing before the `=`.
+    #[error("the path is empty")]
+    Empty,
+    /// A segment that does not start with a key.
+    #[error("'{0}' does not start with a key")]
+    NoKey(String),
+    /// What follows the key is not one `[k]` or `[*]`.
+    #[error("'{part}': '{rest}' is not one index [k] or [*]")]
+    NotOneIndex {
+        /// The segment.
+        part: String,
+        /// What follows its key.
+        rest: String,
+    },
+    /// An index beyond `usize`.
+    #[error("'{part}': index {inner} is too large")]
+    IndexTooLarge {
+        /// The segment.
+        part: String,
+        /// The index as written.
+        inner: String,
+    },
+    /// An index that is neither a whole number nor `*`.
+    #[error("'{part}': index '{inner}' is not a whole number >= 0 or *")]
+    BadIndex {
+        /// The segment.
+        part: String,
+        /// The index as written.
+        inner: String,
+    },
+}
+
+/// Why a `--set` path does not lead to a field of the scenario; `at` names where it stopped.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PlaceError {
+    /// A key below a value that is not a table.
+    #[error("{at} is not a table, it has no field '{key}'")]
+    NotATable {
+        /// The value ("the scenario" at the root).
+        at: String,
+        /// The key asked for.
+        key: String,
+    },
+    /// A key the table does not have.
+    #[error("{at} has no field '{key}'")]
+    NoField {
+        /// The table ("the scenario" at the root).
+        at: String,
+        /// The key asked for.
+        key: String,
+    },
+    /// An index on a value that is not an array.
+    #[error("{0} is not an array")]
+    NotAnArray(String),
+    /// An index past the end: the element and how many there are.
+    #[error("{element} does not exist: {extent}")]
+    NoElement {
+        /// The element asked for, e.g. `agents[7] (agent 8)`.
+        element: String,
+        /// How many elements there are.
+        extent: String,
+    },
+    /// `[*]` on an empty array.
+    #[error("{0}[*]: {0} is empty")]
+    EmptyArray(String),
+}
+
+/// Why a `--set path=value` is refused; `set` is the argument as given.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OverrideError {
+    /// The argument holds a line break.
+    #[error("--set {set:?}: contains a line break; give one path=value per --set")]
+    LineBreak {
+        /// The argument.
+        set: String,
+    },
+    /// No `=`.
+    #[error("--set {set:?}: expected path=value")]
+    NoEquals {
+        /// The argument.
+        set: String,
+    },
+    /// A malformed path.
+    #[error("--set {set:?}: {source}; expected {grammar}", grammar = PATH_GRAMMAR)]
+    Path {
+        /// The argument.
+        set: String,
+        /// What is wrong with the path.
+        source: PathError,
+    },
+    /// Nothing after the `=`.
+    #[error("--set {set:?}: the value is missing")]
+    NoValue {
+        /// The argument.
+        set: String,
+    },
+    /// The value is not one TOML value.
+    #[error("--set {set:?}: the value '{text}' is not one TOML value: {message}")]
+    Value {
+        /// The argument.
+        set: String,
+        /// The value as given.
+        text: String,
+        /// The TOML parser's message.
+        message: String,
+    },
+    /// The path does not lead to a field.
+    #[error("--set {set:?}: {source}")]
+    Place {
+        /// The argument.
+        set: String,
+        /// Where the path stopped.
+        source: PlaceError,
+    },
+    /// The scenario could not be turned into a TOML tree (the encoder's message).
+    #[error("{0}")]
+    Encode(String),
+    /// The scenario with the overrides is not a scenario any more (the decoder's error).
+    #[error("--set: {0}")]
+    Decode(toml::de::Error),
+}
+
 /// Parses one `--set` argument. It must be `path=value` exactly (spaces may surround the `=`): the
 /// path follows [`PATH_GRAMMAR`], the value is one TOML value with nothing after it, on one line.
-pub fn parse_override(set: &str) -> Result<Override, String> {
-    let fail = |why: String| format!("--set {set:?}: {why}");
+pub fn parse_override(set: &str) -> Result<Override, OverrideError> {
+    let owned = || set.to_string();
     if set.contains(['\n', '\r']) {
-        return Err(fail(
-            "contains a line break; give one path=value per --set".into(),
-        ));
+        return Err(OverrideError::LineBreak { set: owned() });
     }
     let (path, value) = set
         .split_once('=')
-        .ok_or_else(|| fail("expected path=value".into()))?;
+        .ok_or_else(|| OverrideError::NoEquals { set: owned() })?;
     // Spaces may surround the `=` (as in TOML), nowhere else in the path.
-    let path = parse_path(path.trim_end_matches([' ', '\t']))
-        .map_err(|why| fail(format!("{why}; expected {PATH_GRAMMAR}")))?;
+    let path =
+        parse_path(path.trim_end_matches([' ', '\t'])).map_err(|source| OverrideError::Path {
+            set: owned(),
+            source,
+        })?;
     let text = value.trim_matches([' ', '\t']);
     if text.is_empty() {
-        return Err(fail("the value is missing".into()));
+        return Err(OverrideError::NoValue { set: owned() });
     }
     let value = serde::Deserialize::deserialize(toml::de::ValueDeserializer::new(text)).map_err(
-        |e: toml::de::Error| {
-            fail(format!(
-                "the value '{text}' is not one TOML value: {}",
-                e.message()
-            ))
+        |e: toml::de::Error| OverrideError::Value {
+            set: owned(),
+            text: text.to_string(),
+            message: e.message().to_string(),
         },
     )?;
     Ok(Override { path, value })
 }
 
-fn parse_path(path: &str) -> Result<Vec<Segment>, String> {
+fn parse_path(path: &str) -> Result<Vec<Segment>, PathError> {
     if path.is_empty() {
-        return Err("the path is empty".into());
+        return Err(PathError::Empty);
     }
     path.split('.').map(parse_segment).collect()
 }
 
-fn parse_segment(part: &str) -> Result<Segment, String> {
+fn parse_segment(part: &str) -> Result<Segment, PathError> {
     let key_len = part
         .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
         .unwrap_or(part.len());
     let (key, rest) = part.split_at(key_len);
     if key.is_empty() || key.starts_with(|c: char| c.is_ascii_digit()) {
-        return Err(format!("'{part}' does not start with a key"));
+        return Err(PathError::NoKey(part.to_string()));
     }
     let index = if rest.is_empty() {
         None
@@ -141,17 +300,24 @@ fn parse_segment(part: &str) -> Result<Segment, String> {
             .strip_prefix('[')
             .and_then(|r| r.strip_suffix(']'))
             .filter(|inner| !inner.contains(['[', ']']))
-            .ok_or_else(|| format!("'{part}': '{rest}' is not one index [k] or [*]"))?;
+            .ok_or_else(|| PathError::NotOneIndex {
+                part: part.to_string(),
+                rest: rest.to_string(),
+            })?;
         if inner == "*" {
             Some(Index::Every)
         } else if !inner.is_empty() && inner.bytes().all(|b| b.is_ascii_digit()) {
             Some(Index::At(inner.parse().map_err(|_| {
-                format!("'{part}': index {inner} is too large")
+                PathError::IndexTooLarge {
+                    part: part.to_string(),
+                    inner: inner.to_string(),
+                }
             })?))
         } else {
-            return Err(format!(
-                "'{part}': index '{inner}' is not a whole number >= 0 or *"
-            ));
+            return Err(PathError::BadIndex {
+                part: part.to_string(),
+                inner: inner.to_string(),
+            });
         }
     };
     Ok(Segment {
@@ -176,7 +342,7 @@ fn set_at(
     path: &[Segment],
     value: &toml::Value,
     done: &str,
-) -> Result<(), String> {
+) -> Result<(), PlaceError> {
     let Some((seg, rest)) = path.split_first() else {
         *node = value.clone();
         return Ok(());
@@ -193,31 +359,40 @@ fn set_at(
     };
     let child = node
         .as_table_mut()
-        .ok_or_else(|| format!("{parent} is not a table, it has no field '{}'", seg.key))?
+        .ok_or_else(|| PlaceError::NotATable {
+            at: parent.to_string(),
+            key: seg.key.clone(),
+        })?
         .get_mut(&seg.key)
-        .ok_or_else(|| format!("{parent} has no field '{}'", seg.key))?;
+        .ok_or_else(|| PlaceError::NoField {
+            at: parent.to_string(),
+            key: seg.key.clone(),
+        })?;
     let Some(index) = seg.index else {
         return set_at(child, rest, value, &here);
     };
     let items = child
         .as_array_mut()
-        .ok_or_else(|| format!("{here} is not an array"))?;
+        .ok_or_else(|| PlaceError::NotAnArray(here.clone()))?;
     let len = items.len();
     match index {
         Index::At(k) => {
             let item = items.get_mut(k).ok_or_else(|| {
-                let what = if here == "agents" {
+                let extent = if here == "agents" {
                     format!("the scenario has {len} agents: agents[0] .. agents[{}] (0-based, agents 1 .. {len})", len.saturating_sub(1))
                 } else {
                     format!("{here} has {len} elements (0-based)")
                 };
-                format!("{} does not exist: {what}", element(&here, k))
+                PlaceError::NoElement {
+                    element: element(&here, k),
+                    extent,
+                }
             })?;
             set_at(item, rest, value, &element(&here, k))
         }
         Index::Every => {
             if len == 0 {
-                return Err(format!("{here}[*]: {here} is empty"));
+                return Err(PlaceError::EmptyArray(here));
             }
             for (k, item) in items.iter_mut().enumerate() {
                 set_at(item, rest, value, &element(&here, k))?;
@@ -230,48 +405,79 @@ fn set_at(
 /// Applies `--set path=value` overrides (TOML paths such as `controller.position.k_p`,
 /// `agents[2].delay.base_s` (0-based: agent 3) or `agents[*].delay.base_s` (every agent); values
 /// in TOML syntax) to a scenario. Anything but `path=value` exactly is rejected, naming it.
-pub fn apply_overrides(s: Scenario, sets: &[String]) -> Result<Scenario, String> {
+pub fn apply_overrides(s: Scenario, sets: &[String]) -> Result<Scenario, OverrideError> {
     if sets.is_empty() {
         return Ok(s);
     }
-    let mut root = toml::Value::try_from(&s).map_err(|e| e.to_string())?;
+    let mut root = toml::Value::try_from(&s).map_err(|e| OverrideError::Encode(e.to_string()))?;
     for set in sets {
         let o = parse_override(set)?;
-        set_at(&mut root, &o.path, &o.value, "").map_err(|e| format!("--set {set:?}: {e}"))?;
+        set_at(&mut root, &o.path, &o.value, "").map_err(|source| OverrideError::Place {
+            set: set.clone(),
+            source,
+        })?;
     }
-    root.try_into()
-        .map_err(|e: toml::de::Error| format!("--set: {e}"))
+    root.try_into().map_err(OverrideError::Decode)
 }
 
-/// Loads a scenario, applies the overrides, validates; exit code 2 with clear errors on failure.
-pub fn load_with_overrides(name: Option<&str>, sets: &[String]) -> Result<Scenario, ExitCode> {
+/// Why the scenario or the arguments of a runner (`sim`, `run`, `check`) are refused: bad input,
+/// exit 2. Each names the argument or file.
+#[derive(Debug, thiserror::Error)]
+pub enum InputError {
+    /// The scenario cannot be loaded (its name or file, and why).
+    #[error("{0}")]
+    Load(#[from] formation_config::scenario::LoadError),
+    /// A `--set` override is refused.
+    #[error("{0}")]
+    Override(#[from] OverrideError),
+    /// The scenario `name` after the overrides breaks its rules: every broken rule, one a line.
+    #[error("scenario '{name}' is invalid:\n{}", print_lines(&errors.0))]
+    Invalid {
+        /// The scenario's name or file as given.
+        name: String,
+        /// The broken rules.
+        errors: ValidationErrors,
+    },
+    /// The scenario with the runtime flags and the `--events` file breaks its rules.
+    #[error("the scenario with its runtime settings and events is invalid:\n{}", print_lines(&.0 .0))]
+    InvalidWithEvents(ValidationErrors),
+    /// `--variant` names no variant.
+    #[error("unknown variant '{0}' (expected proposed, no-rbfnn or unconstrained)")]
+    Variant(String),
+    /// The `--events` file cannot be read or holds something else than events.
+    #[error("--events {}: {source}", path.display())]
+    Events {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: EventsError,
+    },
+    /// `--ros2` or `--record rosbag2` in a build without ROS 2.
+    #[error("{}", crate::record::NO_ROS2)]
+    NoRos2,
+    /// `--ros2` in an environment that is no valid ROS 2 one.
+    #[cfg(feature = "ros2")]
+    #[error("--ros2: {0}")]
+    Ros2Env(crate::record::ros2::EnvError),
+}
+
+/// Loads a scenario, applies the overrides, validates; an [`InputError`] (exit 2) naming what is
+/// wrong otherwise.
+pub fn load_with_overrides(name: Option<&str>, sets: &[String]) -> Result<Scenario, InputError> {
     let name = name.unwrap_or("paper");
-    let s = match Scenario::load(name) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return Err(ExitCode::from(EXIT_INVALID));
-        }
-    };
-    let s = match apply_overrides(s, sets) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return Err(ExitCode::from(EXIT_INVALID));
-        }
-    };
-    if let Err(errs) = validate(&s) {
-        eprintln!("error: scenario '{name}' is invalid:");
-        print_errors(&errs.0);
-        return Err(ExitCode::from(EXIT_INVALID));
-    }
+    let s = apply_overrides(Scenario::load(name)?, sets)?;
+    validate(&s).map_err(|errors| InputError::Invalid {
+        name: name.to_string(),
+        errors,
+    })?;
     Ok(s)
 }
 
 /// Most errors printed for one input; the rest are counted.
 pub const MAX_PRINTED_ERRORS: usize = 20;
 
-/// The lines [`print_errors`] prints: the first [`MAX_PRINTED_ERRORS`], then how many more.
+/// The lines of a list of validation errors, indented: the first [`MAX_PRINTED_ERRORS`], then
+/// how many more.
 pub fn error_lines<T: std::fmt::Display>(errors: &[T]) -> Vec<String> {
     let mut out: Vec<String> = errors
         .iter()
@@ -288,19 +494,14 @@ pub fn error_lines<T: std::fmt::Display>(errors: &[T]) -> Vec<String> {
     out
 }
 
-/// Prints validation errors on stderr, indented: at most [`MAX_PRINTED_ERRORS`] and a count.
-pub fn print_errors<T: std::fmt::Display>(errors: &[T]) {
-    for l in error_lines(errors) {
-        eprintln!("{l}");
-    }
+/// [`error_lines`] as one text (no line break at its end).
+pub fn print_lines<T: std::fmt::Display>(errors: &[T]) -> String {
+    error_lines(errors).join("\n")
 }
 
-/// Parses a variant name, exit code 2 on an unknown one.
-pub fn parse_variant(name: &str) -> Result<formation_config::Variant, ExitCode> {
-    formation_config::Variant::parse(name).ok_or_else(|| {
-        eprintln!("error: unknown variant '{name}' (expected proposed, no-rbfnn or unconstrained)");
-        ExitCode::from(EXIT_INVALID)
-    })
+/// Parses a variant name; [`InputError::Variant`] (exit 2) on an unknown one.
+pub fn parse_variant(name: &str) -> Result<formation_config::Variant, InputError> {
+    formation_config::Variant::parse(name).ok_or_else(|| InputError::Variant(name.to_string()))
 }
 
 /// What every runner (`sim`, `run`) takes: scenario, variant, output directory and overrides.
@@ -400,26 +601,22 @@ impl RunnerArgs {
     }
 
     /// `--ros2` and `--record rosbag2` need the feature `ros2`; `--ros2` a valid ROS 2
-    /// environment (`ROS_DOMAIN_ID`, discovery range). Exit code 2 otherwise.
-    fn check_ros2(&self) -> Result<(), ExitCode> {
+    /// environment (`ROS_DOMAIN_ID`, discovery range). An [`InputError`] (exit 2) otherwise.
+    fn check_ros2(&self) -> Result<(), InputError> {
         let wanted = self.ros2 || self.record.contains(&crate::record::Format::Rosbag2);
         if wanted && !cfg!(feature = "ros2") {
-            eprintln!("error: {}", crate::record::NO_ROS2);
-            return Err(ExitCode::from(EXIT_INVALID));
+            return Err(InputError::NoRos2);
         }
         #[cfg(feature = "ros2")]
         if self.ros2 {
-            if let Err(e) = crate::record::ros2::env_options() {
-                eprintln!("error: --ros2: {e}");
-                return Err(ExitCode::from(EXIT_INVALID));
-            }
+            crate::record::ros2::env_options().map_err(InputError::Ros2Env)?;
         }
         Ok(())
     }
 
     /// The validated scenario (after the overrides, the runtime flags and the events file) and the
-    /// variant; exit code 2 with clear errors.
-    pub fn load(&self) -> Result<(Scenario, formation_config::Variant), ExitCode> {
+    /// variant; an [`InputError`] (exit 2) naming what is wrong otherwise.
+    pub fn load(&self) -> Result<(Scenario, formation_config::Variant), InputError> {
         use formation_config::scenario::events::{RestartPolicy, RestartState};
         self.check_ros2()?;
         let mut scenario = load_with_overrides(self.scenario.as_deref(), &self.sets)?;
@@ -443,19 +640,13 @@ impl RunnerArgs {
             };
         }
         if let Some(path) = &self.events {
-            match read_events(path) {
-                Ok(mut e) => scenario.events.append(&mut e),
-                Err(e) => {
-                    eprintln!("error: --events {}: {e}", path.display());
-                    return Err(ExitCode::from(EXIT_INVALID));
-                }
-            }
+            let mut events = read_events(path).map_err(|source| InputError::Events {
+                path: path.clone(),
+                source,
+            })?;
+            scenario.events.append(&mut events);
         }
-        if let Err(errs) = validate(&scenario) {
-            eprintln!("error: the scenario with its runtime settings and events is invalid:");
-            print_errors(&errs.0);
-            return Err(ExitCode::from(EXIT_INVALID));
-        }
+        validate(&scenario).map_err(InputError::InvalidWithEvents)?;
         Ok((scenario, parse_variant(&self.variant)?))
     }
 }
@@ -467,6 +658,41 @@ pub const MAX_EVENTS_PER_FILE: usize = formation_config::scenario::validate::MAX
 /// Largest `--events` file read, bytes (a line of `events.jsonl` is ~400 bytes).
 const MAX_EVENTS_FILE_BYTES: u64 = 4 << 20;
 
+/// Why an `--events` file is refused ([`read_events`]).
+#[derive(Debug, thiserror::Error)]
+pub enum EventsError {
+    /// The file cannot be read.
+    #[error("{0}")]
+    Read(#[from] std::io::Error),
+    /// The file is larger than `MAX_EVENTS_FILE_BYTES`.
+    #[error("larger than {} MiB; a file holds at most {MAX_EVENTS_PER_FILE} events", MAX_EVENTS_FILE_BYTES >> 20)]
+    TooLarge,
+    /// The file holds this many events or more, over [`MAX_EVENTS_PER_FILE`].
+    #[error(
+        "{0} events or more; a file holds at most {MAX_EVENTS_PER_FILE} (and a timeline as many)"
+    )]
+    TooMany(usize),
+    /// A TOML file that is no `[[events]]` list.
+    #[error("{0}")]
+    Toml(#[from] toml::de::Error),
+    /// A JSON line (1-based) that is no event.
+    #[error("line {line}: {source}")]
+    Json {
+        /// The line, 1-based.
+        line: usize,
+        /// The JSON reader's error.
+        source: serde_json::Error,
+    },
+    /// A JSON line (1-based) whose event has no time.
+    #[error("line {line}: an event needs `at_s` (its time, s); got {text}")]
+    NoTime {
+        /// The line, 1-based.
+        line: usize,
+        /// The line's text.
+        text: String,
+    },
+}
+
 /// The events of a file: TOML with `[[events]]`, or JSON lines (a live run's `events.jsonl`, whose
 /// accepted injections carry their event as `"scenario_event"` and whose refused requests,
 /// `"event": "rejected"`, are skipped), or JSON lines of bare events. A line that is neither (an
@@ -474,33 +700,24 @@ const MAX_EVENTS_FILE_BYTES: u64 = 4 << 20;
 /// [`MAX_EVENTS_PER_FILE`] events.
 pub fn read_events(
     path: &std::path::Path,
-) -> Result<Vec<formation_config::scenario::events::Event>, String> {
+) -> Result<Vec<formation_config::scenario::events::Event>, EventsError> {
     use formation_config::scenario::events::Event;
     use std::io::Read;
     let mut text = String::new();
     std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_EVENTS_FILE_BYTES + 1).read_to_string(&mut text))
-        .map_err(|e| e.to_string())?;
+        .and_then(|f| f.take(MAX_EVENTS_FILE_BYTES + 1).read_to_string(&mut text))?;
     if text.len() as u64 > MAX_EVENTS_FILE_BYTES {
-        return Err(format!(
-            "larger than {} MiB; a file holds at most {MAX_EVENTS_PER_FILE} events",
-            MAX_EVENTS_FILE_BYTES >> 20
-        ));
+        return Err(EventsError::TooLarge);
     }
-    let too_many = |n: usize| {
-        format!("{n} events or more; a file holds at most {MAX_EVENTS_PER_FILE} (and a timeline as many)")
-    };
     let is_toml = path.extension().is_some_and(|x| x == "toml");
     if is_toml {
         #[derive(serde::Deserialize)]
         struct File {
             events: Vec<Event>,
         }
-        let events = toml::from_str::<File>(&text)
-            .map(|f| f.events)
-            .map_err(|e| e.to_string())?;
+        let events = toml::from_str::<File>(&text).map(|f| f.events)?;
         if events.len() > MAX_EVENTS_PER_FILE {
-            return Err(too_many(events.len()));
+            return Err(EventsError::TooMany(events.len()));
         }
         return Ok(events);
     }
@@ -510,23 +727,26 @@ pub fn read_events(
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
     {
-        let v: serde_json::Value =
-            serde_json::from_str(line).map_err(|e| format!("line {}: {e}", k + 1))?;
+        let json = |source| EventsError::Json {
+            line: k + 1,
+            source,
+        };
+        let v: serde_json::Value = serde_json::from_str(line).map_err(json)?;
         let ev = match v.get("scenario_event") {
             Some(e) => e.clone(),
             None if v.get("event").and_then(|e| e.as_str()) == Some("rejected") => continue,
             None => v,
         };
         if ev.get("at_s").is_none_or(|t| t.is_null()) {
-            return Err(format!(
-                "line {}: an event needs `at_s` (its time, s); got {line}",
-                k + 1
-            ));
+            return Err(EventsError::NoTime {
+                line: k + 1,
+                text: line.to_string(),
+            });
         }
         if out.len() == MAX_EVENTS_PER_FILE {
-            return Err(too_many(out.len() + 1));
+            return Err(EventsError::TooMany(out.len() + 1));
         }
-        out.push(serde_json::from_value::<Event>(ev).map_err(|e| format!("line {}: {e}", k + 1))?);
+        out.push(serde_json::from_value::<Event>(ev).map_err(json)?);
     }
     Ok(out)
 }
@@ -568,7 +788,7 @@ mod tests {
         let path =
             std::env::temp_dir().join(format!("formation-ev-{tag}-{}.jsonl", std::process::id()));
         std::fs::write(&path, text).unwrap();
-        let r = read_events(&path);
+        let r = read_events(&path).map_err(|e| e.to_string());
         let _ = std::fs::remove_file(&path);
         r
     }
@@ -602,6 +822,7 @@ mod tests {
 
     fn set(s: Scenario, sets: &[&str]) -> Result<Scenario, String> {
         apply_overrides(s, &sets.iter().map(|x| x.to_string()).collect::<Vec<_>>())
+            .map_err(|e| e.to_string())
     }
 
     fn rejected(arg: &str) -> String {
@@ -705,11 +926,12 @@ mod tests {
     #[test]
     fn whole_numbers_reject_negative_values_saying_so() {
         assert_eq!(whole_number::<usize>("3"), Ok(3));
-        let e = whole_number::<usize>("-3").unwrap_err();
+        let e = whole_number::<usize>("-3").unwrap_err().to_string();
         assert!(e.contains("-3 is negative"), "{e}");
         assert!(whole_number::<u32>("1.5").is_err());
         assert!(whole_number::<u32>("99999999999")
             .unwrap_err()
+            .to_string()
             .contains("too large"));
     }
 

@@ -17,23 +17,49 @@ pub fn allowed() -> Vec<usize> {
     }
 }
 
+/// Why a CPU list is refused ([`parse_list`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CpuListError {
+    /// A part that is no CPU number or range (the part).
+    #[error("bad CPU '{0}'")]
+    Bad(String),
+    /// A range whose start is above its end (the part).
+    #[error("bad CPU range '{0}'")]
+    Range(String),
+    /// A CPU this process may not run on.
+    #[error("CPU {cpu} is not available (allowed: {allowed:?})")]
+    NotAllowed {
+        /// The CPU.
+        cpu: usize,
+        /// The CPUs this process may run on.
+        allowed: Vec<usize>,
+    },
+    /// No CPU at all.
+    #[error("empty CPU list")]
+    Empty,
+}
+
 /// Parses a CPU list such as `0,1`, `0-3` or `2,0-1` (order kept, duplicates dropped); every CPU
 /// must be in `allowed`.
-pub fn parse_list(s: &str, allowed: &[usize]) -> Result<Vec<usize>, String> {
+pub fn parse_list(s: &str, allowed: &[usize]) -> Result<Vec<usize>, CpuListError> {
     let mut out = Vec::new();
     for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let (lo, hi) = match part.split_once('-') {
             Some((a, b)) => (a.trim(), b.trim()),
             None => (part, part),
         };
-        let lo: usize = lo.parse().map_err(|_| format!("bad CPU '{part}'"))?;
-        let hi: usize = hi.parse().map_err(|_| format!("bad CPU '{part}'"))?;
+        let bad = |_| CpuListError::Bad(part.to_string());
+        let lo: usize = lo.parse().map_err(bad)?;
+        let hi: usize = hi.parse().map_err(bad)?;
         if lo > hi {
-            return Err(format!("bad CPU range '{part}'"));
+            return Err(CpuListError::Range(part.to_string()));
         }
         for c in lo..=hi {
             if !allowed.contains(&c) {
-                return Err(format!("CPU {c} is not available (allowed: {allowed:?})"));
+                return Err(CpuListError::NotAllowed {
+                    cpu: c,
+                    allowed: allowed.to_vec(),
+                });
             }
             if !out.contains(&c) {
                 out.push(c);
@@ -41,7 +67,7 @@ pub fn parse_list(s: &str, allowed: &[usize]) -> Result<Vec<usize>, String> {
         }
     }
     if out.is_empty() {
-        return Err("empty CPU list".into());
+        return Err(CpuListError::Empty);
     }
     Ok(out)
 }

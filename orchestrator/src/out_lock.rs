@@ -29,14 +29,66 @@ pub const SUBFOLDERS: [&str; 6] = [
     "samples",
 ];
 
+/// Why an output folder is refused or its lock cannot be taken; each names the folder or file.
+#[derive(Debug, thiserror::Error)]
+pub enum OutLockError {
+    /// The folder cannot be created owner-only, or is not this user's alone.
+    #[error("output folder: {0}")]
+    Folder(files::UnsafeDir),
+    /// A subfolder a run writes into is not this user's alone (why, as the check says it).
+    #[error("output folder: refusing the folder {}: {why}", path.display())]
+    Subfolder {
+        /// The subfolder.
+        path: PathBuf,
+        /// Why it is refused.
+        why: files::DirProblem,
+    },
+    /// The lock file cannot be opened.
+    #[error("cannot lock the output folder {}: {source}", out.display())]
+    Open {
+        /// The output folder.
+        out: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The lock cannot be taken (an error, not another holder).
+    #[error("cannot lock {}: {source}", path.display())]
+    Lock {
+        /// The lock file.
+        path: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// Another command holds the folder.
+    #[error("the output folder {} is in use by {holder}: choose another --out or wait for it to end", out.display())]
+    InUse {
+        /// The output folder.
+        out: PathBuf,
+        /// Who holds it, e.g. `` `formation run` (run 3d2cb2b7, pid 812) ``.
+        holder: String,
+    },
+    /// The holder's line cannot be written into the lock file.
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        /// The lock file.
+        path: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The lock file was replaced every time it was locked.
+    #[error("cannot lock the output folder {}: its lock file keeps changing", .0.display())]
+    KeepsChanging(PathBuf),
+}
+
 /// Creates `out` owner-only or refuses it (see the module documentation).
-pub fn check_folder(out: &Path) -> Result<(), String> {
-    files::ensure_private_dir(out).map_err(|e| format!("output folder: {e}"))?;
+pub fn check_folder(out: &Path) -> Result<(), OutLockError> {
+    files::ensure_private_dir(out).map_err(OutLockError::Folder)?;
     for sub in SUBFOLDERS {
         let p = out.join(sub);
         if std::fs::symlink_metadata(&p).is_ok() {
-            files::check_private_dir(&p).map_err(|why| {
-                format!("output folder: refusing the folder {}: {why}", p.display())
+            files::check_private_dir(&p).map_err(|why| OutLockError::Subfolder {
+                path: p.clone(),
+                why,
             })?;
         }
     }
@@ -74,24 +126,28 @@ fn describe_holder(text: &str) -> String {
 }
 
 /// Takes the lock of `out` (creating the folder), or says which run holds it.
-pub fn acquire(out: &Path, run_id: Option<&str>, command: &str) -> Result<OutLock, String> {
+pub fn acquire(out: &Path, run_id: Option<&str>, command: &str) -> Result<OutLock, OutLockError> {
     check_folder(out)?;
     let path = out.join(LOCK_NAME);
     // The holder removes the file at its end: a file opened just before that is no longer the one
     // at the path once locked, so open again.
     for _ in 0..16 {
-        let mut file = files::open_lock_file(&path, true)
-            .map_err(|e| format!("cannot lock the output folder {}: {e}", out.display()))?;
-        let locked = files::try_lock(&file, Lock::Exclusive)
-            .map_err(|e| format!("cannot lock {}: {e}", path.display()))?;
+        let mut file = files::open_lock_file(&path, true).map_err(|source| OutLockError::Open {
+            out: out.to_path_buf(),
+            source,
+        })?;
+        let locked =
+            files::try_lock(&file, Lock::Exclusive).map_err(|source| OutLockError::Lock {
+                path: path.clone(),
+                source,
+            })?;
         if !locked {
             let mut text = String::new();
             let _ = file.read_to_string(&mut text);
-            return Err(format!(
-                "the output folder {} is in use by {}: choose another --out or wait for it to end",
-                out.display(),
-                describe_holder(&text)
-            ));
+            return Err(OutLockError::InUse {
+                out: out.to_path_buf(),
+                holder: describe_holder(&text),
+            });
         }
         if !files::is_at(&file, &path) {
             continue;
@@ -101,13 +157,13 @@ pub fn acquire(out: &Path, run_id: Option<&str>, command: &str) -> Result<OutLoc
             .and_then(|_| {
                 file.write_all(holder_text(std::process::id(), run_id, command).as_bytes())
             })
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+            .map_err(|source| OutLockError::Write {
+                path: path.clone(),
+                source,
+            })?;
         return Ok(OutLock { file, path });
     }
-    Err(format!(
-        "cannot lock the output folder {}: its lock file keeps changing",
-        out.display()
-    ))
+    Err(OutLockError::KeepsChanging(out.to_path_buf()))
 }
 
 impl Drop for OutLock {
@@ -129,7 +185,7 @@ mod tests {
         let d = std::env::temp_dir().join(format!("fm-outlock-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&d);
         let first = acquire(&d, Some("abc123"), "formation run").unwrap();
-        let e = acquire(&d, None, "formation sim").unwrap_err();
+        let e = acquire(&d, None, "formation sim").unwrap_err().to_string();
         assert!(e.contains("run abc123"), "{e}");
         assert!(e.contains(&format!("pid {}", std::process::id())), "{e}");
         assert!(e.contains(&d.display().to_string()), "{e}");
@@ -148,7 +204,9 @@ mod tests {
         let out = d.join("a").join("out");
         drop(acquire(&out, None, "formation sim").unwrap());
         std::fs::set_permissions(&out, std::fs::Permissions::from_mode(0o777)).unwrap();
-        let e = acquire(&out, None, "formation sim").unwrap_err();
+        let e = acquire(&out, None, "formation sim")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains(&out.display().to_string()) && e.contains("world-writable"),
             "{e}"
@@ -157,7 +215,9 @@ mod tests {
         let elsewhere = d.join("elsewhere");
         std::fs::create_dir(&elsewhere).unwrap();
         std::os::unix::fs::symlink(&elsewhere, out.join("checkpoints")).unwrap();
-        let e = acquire(&out, None, "formation run").unwrap_err();
+        let e = acquire(&out, None, "formation run")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("checkpoints") && e.contains("symbolic link"),
             "{e}"

@@ -1,8 +1,7 @@
 //! `formation node <role> ...`: a role process of `formation run` (plant, leader or agent), started
 //! by the orchestrator from the same executable, so one install is the whole system.
 
-use crate::cli;
-use std::process::ExitCode;
+use crate::error::CommandError;
 
 /// `formation node <role> <args>`: what the orchestrator starts for each role process.
 #[derive(clap::Args, Debug)]
@@ -14,34 +13,20 @@ pub struct NodeArgs {
     pub args: Vec<std::ffi::OsString>,
 }
 
-/// Runs one role process; exit code 1 with a one-line error (also in its log) on failure.
-pub fn main(a: NodeArgs) -> ExitCode {
+/// Runs one role process; a [`CommandError`] (exit code 1, with a one-line error also in its log)
+/// on failure.
+pub fn main(a: NodeArgs) -> Result<(), CommandError> {
     use formation_config::protocol::messages::Role;
-    let Some(role) = Role::from_name(&a.role) else {
-        eprintln!(
-            "formation node: unknown role '{}' (plant, leader or agent)",
-            a.role
-        );
-        return ExitCode::from(cli::EXIT_INVALID);
-    };
-    let args = match formation_config::node::args::ChildArgs::parse(a.args) {
-        Ok(args) => args,
-        Err(e) => {
-            eprintln!("formation node {role}: {e}");
-            return ExitCode::from(cli::EXIT_INVALID);
-        }
-    };
+    let role = Role::from_name(&a.role).ok_or_else(|| CommandError::UnknownRole(a.role.clone()))?;
+    let args = formation_config::node::args::ChildArgs::parse(a.args)
+        .map_err(|source| CommandError::NodeArgs { role, source })?;
     let result = match role {
         Role::Plant => formation_plant::node::run(args),
         Role::Leader => formation_leader::node::run(args),
         Role::Agent => formation_agent::node::run(args),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e}");
-            eprintln!("fm-{role}: {e}");
-            ExitCode::from(1)
-        }
-    }
+    result.map_err(|source| {
+        tracing::error!("{source}");
+        CommandError::Node { role, source }
+    })
 }

@@ -2,10 +2,10 @@
 
 use crate::cli;
 use crate::closed_loop::ClosedLoop;
+use crate::error::CommandError;
 use crate::record::{Outputs, Recorder, Summary};
 use formation_config::{Scenario, Variant};
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::time::Instant;
 
 /// Arguments of `formation sim`.
@@ -23,12 +23,10 @@ pub struct SimArgs {
     pub repeat: u32,
 }
 
-/// Entry point of `formation sim`.
-pub fn main(args: SimArgs) -> ExitCode {
-    let (scenario, variant) = match args.common.load() {
-        Ok(v) => v,
-        Err(code) => return code,
-    };
+/// Entry point of `formation sim`; the `formation` binary prints the error and maps it to the
+/// exit code.
+pub fn main(args: SimArgs) -> Result<(), CommandError> {
+    let (scenario, variant) = args.common.load()?;
     let live = args.common.live_options();
     let ros2 = args.common.ros2_options();
     let out = args
@@ -36,82 +34,60 @@ pub fn main(args: SimArgs) -> ExitCode {
         .out
         .unwrap_or_else(|| PathBuf::from(format!("out/{}-{}", scenario.name, variant.name())));
     // Held until the outputs are complete: a second run into the same folder is refused.
-    let _out_lock = match crate::out_lock::acquire(&out, None, "formation sim") {
-        Ok(l) => l,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(cli::EXIT_INVALID);
-        }
-    };
-    if let Err(e) = write_resolved_scenario(&scenario, &out) {
-        eprintln!("error: cannot write {}/scenario.toml: {e}", out.display());
-        return ExitCode::from(1);
-    }
+    let _out_lock = crate::out_lock::acquire(&out, None, "formation sim")?;
+    write_resolved_scenario(&scenario, &out).map_err(|source| CommandError::WriteScenario {
+        out: out.clone(),
+        source,
+    })?;
     let mut outputs = Outputs::with(&args.common.record);
     outputs.foxglove = live;
     outputs.ros2 = ros2;
+    let written = |source| CommandError::WriteOutputs {
+        out: out.clone(),
+        source,
+    };
     let mut factors = Vec::new();
     for _ in 1..args.repeat.max(1) {
-        match run_in_process_with(&scenario, variant, &out, outputs) {
-            Ok(s) => factors.push(s.realtime_factor),
-            Err(e) => {
-                eprintln!("error: cannot write outputs to {}: {e}", out.display());
-                return ExitCode::from(1);
-            }
+        let s = run_in_process_with(&scenario, variant, &out, outputs).map_err(written)?;
+        factors.push(s.realtime_factor);
+    }
+    let summary = run_in_process_with(&scenario, variant, &out, outputs).map_err(written)?;
+    if args.repeat > 1 {
+        factors.push(summary.realtime_factor);
+        factors.sort_by(|a, b| a.total_cmp(b));
+        let line = format!(
+            "speed over {} runs: median {:.0}x real time (slowest {:.0}x, fastest {:.0}x), {:.2} µs per simulated step",
+            factors.len(),
+            factors[factors.len() / 2],
+            factors[0],
+            factors[factors.len() - 1],
+            1e6 * scenario.simulation.dt_s / factors[factors.len() / 2]
+        );
+        // With --json, standard output holds the JSON only.
+        if args.common.json {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
         }
     }
-    match run_in_process_with(&scenario, variant, &out, outputs) {
-        Ok(summary) => {
-            if args.repeat > 1 {
-                factors.push(summary.realtime_factor);
-                factors.sort_by(|a, b| a.total_cmp(b));
-                let line = format!(
-                    "speed over {} runs: median {:.0}x real time (slowest {:.0}x, fastest {:.0}x), {:.2} µs per simulated step",
-                    factors.len(),
-                    factors[factors.len() / 2],
-                    factors[0],
-                    factors[factors.len() - 1],
-                    1e6 * scenario.simulation.dt_s / factors[factors.len() / 2]
-                );
-                // With --json, standard output holds the JSON only.
-                if args.common.json {
-                    eprintln!("{line}");
-                } else {
-                    println!("{line}");
-                }
-            }
-            if args.common.json {
-                println!("{}", summary.to_json());
-            } else if args.quiet {
-                println!("{}", out.join("summary.json").display());
-            } else {
-                summary.print_table();
-                println!("wrote {}/trajectory.csv and summary.json", out.display());
-            }
-            exit_code(&summary)
-        }
-        Err(e) => {
-            eprintln!("error: cannot write outputs to {}: {e}", out.display());
-            ExitCode::from(1)
-        }
+    if args.common.json {
+        println!("{}", summary.to_json());
+    } else if args.quiet {
+        println!("{}", out.join("summary.json").display());
+    } else {
+        summary.print_table();
+        println!("wrote {}/trajectory.csv and summary.json", out.display());
     }
+    result_of(&summary)
 }
 
-/// Exit code of a runner (`sim`, `run`) that ran to its end and wrote its outputs: 0, or
-/// [`cli::EXIT_RESULT_FAILED`] (3) when the run diverged, with the divergence named on stderr.
-pub fn exit_code(summary: &Summary) -> ExitCode {
+/// The end of a runner (`sim`, `run`) that ran to its end and wrote its outputs: `Ok`, or
+/// [`CommandError::Diverged`] (exit code [`crate::cli::EXIT_RESULT_FAILED`], 3) when the run
+/// diverged.
+pub fn result_of(summary: &Summary) -> Result<(), CommandError> {
     match &summary.divergence {
-        None => ExitCode::SUCCESS,
-        Some(d) => {
-            eprintln!(
-                "diverged: t = {:.3} s, agent {}: {} (outputs up to that step are written; exit code {})",
-                d.time_s,
-                d.agent,
-                d.cause,
-                cli::EXIT_RESULT_FAILED
-            );
-            ExitCode::from(cli::EXIT_RESULT_FAILED)
-        }
+        None => Ok(()),
+        Some(d) => Err(CommandError::Diverged(d.clone())),
     }
 }
 

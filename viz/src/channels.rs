@@ -5,6 +5,7 @@
 use crate::scene::{plot_schema, step_ns, Scene, PLOT_SCHEMA_NAME};
 use foxglove::messages::{FrameTransforms, Log, SceneUpdate};
 use foxglove::{Encode, Schema};
+use std::borrow::Cow;
 
 /// `/tf`.
 pub const TF: usize = 0;
@@ -21,13 +22,40 @@ pub const LOG: usize = 5;
 /// `/agent/1/plot`; agent i's is `PLOT + i - 1`.
 pub const PLOT: usize = 6;
 
+/// A channel's schema, as MCAP and Foxglove's protocol carry it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelSchema {
+    /// Name (`foxglove.SceneUpdate`, the plot schema's name).
+    pub name: String,
+    /// Encoding (`protobuf` or `jsonschema`).
+    pub encoding: String,
+    /// The schema itself (a protobuf file descriptor set, or a JSON Schema).
+    pub data: Vec<u8>,
+}
+
+impl From<Schema> for ChannelSchema {
+    fn from(s: Schema) -> ChannelSchema {
+        ChannelSchema {
+            name: s.name,
+            encoding: s.encoding,
+            data: s.data.into_owned(),
+        }
+    }
+}
+
+impl From<ChannelSchema> for Schema {
+    fn from(s: ChannelSchema) -> Schema {
+        Schema::new(s.name, s.encoding, Cow::Owned(s.data))
+    }
+}
+
 /// One channel: its topic, schema and message encoding.
 #[derive(Debug, Clone)]
 pub struct ChannelSpec {
     /// Topic.
     pub topic: String,
     /// Schema (name, encoding, data).
-    pub schema: Schema,
+    pub schema: ChannelSchema,
     /// Message encoding (`protobuf` or `json`).
     pub message_encoding: &'static str,
 }
@@ -35,7 +63,9 @@ pub struct ChannelSpec {
 fn well_known<T: Encode>(topic: &str) -> ChannelSpec {
     ChannelSpec {
         topic: topic.into(),
-        schema: T::get_schema().expect("every well-known message has a schema"),
+        schema: T::get_schema()
+            .expect("every well-known message has a schema")
+            .into(),
         message_encoding: "protobuf",
     }
 }
@@ -50,11 +80,12 @@ pub fn channels(n: usize) -> Vec<ChannelSpec> {
         well_known::<SceneUpdate>("/scene/events"),
         well_known::<Log>("/log"),
     ];
-    let plot = Schema::new(
+    let plot: ChannelSchema = Schema::new(
         PLOT_SCHEMA_NAME,
         "jsonschema",
         plot_schema().to_string().into_bytes(),
-    );
+    )
+    .into();
     for id in 1..=n {
         out.push(ChannelSpec {
             topic: format!("/agent/{id}/plot"),

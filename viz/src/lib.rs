@@ -18,7 +18,6 @@ pub mod live;
 pub mod scene;
 pub mod topview;
 
-pub use foxglove;
 pub use frame::{AgentSample, Frame, Limits};
 pub use live::{LiveError, LiveStats, LiveView};
 pub use scene::{Scene, SceneBuilder, SceneConfig};

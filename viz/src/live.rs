@@ -164,7 +164,7 @@ impl LiveView {
             let ch = ctx
                 .channel_builder(s.topic.clone())
                 .message_encoding(s.message_encoding)
-                .schema(s.schema)
+                .schema(foxglove::Schema::from(s.schema))
                 .build_raw()
                 .map_err(|e| LiveError::Server(format!("channel {}: {e}", s.topic)))?;
             raw.push(ch);

@@ -69,13 +69,13 @@ pub fn link_state(timeline: &Timeline, a: usize, b: usize, k: u64) -> LinkState 
 
 /// The rotation of ZYX Euler angles A = [phi, theta, psi] (body to inertial, R = Rz Ry Rx as
 /// the plant's eq. (1)) as a unit quaternion.
-pub fn quaternion(a: [f64; 3]) -> Quaternion {
+pub(crate) fn quaternion(a: [f64; 3]) -> Quaternion {
     let [x, y, z, w] = quaternion_xyzw(a);
     Quaternion { x, y, z, w }
 }
 
 /// A point of the scene rotated by a quaternion (for the top-view figure and the tests).
-pub fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
+pub(crate) fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
     // v' = v + 2 w (u x v) + 2 u x (u x v), u = (x, y, z).
     let u = [q.x, q.y, q.z];
     let cross = |a: [f64; 3], b: [f64; 3]| {
@@ -96,7 +96,7 @@ pub fn rotate(q: &Quaternion, v: [f64; 3]) -> [f64; 3] {
 }
 
 /// Colour of agent `id` (1-based): the palette of the figures, cycled.
-pub fn agent_color(id: usize, alpha: f64) -> Color {
+pub(crate) fn agent_color(id: usize, alpha: f64) -> Color {
     let [r, g, b] = agent_rgb(id);
     rgba(r, g, b, alpha)
 }
@@ -117,7 +117,7 @@ fn down_color(alpha: f64) -> Color {
 }
 
 /// Colour of an edge in `state`.
-pub fn link_color(state: LinkState) -> Color {
+pub(crate) fn link_color(state: LinkState) -> Color {
     let ([r, g, b], alpha) = state.rgba();
     rgba(r, g, b, f64::from(alpha))
 }
@@ -307,19 +307,33 @@ pub struct Scene {
     /// Step of the frame.
     pub step: u64,
     /// `/tf`.
-    pub transforms: FrameTransforms,
+    pub(crate) transforms: FrameTransforms,
     /// `/scene/agents`.
-    pub agents: SceneUpdate,
+    pub(crate) agents: SceneUpdate,
     /// `/scene/mission`.
-    pub mission: SceneUpdate,
+    pub(crate) mission: SceneUpdate,
     /// `/scene/links`.
-    pub links: SceneUpdate,
+    pub(crate) links: SceneUpdate,
     /// `/scene/events`.
-    pub events: SceneUpdate,
+    pub(crate) events: SceneUpdate,
     /// `/log`: the events that apply since the previous frame, each with its step.
-    pub logs: Vec<(u64, Log)>,
+    pub(crate) logs: Vec<(u64, Log)>,
     /// `/agent/{i}/plot`, agents 1..N.
     pub plots: Vec<AgentPlot>,
+}
+
+impl Scene {
+    /// The position of agent `id` (1-based) in the world frame as `/tf` carries it, m.
+    pub fn agent_translation(&self, id: usize) -> Option<[f64; 3]> {
+        let frame = agent_frame(id);
+        let t = self
+            .transforms
+            .transforms
+            .iter()
+            .find(|t| t.child_frame_id == frame)?;
+        let p = t.translation.as_ref()?;
+        Some([p.x, p.y, p.z])
+    }
 }
 
 /// Builds the scene frame after frame: keeps the trails, the timeline and the events.
@@ -373,7 +387,7 @@ fn at(p: [f64; 3]) -> Option<Pose> {
 }
 
 /// Simulation time of step k as a timestamp.
-pub fn timestamp(step: u64, dt: f64) -> Timestamp {
+pub(crate) fn timestamp(step: u64, dt: f64) -> Timestamp {
     let ns = step_ns(step, dt);
     Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
 }

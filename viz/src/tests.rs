@@ -346,7 +346,7 @@ fn seen_from_above_the_body_follows_its_pose_and_the_footprint_lies_under_it() {
     let scene = b.build(&f);
     let all = shapes(&scene);
     let p = f.agents[0].position;
-    let color = agent_color(1, 1.0);
+    let color = crate::topview::rgba(agent_color(1, 1.0));
     // The heading arrow of agent 1 starts at P_1 and points along psi.
     let arrow = all
         .iter()

@@ -6,6 +6,29 @@
 use crate::scene::{rotate, Scene, WORLD_FRAME};
 use foxglove::messages::{line_primitive, Color, Pose, Quaternion, SceneEntity, SceneUpdate};
 
+/// A colour: red, green, blue and alpha, each in [0, 1], as the scene's messages carry it.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Rgba {
+    /// Red.
+    pub r: f64,
+    /// Green.
+    pub g: f64,
+    /// Blue.
+    pub b: f64,
+    /// Alpha (1: opaque).
+    pub a: f64,
+}
+
+/// The colour of a primitive's message.
+pub(crate) fn rgba(c: Color) -> Rgba {
+    Rgba {
+        r: c.r,
+        g: c.g,
+        b: c.b,
+        a: c.a,
+    }
+}
+
 /// A flat shape in world x-y coordinates, m.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Shape {
@@ -14,14 +37,14 @@ pub enum Shape {
         /// Vertices.
         points: Vec<[f64; 2]>,
         /// Fill colour (with alpha).
-        color: Color,
+        color: Rgba,
     },
     /// A stroked polyline (trails, error lines, arrows).
     Polyline {
         /// Vertices.
         points: Vec<[f64; 2]>,
         /// Colour.
-        color: Color,
+        color: Rgba,
         /// Width, m (the primitive's thickness).
         width_m: f64,
     },
@@ -32,7 +55,7 @@ pub enum Shape {
         /// Text.
         text: String,
         /// Colour.
-        color: Color,
+        color: Rgba,
         /// Font size, m.
         size_m: f64,
     },
@@ -118,7 +141,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
         let t = frame.then(&Rigid::of(&c.pose));
         let d = c.size.map_or(0.0, |s| s.x.max(s.y));
         let layer = if body { 3 } else { 0 };
-        let color = c.color.unwrap_or_default();
+        let color = rgba(c.color.unwrap_or_default());
         layered(
             layer,
             Shape::Polygon {
@@ -131,7 +154,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
     for s in &e.spheres {
         let t = frame.then(&Rigid::of(&s.pose));
         let d = s.size.map_or(0.0, |s| s.x.max(s.y));
-        let color = s.color.unwrap_or_default();
+        let color = rgba(s.color.unwrap_or_default());
         layered(
             2,
             Shape::Polygon {
@@ -152,7 +175,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             3,
             Shape::Polygon {
                 points,
-                color: c.color.unwrap_or_default(),
+                color: rgba(c.color.unwrap_or_default()),
             },
             out,
         );
@@ -172,7 +195,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
                     1,
                     Shape::Polyline {
                         points: pair.to_vec(),
-                        color,
+                        color: rgba(color),
                         width_m: l.thickness,
                     },
                     out,
@@ -183,7 +206,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
                 1,
                 Shape::Polyline {
                     points: pts,
-                    color,
+                    color: rgba(color),
                     width_m: l.thickness,
                 },
                 out,
@@ -197,7 +220,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             4,
             Shape::Polyline {
                 points: vec![xy(t.p), xy(tip)],
-                color: a.color.unwrap_or_default(),
+                color: rgba(a.color.unwrap_or_default()),
                 width_m: a.shaft_diameter,
             },
             out,
@@ -210,7 +233,7 @@ fn entity_shapes(e: &SceneEntity, frame: &Rigid, out: &mut Vec<(u8, Shape)>) {
             Shape::Text {
                 at: xy(t.p),
                 text: x.text.clone(),
-                color: x.color.unwrap_or_default(),
+                color: rgba(x.color.unwrap_or_default()),
                 size_m: x.font_size,
             },
             out,

@@ -72,16 +72,16 @@ impl Checkpoints {
 pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), NodeError> {
     let dir = &b.args.run_dir;
     let path = restart::rejoin_path(dir, i);
-    let plan: RejoinFile =
-        restart::read_rejoin(&path, i, b.scenario_hash, r).map_err(NodeError::Args)?;
+    let plan: RejoinFile = restart::read_rejoin(&path, i, b.scenario_hash, r)
+        .map_err(|e| NodeError::Args(e.to_string()))?;
     for e in &plan.events {
         e.apply(agent.timeline_mut());
     }
     let mut checkpoint = None;
     if let Some(s) = plan.checkpoint {
         let cpath = restart::checkpoint_path(dir, i);
-        let c: Checkpoint =
-            restart::read_checkpoint(&cpath, i, b.scenario_hash).map_err(NodeError::Args)?;
+        let c: Checkpoint = restart::read_checkpoint(&cpath, i, b.scenario_hash)
+            .map_err(|e| NodeError::Args(e.to_string()))?;
         if c.step != s {
             return Err(NodeError::Args(format!(
                 "{} holds step {}, the rejoin plan step {s}",

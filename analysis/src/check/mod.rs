@@ -155,9 +155,43 @@ pub fn report(s: &Scenario) -> Report {
 /// The report of a (validated) scenario flown by `variant`.
 pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
     let graph = spectrum::spectrum(&Topology::from_scenario(s));
+    let theorem1 = theorem1_of(s, &graph);
+    let outer = outer_report(s, &graph);
+    let (filters, inner) = inner_reports(s, &graph, outer.fastest_mode_rad_s);
+    let barrier = barrier::analyse(s);
+    let mut r = Report {
+        scenario: s.name.clone(),
+        variant: variant.name(),
+        gain_set: if variant == formation_config::Variant::Unconstrained {
+            "unconstrained"
+        } else {
+            "constrained"
+        },
+        graph,
+        theorem1,
+        outer,
+        filters,
+        cascade_model: inner::CASCADE_MODEL,
+        inner,
+        barrier,
+        verdicts: Vec::new(),
+        worst: Level::Ok,
+    };
+    r.verdicts = verdicts::all(&r);
+    r.worst = r
+        .verdicts
+        .iter()
+        .map(|v| v.level)
+        .max_by_key(|l| *l as u8)
+        .unwrap_or(Level::Ok);
+    r
+}
+
+/// Theorem 1's analysis, when L + B is positive definite.
+fn theorem1_of(s: &Scenario, graph: &spectrum::Spectrum) -> Option<theorem1::Theorem1> {
     let pos = &s.controller.position;
     let tau = s.simulation.max_delay_s;
-    let theorem1 = match (graph.sigma_max_g_inv, graph.sigma_min_b_inv) {
+    match (graph.sigma_max_g_inv, graph.sigma_min_b_inv) {
         (Some(g_inv), Some(b_inv)) => Some(theorem1::analyse(theorem1::Theorem1Inputs {
             k_p: pos.k_p,
             k_v: pos.k_v,
@@ -170,7 +204,13 @@ pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
             sigma_min_b_inv: b_inv,
         })),
         _ => None,
-    };
+    }
+}
+
+/// The outer loop's modes, margins and information structure.
+fn outer_report(s: &Scenario, graph: &spectrum::Spectrum) -> OuterReport {
+    let pos = &s.controller.position;
+    let tau = s.simulation.max_delay_s;
     // The leader-relative terms (D11) add k_L to every mode's damping and k_LP to its stiffness:
     // s² + (lambda k_V + k_L) s + (lambda k_P + k_LP). For one mode this equals the consensus law with
     // the effective gains k_V + k_L / lambda and k_P + k_LP / lambda, which is how the loop models get them.
@@ -226,7 +266,7 @@ pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
     } else {
         graph.lambda_min * pos.k_p + k_lp
     };
-    let outer = OuterReport {
+    OuterReport {
         fastest_mode_rad_s: fastest,
         slowest_decay_rate: outer::slowest_decay(&modes),
         slowest_damping_rate: slowest_damping,
@@ -247,7 +287,21 @@ pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
         ),
         information,
         modes,
-    };
+    }
+}
+
+/// The command filters' poles and the inner loops of both gain sets, against the fastest outer
+/// mode `fastest` (rad/s).
+fn inner_reports(
+    s: &Scenario,
+    graph: &spectrum::Spectrum,
+    fastest: f64,
+) -> (Filters, Vec<inner::InnerLoop>) {
+    let pos = &s.controller.position;
+    let tau = s.simulation.max_delay_s;
+    let (k_l, k_lp) = (pos.leader_velocity_damping, pos.leader_position_gain);
+    let lmax = graph.lambda_max.max(1e-12);
+    let (kp_fast, kv_fast) = (pos.k_p + k_lp / lmax, pos.k_v + k_l / lmax);
     let (fa, fr) = (
         &s.controller.attitude_command_filter,
         &s.controller.rate_command_filter,
@@ -288,44 +342,19 @@ pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
             &cascade,
         ),
     ];
-    let barrier = barrier::analyse(s);
-    let mut r = Report {
-        scenario: s.name.clone(),
-        variant: variant.name(),
-        gain_set: if variant == formation_config::Variant::Unconstrained {
-            "unconstrained"
-        } else {
-            "constrained"
-        },
-        graph,
-        theorem1,
-        outer,
-        filters,
-        cascade_model: inner::CASCADE_MODEL,
-        inner,
-        barrier,
-        verdicts: Vec::new(),
-        worst: Level::Ok,
-    };
-    r.verdicts = verdicts::all(&r);
-    r.worst = r
-        .verdicts
-        .iter()
-        .map(|v| v.level)
-        .max_by_key(|l| *l as u8)
-        .unwrap_or(Level::Ok);
-    r
+    (filters, inner)
 }
 
 /// Entry point of `formation check`.
 pub fn main(args: CheckArgs) -> ExitCode {
-    let s = match load_with_overrides(args.scenario.as_deref(), &args.sets) {
-        Ok(s) => s,
-        Err(code) => return code,
-    };
-    let variant = match formation_runtime::cli::parse_variant(&args.variant) {
+    let loaded = load_with_overrides(args.scenario.as_deref(), &args.sets)
+        .and_then(|s| Ok((s, formation_runtime::cli::parse_variant(&args.variant)?)));
+    let (s, variant) = match loaded {
         Ok(v) => v,
-        Err(code) => return code,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(formation_runtime::cli::EXIT_INVALID);
+        }
     };
     let r = report_for(&s, variant);
     if args.json {

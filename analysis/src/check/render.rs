@@ -31,6 +31,21 @@ pub fn text(r: &Report) -> String {
 
 fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
     writeln!(o, "formation check: scenario '{}'", r.scenario)?;
+    write_graph(r, o)?;
+    write_theorem1(r, o)?;
+    write_outer(r, o)?;
+    write_inner(r, o)?;
+    write_barrier(r, o)?;
+    writeln!(o, "\n== Verdicts")?;
+    for v in &r.verdicts {
+        writeln!(o, "{:<4} {}: {}", v.level.label(), v.check, v.why)?;
+    }
+    writeln!(o, "worst: {}", r.worst.label())?;
+    Ok(())
+}
+
+/// Section 1: the eigenvalues of L + B.
+fn write_graph(r: &Report, o: &mut String) -> std::fmt::Result {
     writeln!(o, "\n== 1. Graph: L + B (Lemma 1, Assumption 1)")?;
     let ev: Vec<String> = r
         .graph
@@ -46,6 +61,11 @@ fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
             "sigma_max(G^-1) = {a:.4}, sigma_min(B^-1) = {b:.5}  (G = (L+B) x I3, B = G^T G)"
         )?;
     }
+    Ok(())
+}
+
+/// Section 2: Theorem 1's matrix M.
+fn write_theorem1(r: &Report, o: &mut String) -> std::fmt::Result {
     writeln!(o, "\n== 2. Theorem 1: matrix M of eq. (18)")?;
     match &r.theorem1 {
         None => writeln!(o, "skipped: L + B is not positive definite")?,
@@ -103,6 +123,11 @@ fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
             )?;
         }
     }
+    Ok(())
+}
+
+/// Section 3, first part: the outer modes against the uncertainty, the delay and the RBFNN.
+fn write_outer(r: &Report, o: &mut String) -> std::fmt::Result {
     writeln!(o, "\n== 3. Loop bandwidths (linearised, near hover)")?;
     let ou = &r.outer;
     writeln!(o, "outer modes s^2 + lambda k_V s + lambda k_P (no delay):")?;
@@ -151,6 +176,11 @@ fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
         "RBFNN (15): forgets at kappa K_W = {:.4}/s; static gains up to l K_P/K_W = {:.3}, l K_V/K_W = {:.3}",
         ou.rbfnn.forgetting_rate, ou.rbfnn.static_p_gain_bound, ou.rbfnn.static_d_gain_bound
     )?;
+    Ok(())
+}
+
+/// Section 3, second part: the command filters and the inner loops' margins.
+fn write_inner(r: &Report, o: &mut String) -> std::fmt::Result {
     for (name, f) in [
         ("attitude command filter 1", &r.filters.attitude),
         ("rate command filter", &r.filters.rate),
@@ -194,6 +224,11 @@ fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
             margin(&il.cascade)
         )?;
     }
+    Ok(())
+}
+
+/// Section 4: the barrier's feasibility.
+fn write_barrier(r: &Report, o: &mut String) -> std::fmt::Result {
     let b = &r.barrier;
     writeln!(o, "\n== 4. Barrier feasibility (roll/pitch)")?;
     writeln!(
@@ -216,10 +251,5 @@ fn write_all(r: &Report, o: &mut String) -> std::fmt::Result {
         "followable command rate inside C_i1 = {} rad: min(C-bar_i2 = {:.3}, sqrt(2 a C_i1)) = {:.3} rad/s",
         b.attitude_margin_rad, b.rate_constraint_rad_s, b.followable_rate_rad_s
     )?;
-    writeln!(o, "\n== Verdicts")?;
-    for v in &r.verdicts {
-        writeln!(o, "{:<4} {}: {}", v.level.label(), v.check, v.why)?;
-    }
-    writeln!(o, "worst: {}", r.worst.label())?;
     Ok(())
 }

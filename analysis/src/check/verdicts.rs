@@ -63,6 +63,24 @@ fn not_flown(mut v: Verdict, gain_set: &str) -> Verdict {
 /// Every verdict of a report.
 pub fn all(r: &Report) -> Vec<Verdict> {
     let mut v = Vec::new();
+    graph_verdicts(r, &mut v);
+    theorem1_verdicts(r, &mut v);
+    outer_verdicts(r, &mut v);
+    for il in &r.inner {
+        let mut own = Vec::new();
+        inner_verdicts(il, &mut own);
+        if il.gain_set == r.gain_set {
+            v.extend(own);
+        } else {
+            v.extend(own.into_iter().map(|x| not_flown(x, il.gain_set)));
+        }
+    }
+    barrier_verdicts(r, &mut v);
+    v
+}
+
+/// Lemma 1: L + B positive definite.
+fn graph_verdicts(r: &Report, v: &mut Vec<Verdict>) {
     let g = &r.graph;
     v.push(if g.positive_definite {
         Verdict::new(
@@ -80,6 +98,10 @@ pub fn all(r: &Report) -> Vec<Verdict> {
             ),
         )
     });
+}
+
+/// Theorem 1: M positive definite, and the ties between the gains.
+fn theorem1_verdicts(r: &Report, v: &mut Vec<Verdict>) {
     if let Some(t) = &r.theorem1 {
         let failing: Vec<&str> = t
             .necessary
@@ -116,6 +138,11 @@ pub fn all(r: &Report) -> Vec<Verdict> {
             ),
         ));
     }
+}
+
+/// The outer loop: damping and stiffness against the uncertainty, the leader's information, the
+/// delay margin, the RBFNN's leakage.
+fn outer_verdicts(r: &Report, v: &mut Vec<Verdict>) {
     let o = &r.outer;
     let u = &o.uncertainty;
     v.push(Verdict::new(
@@ -193,15 +220,10 @@ pub fn all(r: &Report) -> Vec<Verdict> {
             }
         ),
     ));
-    for il in &r.inner {
-        let mut own = Vec::new();
-        inner_verdicts(il, &mut own);
-        if il.gain_set == r.gain_set {
-            v.extend(own);
-        } else {
-            v.extend(own.into_iter().map(|x| not_flown(x, il.gain_set)));
-        }
-    }
+}
+
+/// The barrier: the acceleration and command rate the attitude constraints leave.
+fn barrier_verdicts(r: &Report, v: &mut Vec<Verdict>) {
     let b = &r.barrier;
     v.push(Verdict::new(
         "barrier.acceleration",
@@ -223,7 +245,6 @@ pub fn all(r: &Report) -> Vec<Verdict> {
             b.command_rate_limit_rad_s, b.followable_rate_rad_s, b.attitude_margin_rad
         ),
     ));
-    v
 }
 
 fn inner_verdicts(il: &InnerLoop, v: &mut Vec<Verdict>) {

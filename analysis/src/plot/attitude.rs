@@ -60,12 +60,14 @@ pub fn attitude_constraint<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawRe
     constraint_figure(
         fig,
         root,
-        "Fig. 9 — attitude norm ‖A_i‖ and constraint C1_bar",
-        ("att_norm", "‖A_i‖"),
-        ("att_cmd_norm", "‖A_iC‖"),
-        ("c1_bar", "C1_bar"),
-        "rad",
-        true,
+        Constraint {
+            title: "Fig. 9 — attitude norm ‖A_i‖ and constraint C1_bar",
+            state: ("att_norm", "‖A_i‖"),
+            command: ("att_cmd_norm", "‖A_iC‖"),
+            bound: ("c1_bar", "C1_bar"),
+            unit: "rad",
+            with_compare: true,
+        },
     )
 }
 
@@ -74,26 +76,42 @@ pub fn rate_constraint<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult
     constraint_figure(
         fig,
         root,
-        "Fig. 10 — angular-rate norm ‖Ω_i‖, virtual control ‖α_i‖ and constraint C2_bar",
-        ("rate_norm", "‖Ω_i‖"),
-        ("alpha_norm", "‖α_i‖"),
-        ("c2_bar", "C2_bar"),
-        "rad/s",
-        false,
+        Constraint {
+            title: "Fig. 10 — angular-rate norm ‖Ω_i‖, virtual control ‖α_i‖ and constraint C2_bar",
+            state: ("rate_norm", "‖Ω_i‖"),
+            command: ("alpha_norm", "‖α_i‖"),
+            bound: ("c2_bar", "C2_bar"),
+            unit: "rad/s",
+            with_compare: false,
+        },
     )
 }
 
-#[allow(clippy::too_many_arguments)]
-fn constraint_figure<DB: Backend>(
-    fig: &Figure,
-    root: &Area<DB>,
-    title: &str,
-    state: (&str, &str),
-    command: (&str, &str),
-    bound: (&str, &str),
-    unit: &str,
+/// What a constraint figure draws: each pair is (CSV column, legend label).
+struct Constraint<'a> {
+    /// The figure's title (the run's title follows it).
+    title: &'a str,
+    /// The constrained norm.
+    state: (&'a str, &'a str),
+    /// Its command (dashed).
+    command: (&'a str, &'a str),
+    /// The constraint.
+    bound: (&'a str, &'a str),
+    /// The unit of the norms.
+    unit: &'a str,
+    /// Whether the `--compare` run's norm is drawn as well.
     with_compare: bool,
-) -> DrawResult {
+}
+
+fn constraint_figure<DB: Backend>(fig: &Figure, root: &Area<DB>, c: Constraint) -> DrawResult {
+    let Constraint {
+        title,
+        state,
+        command,
+        bound,
+        unit,
+        with_compare,
+    } = c;
     let area = titled(root, &format!("{title} ({})", fig.run.title()))?;
     let cells = area.split_evenly((fig.run.agents.len(), 1));
     for (cell, a) in cells.iter().zip(&fig.run.agents) {

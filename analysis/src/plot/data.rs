@@ -186,22 +186,64 @@ impl Run {
     }
 }
 
+/// Why a `trajectory.csv` does not parse: the line and column, and what failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CsvError {
+    /// No header.
+    #[error("the file is empty (no header)")]
+    Empty,
+    /// Columns the figures need are absent.
+    #[error("missing column(s): {}", .0.join(", "))]
+    Missing(Vec<&'static str>),
+    /// A row with another number of fields than the header.
+    #[error("line {line}: {fields} fields, the header has {header}")]
+    Fields {
+        /// The line (1-based).
+        line: usize,
+        /// Its fields.
+        fields: usize,
+        /// The header's fields.
+        header: usize,
+    },
+    /// A cell that is not a number.
+    #[error("line {line}: column '{column}': not a number: '{cell}'")]
+    Number {
+        /// The line (1-based).
+        line: usize,
+        /// The column.
+        column: &'static str,
+        /// The cell.
+        cell: String,
+    },
+    /// An agent index that is not a positive integer.
+    #[error("line {line}: agent index must be a positive integer, got {got}")]
+    Agent {
+        /// The line (1-based).
+        line: usize,
+        /// The value.
+        got: f64,
+    },
+    /// A header and no row.
+    #[error("no data rows after the header")]
+    NoRows,
+}
+
 /// Parses the long-format CSV into per-agent column vectors. Errors name the line and column.
-fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
+fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, CsvError> {
     let mut lines = text
         .lines()
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty());
-    let (_, header) = lines.next().ok_or("the file is empty (no header)")?;
+    let (_, header) = lines.next().ok_or(CsvError::Empty)?;
     let names: Vec<&str> = header.split(',').map(str::trim).collect();
     let index: HashMap<&str, usize> = names.iter().enumerate().map(|(i, n)| (*n, i)).collect();
-    let missing: Vec<&str> = REQUIRED_COLUMNS
+    let missing: Vec<&'static str> = REQUIRED_COLUMNS
         .iter()
         .map(|c| c.name())
         .filter(|c| !index.contains_key(c))
         .collect();
     if !missing.is_empty() {
-        return Err(format!("missing column(s): {}", missing.join(", ")));
+        return Err(CsvError::Missing(missing));
     }
     let wanted: Vec<usize> = REQUIRED_COLUMNS.iter().map(|c| index[c.name()]).collect();
     let agent_col = column_index(Column::Agent.name());
@@ -211,29 +253,25 @@ fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
     for (lineno, line) in lines {
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
         if cells.len() != names.len() {
-            return Err(format!(
-                "line {}: {} fields, the header has {}",
-                lineno + 1,
-                cells.len(),
-                names.len()
-            ));
+            return Err(CsvError::Fields {
+                line: lineno + 1,
+                fields: cells.len(),
+                header: names.len(),
+            });
         }
         for (v, (&src, name)) in values.iter_mut().zip(wanted.iter().zip(REQUIRED_COLUMNS)) {
-            *v = parse_number(cells[src]).ok_or_else(|| {
-                format!(
-                    "line {}: column '{}': not a number: '{}'",
-                    lineno + 1,
-                    name.name(),
-                    cells[src]
-                )
+            *v = parse_number(cells[src]).ok_or_else(|| CsvError::Number {
+                line: lineno + 1,
+                column: name.name(),
+                cell: cells[src].to_string(),
             })?;
         }
         let a = values[agent_col];
         if !(a >= 1.0 && a.fract() == 0.0 && a < u32::MAX as f64) {
-            return Err(format!(
-                "line {}: agent index must be a positive integer, got {a}",
-                lineno + 1
-            ));
+            return Err(CsvError::Agent {
+                line: lineno + 1,
+                got: a,
+            });
         }
         let id = a as u32;
         let trace = match by_agent.iter_mut().position(|t| t.id == id) {
@@ -243,7 +281,8 @@ fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
                     id,
                     columns: vec![Vec::new(); REQUIRED_COLUMNS.len()],
                 });
-                by_agent.last_mut().ok_or("internal: empty agent list")?
+                let last = by_agent.len() - 1;
+                &mut by_agent[last]
             }
         };
         for (c, v) in trace.columns.iter_mut().zip(&values) {
@@ -251,7 +290,7 @@ fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, String> {
         }
     }
     if by_agent.is_empty() {
-        return Err("no data rows after the header".to_string());
+        return Err(CsvError::NoRows);
     }
     by_agent.sort_by_key(|t| t.id);
     Ok(by_agent)

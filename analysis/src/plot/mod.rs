@@ -91,6 +91,17 @@ impl std::fmt::Display for PlotError {
 
 impl std::error::Error for PlotError {}
 
+impl PlotError {
+    /// The exit code of `formation plot` for this error: 2 for bad input, 1 for a figure that
+    /// could not be drawn or written (docs/cli.md).
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            PlotError::Input(_) => formation_runtime::cli::EXIT_INVALID,
+            PlotError::Render(_) => 1,
+        }
+    }
+}
+
 /// One figure written: its path and size, px.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Rendered {
@@ -112,13 +123,9 @@ pub fn main(args: PlotArgs) -> ExitCode {
             }
             ExitCode::SUCCESS
         }
-        Err(e @ PlotError::Input(_)) => {
+        Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(formation_runtime::cli::EXIT_INVALID)
-        }
-        Err(e @ PlotError::Render(_)) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
+            ExitCode::from(e.exit_code())
         }
     }
 }
@@ -286,7 +293,7 @@ pub fn render_all(
     out: &Path,
     format: Format,
 ) -> Result<Vec<Rendered>, PlotError> {
-    style::register_fonts().map_err(PlotError::Render)?;
+    style::register_fonts().map_err(|e| PlotError::Render(e.to_string()))?;
     let fig = Figure {
         run,
         compare,

@@ -24,6 +24,42 @@ pub struct Scenes {
     pub at: Vec<(f64, Scene)>,
 }
 
+/// The `trajectory.csv` columns a scene is built from.
+const SCENE_COLUMNS: &[Column] = &[
+    Column::Step,
+    Column::T,
+    Column::Agent,
+    Column::Px,
+    Column::Py,
+    Column::Pz,
+    Column::Phi,
+    Column::Theta,
+    Column::Psi,
+    Column::Pdx,
+    Column::Pdy,
+    Column::Pdz,
+    Column::ENorm,
+    Column::Tx,
+    Column::Ty,
+    Column::AttNorm,
+    Column::C1Bar,
+    Column::RateNorm,
+    Column::C2Bar,
+    Column::GammaX,
+    Column::GammaY,
+    Column::GammaZ,
+    Column::GammaHatX,
+    Column::GammaHatY,
+    Column::GammaHatZ,
+    Column::DeltaX,
+    Column::DeltaY,
+    Column::DeltaZ,
+    Column::DeltaHatX,
+    Column::DeltaHatY,
+    Column::DeltaHatZ,
+    Column::Tau,
+];
+
 fn columns(header: &str) -> BTreeMap<&str, usize> {
     header.split(',').enumerate().map(|(i, c)| (c, i)).collect()
 }
@@ -39,41 +75,7 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
         .map_err(|e| input("trajectory.csv", &e))?;
     let mut lines = text.lines();
     let col = columns(lines.next().unwrap_or_default());
-    let need = [
-        Column::Step,
-        Column::T,
-        Column::Agent,
-        Column::Px,
-        Column::Py,
-        Column::Pz,
-        Column::Phi,
-        Column::Theta,
-        Column::Psi,
-        Column::Pdx,
-        Column::Pdy,
-        Column::Pdz,
-        Column::ENorm,
-        Column::Tx,
-        Column::Ty,
-        Column::AttNorm,
-        Column::C1Bar,
-        Column::RateNorm,
-        Column::C2Bar,
-        Column::GammaX,
-        Column::GammaY,
-        Column::GammaZ,
-        Column::GammaHatX,
-        Column::GammaHatY,
-        Column::GammaHatZ,
-        Column::DeltaX,
-        Column::DeltaY,
-        Column::DeltaZ,
-        Column::DeltaHatX,
-        Column::DeltaHatY,
-        Column::DeltaHatZ,
-        Column::Tau,
-    ];
-    if let Some(missing) = need.iter().find(|c| !col.contains_key(c.name())) {
+    if let Some(missing) = SCENE_COLUMNS.iter().find(|c| !col.contains_key(c.name())) {
         let missing = missing.name();
         return Err(input("trajectory.csv", &format!("no column '{missing}'")));
     }
@@ -170,7 +172,7 @@ pub fn load(dir: &Path, times: &[f64]) -> Result<Scenes, PlotError> {
     Ok(Scenes { at: out })
 }
 
-fn rgba(c: &formation_viz::foxglove::messages::Color) -> RGBAColor {
+fn rgba(c: &formation_viz::topview::Rgba) -> RGBAColor {
     let u = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
     RGBAColor(u(c.r), u(c.g), u(c.b), c.a.clamp(0.0, 1.0))
 }

@@ -11,21 +11,23 @@ pub(super) static FONT_TTF: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf"
 /// The font family every text of the figures uses.
 pub const FONT: &str = "sans-serif";
 
+/// The embedded font could not be parsed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("the embedded font DejaVuSans.ttf could not be parsed")]
+pub struct FontError;
+
 /// Registers the embedded font with plotters' ab_glyph text renderer (once per process).
 /// Every family name plotters may ask for maps to the same face.
-pub fn register_fonts() -> Result<(), String> {
-    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
-    DONE.get_or_init(|| {
+pub fn register_fonts() -> Result<(), FontError> {
+    static DONE: OnceLock<Result<(), FontError>> = OnceLock::new();
+    *DONE.get_or_init(|| {
         for family in ["sans-serif", "serif", "monospace"] {
             for style in [FontStyle::Normal, FontStyle::Bold] {
-                plotters::style::register_font(family, style, FONT_TTF).map_err(|_| {
-                    "the embedded font DejaVuSans.ttf could not be parsed".to_string()
-                })?;
+                plotters::style::register_font(family, style, FONT_TTF).map_err(|_| FontError)?;
             }
         }
         Ok(())
     })
-    .clone()
 }
 
 /// Error type of the drawing code.

@@ -439,15 +439,14 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
     // The scene's poses are the rows of trajectory.csv.
     let tr = formation_runtime::record::table::Trajectory::read(&dir.join("trajectory.csv"))
         .expect("csv");
-    let tf = &scenes.at[1].1.transforms.transforms[2];
     let row = tr
         .rows()
         .iter()
         .find(|r| tr.value(r, "step") as u64 == 1520 && tr.value(r, "agent") as u64 == 3)
         .expect("row of step 1520, agent 3");
-    let p = tf.translation.unwrap();
+    let p = scenes.at[1].1.agent_translation(3).expect("agent 3's /tf");
     assert_eq!(
-        [p.x, p.y, p.z],
+        p,
         [
             tr.value(row, "px"),
             tr.value(row, "py"),

@@ -106,10 +106,33 @@ pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
                 PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(2))
             });
     }
-    // Axis names beside the middle of the tick-labelled edges: the bottom edges that meet at the
-    // corner nearest the viewer (lowest on screen), and the vertical edge at the leftmost corner.
-    let (xr, yr) = ((cx - half, cx + half), (cy - half, cy + half));
     let px = |x: f64, h: f64, y: f64| chart.as_coord_spec().translate(&(x, h, y));
+    draw_3d_axis_names(root, px, (cx, cy, half), (z0, z1))?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 16))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()?;
+    area.draw_text(
+        "● start   ▲ end",
+        &(FONT, 16).into_font().color(&RGBColor(80, 80, 80)),
+        (20, root.dim_in_pixel().1 as i32 - 90),
+    )?;
+    Ok(())
+}
+
+/// Axis names of the 3D chart beside the middle of the tick-labelled edges: the bottom edges that
+/// meet at the corner nearest the viewer (lowest on screen), and the vertical edge at the leftmost
+/// corner. `px` projects (x, height, y) to pixels; the box is `cx ± half`, `cy ± half`, `z0..z1`.
+fn draw_3d_axis_names<DB: Backend>(
+    root: &Area<DB>,
+    px: impl Fn(f64, f64, f64) -> (i32, i32),
+    (cx, cy, half): (f64, f64, f64),
+    (z0, z1): (f64, f64),
+) -> DrawResult {
+    let (xr, yr) = ((cx - half, cx + half), (cy - half, cy + half));
     let corners = [(xr.0, yr.0), (xr.0, yr.1), (xr.1, yr.0), (xr.1, yr.1)];
     let front = corners
         .iter()
@@ -135,18 +158,6 @@ pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     root.draw_text("x (m)", &label, outward(x_mid, 70.0))?;
     root.draw_text("y (m)", &label, outward(y_mid, 70.0))?;
     root.draw_text("z (m)", &label, (z_top.0 - 20, z_top.1 - 40))?;
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 16))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()?;
-    area.draw_text(
-        "● start   ▲ end",
-        &(FONT, 16).into_font().color(&RGBColor(80, 80, 80)),
-        (20, root.dim_in_pixel().1 as i32 - 90),
-    )?;
     Ok(())
 }
 
@@ -305,12 +316,14 @@ pub fn top_view<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     top_panel(
         fig,
         &panels[0],
-        "whole run",
-        centre,
-        half,
-        &snaps,
-        None,
-        true,
+        TopView {
+            title: "whole run",
+            centre,
+            half,
+            snaps: &snaps,
+            trail_until: None,
+            legend: true,
+        },
     )?;
 
     for (k, s) in snaps.iter().enumerate() {
@@ -325,29 +338,52 @@ pub fn top_view<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         top_panel(
             fig,
             &panels[k + 1],
-            &title,
-            s.target,
-            half,
-            std::slice::from_ref(s),
-            Some(s.t),
-            false,
+            TopView {
+                title: &title,
+                centre: s.target,
+                half,
+                snaps: std::slice::from_ref(s),
+                trail_until: Some(s.t),
+                legend: false,
+            },
         )?;
     }
     Ok(())
 }
 
-/// One square top-view panel centred on `centre` with half-width `half`.
-#[allow(clippy::too_many_arguments)]
-fn top_panel<DB: Backend>(
-    fig: &Figure,
-    area: &Area<DB>,
-    title: &str,
+/// What one top-view panel shows.
+struct TopView<'a> {
+    /// The panel's title.
+    title: &'a str,
+    /// Centre of the view (x, y), m.
     centre: (f64, f64),
+    /// Half-width of the view, m (the longer side is widened to keep x and y to scale).
     half: f64,
-    snaps: &[Snapshot],
+    /// The snapshots drawn (target disk, footprints).
+    snaps: &'a [Snapshot],
+    /// `None`: whole trajectories; `Some(t)`: the last [`TRAIL_S`] seconds before t.
     trail_until: Option<f64>,
+    /// Whether the panel carries the legend (else a note on the circles).
     legend: bool,
-) -> DrawResult {
+}
+
+/// The chart of a top view: x and y in m.
+type XyChart<'a, DB> = ChartContext<
+    'a,
+    DB,
+    Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+>;
+
+/// One square top-view panel centred on `v.centre` with half-width `v.half`.
+fn top_panel<DB: Backend>(fig: &Figure, area: &Area<DB>, v: TopView) -> DrawResult {
+    let TopView {
+        title,
+        centre,
+        half,
+        snaps,
+        trail_until,
+        legend,
+    } = v;
     let area = area.titled(title, (FONT, 19))?;
     let (w, h) = area.dim_in_pixel();
     let (margin, xlab, ylab) = (12i32, 44i32, 60i32);
@@ -414,6 +450,29 @@ fn top_panel<DB: Backend>(
         }
     }
 
+    draw_snapshots(&mut chart, fig, snaps, trail_until.is_none(), legend)?;
+    if legend {
+        draw_top_legend(&mut chart, fig, &target_path, snaps, window)?;
+    } else {
+        let note = "circles: sensor footprints r = z tan(θs/2); ✕ target";
+        area.draw_text(
+            note,
+            &(FONT, 13).into_font().color(&RGBColor(80, 80, 80)),
+            (margin + ylab + 6, margin + 4),
+        )?;
+    }
+    Ok(())
+}
+
+/// The snapshots of a top view: the target disk, every quadrotor's footprint, and (`label_time`)
+/// the time beside the target.
+fn draw_snapshots<DB: Backend>(
+    chart: &mut XyChart<'_, DB>,
+    fig: &Figure,
+    snaps: &[Snapshot],
+    label_time: bool,
+    legend: bool,
+) -> DrawResult {
     for s in snaps {
         let disk = circle(s.target, fig.geometry.target_radius_m);
         chart.draw_series(std::iter::once(Polygon::new(
@@ -447,7 +506,7 @@ fn top_panel<DB: Backend>(
             7,
             DISK.stroke_width(3),
         )))?;
-        if trail_until.is_none() {
+        if label_time {
             let r = fig.geometry.target_radius_m;
             let label_pos = (s.target.0 - 0.45 * r, s.target.1 + 1.5 * r);
             chart.draw_series(std::iter::once(Text::new(
@@ -457,36 +516,39 @@ fn top_panel<DB: Backend>(
             )))?;
         }
     }
-    if legend {
-        // Legend box: ~7 entries of 19 px and ~190 px wide, in the emptiest corner of the data
-        // (trajectories, target path, the disks and footprints of the snapshots).
-        let (pw, ph) = chart.plotting_area().dim_in_pixel();
-        let size = (200.0 / pw.max(1) as f64, 150.0 / ph.max(1) as f64);
-        let mut data: Vec<(f64, f64)> = target_path.clone();
-        for a in &run.agents {
-            data.extend(a.col("px").iter().copied().zip(a.col("py").iter().copied()));
-        }
-        for s in snaps {
-            data.extend(circle(s.target, fig.geometry.target_radius_m));
-            for &(_, x, y, r) in &s.agents {
-                data.extend(circle((x, y), r));
-            }
-        }
-        let corner = emptiest_corner(data.into_iter(), window.0, window.1, size);
-        chart
-            .configure_series_labels()
-            .position(corner)
-            .label_font((FONT, 14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .draw()?;
-    } else {
-        let note = "circles: sensor footprints r = z tan(θs/2); ✕ target";
-        area.draw_text(
-            note,
-            &(FONT, 13).into_font().color(&RGBColor(80, 80, 80)),
-            (margin + ylab + 6, margin + 4),
-        )?;
+    Ok(())
+}
+
+/// The legend of a top view, in the emptiest corner of its data (`window`: the x and y ranges).
+fn draw_top_legend<'a, DB: Backend + 'a>(
+    chart: &mut XyChart<'a, DB>,
+    fig: &Figure,
+    target_path: &[(f64, f64)],
+    snaps: &[Snapshot],
+    window: ((f64, f64), (f64, f64)),
+) -> DrawResult {
+    let run = fig.run;
+    // Legend box: ~7 entries of 19 px and ~190 px wide, in the emptiest corner of the data
+    // (trajectories, target path, the disks and footprints of the snapshots).
+    let (pw, ph) = chart.plotting_area().dim_in_pixel();
+    let size = (200.0 / pw.max(1) as f64, 150.0 / ph.max(1) as f64);
+    let mut data: Vec<(f64, f64)> = target_path.to_vec();
+    for a in &run.agents {
+        data.extend(a.col("px").iter().copied().zip(a.col("py").iter().copied()));
     }
+    for s in snaps {
+        data.extend(circle(s.target, fig.geometry.target_radius_m));
+        for &(_, x, y, r) in &s.agents {
+            data.extend(circle((x, y), r));
+        }
+    }
+    let corner = emptiest_corner(data.into_iter(), window.0, window.1, size);
+    chart
+        .configure_series_labels()
+        .position(corner)
+        .label_font((FONT, 14))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()?;
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! Communication graphs of generated scenarios: ring, path, k-nearest, complete, random-connected;
 //! leader weights b; edge weights normalised by the largest degree.
 
+use super::GenError;
 use formation_config::scenario::Edge;
 use formation_runtime::rng::SplitMix64;
 
@@ -21,18 +22,14 @@ pub enum GraphKind {
 
 impl GraphKind {
     /// Parses `ring | path | k-nearest | complete | random-connected`.
-    pub fn parse(s: &str) -> Result<GraphKind, String> {
+    pub fn parse(s: &str) -> Result<GraphKind, GenError> {
         Ok(match s {
             "ring" => GraphKind::Ring,
             "path" => GraphKind::Path,
             "k-nearest" => GraphKind::KNearest,
             "complete" => GraphKind::Complete,
             "random-connected" => GraphKind::RandomConnected,
-            other => {
-                return Err(format!(
-                    "--graph {other}: expected ring, path, k-nearest, complete or random-connected"
-                ))
-            }
+            other => return Err(GenError::Graph(other.to_string())),
         })
     }
 
@@ -215,19 +212,23 @@ pub fn least_coupled_leader_agents(n: usize, edges: &[(usize, usize)]) -> Vec<us
 }
 
 /// Parses `--leader-agents 1,5` (1-based ids, each within 1..=n, no repeats).
-pub fn parse_leader_agents(s: &str, n: usize) -> Result<Vec<usize>, String> {
+pub fn parse_leader_agents(s: &str, n: usize) -> Result<Vec<usize>, GenError> {
     let mut out = Vec::new();
+    let list = || s.to_string();
     for part in s.split(',') {
-        let id: usize = part.trim().parse().map_err(|_| {
-            format!("--leader-agents '{s}': '{part}' is not an agent id (1-based integers)")
+        let id: usize = part.trim().parse().map_err(|_| GenError::LeaderId {
+            list: list(),
+            part: part.to_string(),
         })?;
         if !(1..=n).contains(&id) {
-            return Err(format!(
-                "--leader-agents '{s}': agent {id} is outside 1..={n}"
-            ));
+            return Err(GenError::LeaderOutside {
+                list: list(),
+                id,
+                n,
+            });
         }
         if out.contains(&id) {
-            return Err(format!("--leader-agents '{s}': agent {id} is listed twice"));
+            return Err(GenError::LeaderTwice { list: list(), id });
         }
         out.push(id);
     }

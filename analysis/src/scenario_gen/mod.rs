@@ -121,34 +121,96 @@ pub fn place_starts(s: &mut Scenario, outside_m: f64) {
     }
 }
 
+/// Why a scenario cannot be generated: the option named and what it expects.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GenError {
+    /// `--graph` is not a graph family.
+    #[error("--graph {0}: expected ring, path, k-nearest, complete or random-connected")]
+    Graph(String),
+    /// An entry of `--leader-agents` is not an integer.
+    #[error("--leader-agents '{list}': '{part}' is not an agent id (1-based integers)")]
+    LeaderId {
+        /// The whole list as given.
+        list: String,
+        /// The entry refused.
+        part: String,
+    },
+    /// An id of `--leader-agents` is outside 1..=N.
+    #[error("--leader-agents '{list}': agent {id} is outside 1..={n}")]
+    LeaderOutside {
+        /// The whole list as given.
+        list: String,
+        /// The id refused (1-based).
+        id: usize,
+        /// Agents N.
+        n: usize,
+    },
+    /// An id of `--leader-agents` is given twice.
+    #[error("--leader-agents '{list}': agent {id} is listed twice")]
+    LeaderTwice {
+        /// The whole list as given.
+        list: String,
+        /// The id repeated (1-based).
+        id: usize,
+    },
+    /// A leader agent of the options is outside 1..=N.
+    #[error("--leader-agents: agent {id} is outside 1..={n}")]
+    LeaderAgent {
+        /// The id refused (1-based).
+        id: usize,
+        /// Agents N.
+        n: usize,
+    },
+    /// `--n` is outside 2..=MAX_AGENTS.
+    #[error("--n {n}: expected 2..={max}")]
+    N {
+        /// N given.
+        n: usize,
+        /// The largest N.
+        max: usize,
+    },
+    /// `--min-spacing` is not a positive distance.
+    #[error("--min-spacing {0}: expected a positive distance in m")]
+    MinSpacing(f64),
+    /// `--k` is outside 1..N.
+    #[error("--k {k}: expected 1..={} for N = {n}", n - 1)]
+    K {
+        /// k given.
+        k: usize,
+        /// Agents N.
+        n: usize,
+    },
+}
+
+impl GenError {
+    /// The exit code of `formation scenario` for this error: 2, bad input (docs/cli.md).
+    pub fn exit_code(&self) -> u8 {
+        EXIT_INVALID
+    }
+}
+
 /// The paper scenario scaled to `opts`.
-pub fn generate(opts: &GenOptions) -> Result<Scenario, String> {
+pub fn generate(opts: &GenOptions) -> Result<Scenario, GenError> {
     generate_from(&Scenario::paper(), opts)
 }
 
 /// `template` scaled to `opts`: N agents (specs reused cyclically), radii and spin rate of
 /// [`radii`], the graph of [`graphs`], starts [`START_OUTSIDE_M`] outside the cover slots.
-pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario, String> {
+pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario, GenError> {
     let n = opts.n;
     if !(2..=formation_config::MAX_AGENTS).contains(&n) {
-        return Err(format!(
-            "--n {n}: expected 2..={}",
-            formation_config::MAX_AGENTS
-        ));
+        return Err(GenError::N {
+            n,
+            max: formation_config::MAX_AGENTS,
+        });
     }
     if let Some(s) = opts.min_spacing_m {
         if !(s.is_finite() && s > 0.0) {
-            return Err(format!(
-                "--min-spacing {s}: expected a positive distance in m"
-            ));
+            return Err(GenError::MinSpacing(s));
         }
     }
     if opts.graph == GraphKind::KNearest && !(1..n).contains(&opts.k) {
-        return Err(format!(
-            "--k {}: expected 1..={} for N = {n}",
-            opts.k,
-            n - 1
-        ));
+        return Err(GenError::K { k: opts.k, n });
     }
     let mut s = template.clone();
     let inputs = radii_inputs(template, n, opts.min_spacing_m);
@@ -212,7 +274,7 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
     let mut b = vec![0.0; n];
     for &id in &leaders {
         if !(1..=n).contains(&id) {
-            return Err(format!("--leader-agents: agent {id} is outside 1..={n}"));
+            return Err(GenError::LeaderAgent { id, n });
         }
         b[id - 1] = b_w;
     }
@@ -227,7 +289,7 @@ pub fn generate_from(template: &Scenario, opts: &GenOptions) -> Result<Scenario,
     Ok(s)
 }
 
-fn options(args: &ScenarioArgs) -> Result<GenOptions, String> {
+fn options(args: &ScenarioArgs) -> Result<GenOptions, GenError> {
     let graph = GraphKind::parse(&args.graph)?;
     let leader_agents = args
         .leader_agents
@@ -250,7 +312,7 @@ pub fn main(args: ScenarioArgs) -> ExitCode {
         Ok(s) => s,
         Err(e) => {
             eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
+            return ExitCode::from(e.exit_code());
         }
     };
     if let Err(errs) = validate(&s) {

@@ -16,25 +16,63 @@
 //! Structural parameters (`n`, `graph`, `k`) go first whatever their order on the command line;
 //! `seed` next, then the rest in the order given.
 
-use super::spec::Value;
-use crate::scenario_gen::{self, graphs::GraphKind, GenOptions};
+use super::spec::{SpecError, Value};
+use crate::scenario_gen::{self, graphs::GraphKind, GenError, GenOptions};
+use formation_config::scenario::validate::ValidationErrors;
 use formation_config::Scenario;
+
+/// Why a sample's values cannot make a valid scenario: the parameter and what failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApplyError {
+    /// A value of the wrong kind.
+    #[error(transparent)]
+    Spec(#[from] SpecError),
+    /// `n`, `k` or `seed` not a whole number at or above its least value.
+    #[error("{name}={x}: expected a whole number >= {lo}")]
+    Count {
+        /// The parameter.
+        name: String,
+        /// The value.
+        x: f64,
+        /// Its least value.
+        lo: f64,
+    },
+    /// `graph` given a number.
+    #[error("graph={0}: expected a graph name")]
+    GraphName(Value),
+    /// The generator refused `n`, `graph` or `k`.
+    #[error(transparent)]
+    Generate(#[from] GenError),
+    /// A negative `delay.max`.
+    #[error("delay.max={0}: expected >= 0 s")]
+    DelayMax(f64),
+    /// A scenario path the runtime's `--set` parser refused.
+    #[error("{0}")]
+    Set(formation_runtime::cli::OverrideError),
+    /// The scenario built is invalid: every reason, `; `-separated.
+    #[error("{}", .0.0.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("; "))]
+    Invalid(ValidationErrors),
+}
 
 /// Parameters that take whole numbers (an event's agent, `events[0].agent`, included).
 pub fn is_integer(name: &str) -> bool {
     matches!(name, "n" | "k" | "seed") || (name.starts_with("events[") && name.ends_with("].agent"))
 }
 
-fn count(name: &str, v: &Value, lo: f64) -> Result<usize, String> {
+fn count(name: &str, v: &Value, lo: f64) -> Result<usize, ApplyError> {
     let x = v.num(name)?;
     if x < lo || x.fract() != 0.0 {
-        return Err(format!("{name}={x}: expected a whole number >= {lo}"));
+        return Err(ApplyError::Count {
+            name: name.to_string(),
+            x,
+            lo,
+        });
     }
     Ok(x as usize)
 }
 
 /// The scenario of one sample: `base` with `values` applied.
-pub fn apply(base: &Scenario, values: &[(String, Value)]) -> Result<Scenario, String> {
+pub fn apply(base: &Scenario, values: &[(String, Value)]) -> Result<Scenario, ApplyError> {
     let get = |n: &str| values.iter().find(|(k, _)| k == n).map(|(_, v)| v);
     let seed = get("seed").map(|v| count("seed", v, 0.0)).transpose()?;
     let mut s = if get("n").is_some() || get("graph").is_some() || get("k").is_some() {
@@ -44,7 +82,7 @@ pub fn apply(base: &Scenario, values: &[(String, Value)]) -> Result<Scenario, St
         };
         let graph = match get("graph") {
             Some(Value::Word(w)) => GraphKind::parse(w)?,
-            Some(v) => return Err(format!("graph={v}: expected a graph name")),
+            Some(v) => return Err(ApplyError::GraphName(v.clone())),
             None => GraphKind::Path,
         };
         let mut o = GenOptions::new(n, graph);
@@ -68,7 +106,7 @@ pub fn apply(base: &Scenario, values: &[(String, Value)]) -> Result<Scenario, St
             "delay.max" => {
                 let d = v.num(name)?;
                 if d < 0.0 {
-                    return Err(format!("delay.max={d}: expected >= 0 s"));
+                    return Err(ApplyError::DelayMax(d));
                 }
                 for a in &mut s.agents {
                     let top = a.delay.base_s + a.delay.amplitude_s;
@@ -104,14 +142,8 @@ pub fn apply(base: &Scenario, values: &[(String, Value)]) -> Result<Scenario, St
             path => overrides.push(format!("{path}={v}")),
         }
     }
-    let s = formation_runtime::cli::apply_overrides(s, &overrides)?;
-    formation_config::scenario::validate::validate(&s).map_err(|errs| {
-        errs.0
-            .iter()
-            .map(|e| e.to_string())
-            .collect::<Vec<_>>()
-            .join("; ")
-    })?;
+    let s = formation_runtime::cli::apply_overrides(s, &overrides).map_err(ApplyError::Set)?;
+    formation_config::scenario::validate::validate(&s).map_err(ApplyError::Invalid)?;
     Ok(s)
 }
 
@@ -185,6 +217,6 @@ mod tests {
         .is_err());
         // Gamma below the known lower bound of Assumption 5 is refused by validation.
         let e = apply(&Scenario::paper(), &v(&[("fault.gamma", Value::Num(0.1))])).unwrap_err();
-        assert!(e.contains("Assumption 5"), "{e}");
+        assert!(e.to_string().contains("Assumption 5"), "{e}");
     }
 }

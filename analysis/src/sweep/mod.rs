@@ -13,7 +13,7 @@ pub mod report;
 pub mod spec;
 
 use formation_runtime::cli;
-use report::{Outcome, Progress};
+use report::{Outcome, Progress, SampleError};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -45,22 +45,67 @@ pub struct SweepArgs {
     pub jobs: Option<usize>,
 }
 
+/// Why a sweep cannot run or produced nothing: the option, file or folder and what failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// The base scenario does not load or is invalid: why, then that the base is refused.
+    #[error("{0}\nerror: invalid base scenario")]
+    Base(cli::InputError),
+    /// A `--vary` is malformed, or a `--grid` set is not finite.
+    #[error(transparent)]
+    Spec(#[from] spec::SpecError),
+    /// A parameter varied twice.
+    #[error("--vary {0}: given twice")]
+    Twice(String),
+    /// `--samples 0`.
+    #[error("--samples 0: expected at least 1")]
+    NoSamples,
+    /// The output folder is refused (the folder check's message: it reports its errors as text).
+    #[error("cannot use {}: {why}", out.display())]
+    Folder {
+        /// The output folder.
+        out: PathBuf,
+        /// Why.
+        why: String,
+    },
+    /// `sweep.csv` or `sweep.json` cannot be written.
+    #[error("cannot write {}/{file}: {source}", out.display())]
+    Write {
+        /// The output folder.
+        out: PathBuf,
+        /// `sweep.csv` or `sweep.json`.
+        file: &'static str,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// No sample's scenario was valid.
+    #[error("every sample's scenario was invalid (sweep.csv, column error); the first: {first}")]
+    AllInvalid {
+        /// The first sample's error, `-` if none.
+        first: String,
+    },
+}
+
+impl SweepError {
+    /// The exit code of `formation sweep` for this error: 2 for every one (docs/cli.md).
+    pub fn exit_code(&self) -> u8 {
+        cli::EXIT_INVALID
+    }
+}
+
 /// Entry point of `formation sweep`.
 pub fn main(args: SweepArgs) -> ExitCode {
     match run(&args) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e}");
-            ExitCode::from(cli::EXIT_INVALID)
+            ExitCode::from(e.exit_code())
         }
     }
 }
 
-fn run(args: &SweepArgs) -> Result<ExitCode, String> {
-    let (base, variant) = args
-        .common
-        .load()
-        .map_err(|_| "invalid base scenario".to_string())?;
+fn run(args: &SweepArgs) -> Result<ExitCode, SweepError> {
+    let (base, variant) = args.common.load().map_err(SweepError::Base)?;
     let vary = args
         .vary
         .iter()
@@ -68,14 +113,14 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
         .collect::<Result<Vec<_>, _>>()?;
     for (i, v) in vary.iter().enumerate() {
         if vary[..i].iter().any(|w| w.name == v.name) {
-            return Err(format!("--vary {}: given twice", v.name));
+            return Err(SweepError::Twice(v.name.clone()));
         }
     }
     let samples = if args.grid {
         spec::grid(&vary)?
     } else {
         if args.samples == 0 {
-            return Err("--samples 0: expected at least 1".into());
+            return Err(SweepError::NoSamples);
         }
         spec::monte_carlo(&vary, args.samples, args.seed)
     };
@@ -89,11 +134,15 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("out/sweep-{}", base.name)));
     formation_runtime::out_lock::check_folder(&out)
+        .map_err(|e| e.to_string())
         .and_then(|()| {
             formation_config::node::files::ensure_private_dir(&out.join("samples"))
                 .map_err(|e| e.to_string())
         })
-        .map_err(|e| format!("cannot use {}: {e}", out.display()))?;
+        .map_err(|why| SweepError::Folder {
+            out: out.clone(),
+            why,
+        })?;
     eprintln!(
         "sweep: {} samples ({}), {jobs} jobs, writing {}",
         samples.len(),
@@ -104,8 +153,12 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
     let outcomes = run_samples(&base, variant, &samples, jobs, &out);
     let wall = start.elapsed().as_secs_f64();
     let names: Vec<String> = vary.iter().map(|v| v.name.clone()).collect();
+    let write_error = |file| {
+        let out = out.clone();
+        move |source| SweepError::Write { out, file, source }
+    };
     report::write_csv(&out.join("sweep.csv"), &names, &outcomes)
-        .map_err(|e| format!("cannot write {}/sweep.csv: {e}", out.display()))?;
+        .map_err(write_error("sweep.csv"))?;
     let summary = report::SweepSummary::build(
         &outcomes,
         report::Setup {
@@ -120,14 +173,13 @@ fn run(args: &SweepArgs) -> Result<ExitCode, String> {
     );
     summary
         .write(&out.join("sweep.json"))
-        .map_err(|e| format!("cannot write {}/sweep.json: {e}", out.display()))?;
+        .map_err(write_error("sweep.json"))?;
     summary.print();
     println!("wrote {}/sweep.csv and sweep.json", out.display());
     if summary.invalid == outcomes.len() {
-        return Err(format!(
-            "every sample's scenario was invalid (sweep.csv, column error); the first: {}",
-            summary.first_error.as_deref().unwrap_or("-")
-        ));
+        return Err(SweepError::AllInvalid {
+            first: summary.first_error.as_deref().unwrap_or("-").to_string(),
+        });
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -179,19 +231,24 @@ fn run_one(
     dir: &Path,
 ) -> Outcome {
     let start = Instant::now();
-    let result = apply::apply(base, &sample.values).and_then(|s| {
-        formation_runtime::sim::write_resolved_scenario(&s, dir)
-            .map_err(|e| format!("cannot write {}: {e}", dir.display()))?;
-        formation_runtime::sim::run_in_process_with(
-            &s,
-            variant,
-            dir,
-            formation_runtime::record::Outputs {
-                trajectory: false,
-                ..formation_runtime::record::Outputs::with(&[])
-            },
-        )
-        .map_err(|e| format!("cannot write {}: {e}", dir.display()))
-    });
+    let write_error = |e| SampleError::Write {
+        dir: dir.to_path_buf(),
+        source: std::sync::Arc::new(e),
+    };
+    let result = apply::apply(base, &sample.values)
+        .map_err(SampleError::Apply)
+        .and_then(|s| {
+            formation_runtime::sim::write_resolved_scenario(&s, dir).map_err(write_error)?;
+            formation_runtime::sim::run_in_process_with(
+                &s,
+                variant,
+                dir,
+                formation_runtime::record::Outputs {
+                    trajectory: false,
+                    ..formation_runtime::record::Outputs::with(&[])
+                },
+            )
+            .map_err(write_error)
+        });
     Outcome::new(sample.clone(), result, start.elapsed().as_secs_f64())
 }

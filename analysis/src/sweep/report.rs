@@ -98,20 +98,36 @@ impl Metrics {
     }
 }
 
+/// Why a sample could not run: its scenario is invalid, or its folder cannot be written.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum SampleError {
+    /// The sample's values do not make a valid scenario.
+    #[error(transparent)]
+    Apply(#[from] super::apply::ApplyError),
+    /// The sample's folder (`scenario.toml`, `summary.json`) cannot be written.
+    #[error("cannot write {}: {source}", dir.display())]
+    Write {
+        /// The sample's folder.
+        dir: std::path::PathBuf,
+        /// What the system said (shared: an outcome is cloned).
+        source: std::sync::Arc<std::io::Error>,
+    },
+}
+
 /// One sample's result.
 #[derive(Debug, Clone)]
 pub struct Outcome {
     /// The sample.
     pub sample: Sample,
     /// Its figures, or why it could not run (invalid scenario, output error).
-    pub result: Result<Metrics, String>,
+    pub result: Result<Metrics, SampleError>,
     /// Wall time of the sample, s.
     pub wall_s: f64,
 }
 
 impl Outcome {
     /// From the runner's result.
-    pub fn new(sample: Sample, run: Result<Summary, String>, wall_s: f64) -> Outcome {
+    pub fn new(sample: Sample, run: Result<Summary, SampleError>, wall_s: f64) -> Outcome {
         Outcome {
             sample,
             result: run.map(|s| Metrics::of(&s)),
@@ -168,7 +184,11 @@ pub fn write_csv(path: &Path, names: &[String], outcomes: &[Outcome]) -> std::io
                     o.wall_s
                 ))
             }
-            Err(e) => text.push_str(&format!(",,,,,,,,,,,,,,{:.3},{}\n", o.wall_s, csv_field(e))),
+            Err(e) => text.push_str(&format!(
+                ",,,,,,,,,,,,,,{:.3},{}\n",
+                o.wall_s,
+                csv_field(&e.to_string())
+            )),
         }
     }
     formation_config::node::files::write_atomic(path, text.as_bytes())
@@ -287,7 +307,7 @@ impl SweepSummary {
             invalid: outcomes.len() - ok.len(),
             first_error: outcomes
                 .iter()
-                .find_map(|o| o.result.as_ref().err().cloned()),
+                .find_map(|o| o.result.as_ref().err().map(|e| e.to_string())),
             divergences: ok.iter().filter(|(_, m)| m.diverged).count(),
             diverged_samples: ok
                 .iter()
@@ -483,7 +503,9 @@ mod tests {
             .collect();
         o.push(outcome(10, 50.0, true));
         o.push(Outcome {
-            result: Err("bad".into()),
+            result: Err(SampleError::Apply(super::super::apply::ApplyError::Set(
+                formation_runtime::cli::OverrideError::NoEquals { set: "bad".into() },
+            ))),
             ..outcome(11, 0.0, false)
         });
         let s = SweepSummary::build(
@@ -509,6 +531,9 @@ mod tests {
             (Some(1.0), Some(0))
         );
         assert_eq!(s.samples_per_s, 2.0);
-        assert_eq!(s.first_error.as_deref(), Some("bad"));
+        assert_eq!(
+            s.first_error.as_deref(),
+            Some("--set \"bad\": expected path=value")
+        );
     }
 }

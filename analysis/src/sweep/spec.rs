@@ -34,12 +34,95 @@ impl std::fmt::Display for Value {
 
 impl Value {
     /// The number, or an error naming the parameter.
-    pub fn num(&self, name: &str) -> Result<f64, String> {
+    pub fn num(&self, name: &str) -> Result<f64, SpecError> {
         match self {
             Value::Num(x) => Ok(*x),
-            Value::Word(w) => Err(format!("{name}={w}: expected a number")),
+            Value::Word(w) => Err(SpecError::NotANumber {
+                name: name.to_string(),
+                word: w.clone(),
+            }),
         }
     }
+}
+
+/// Why a `--vary NAME=SPEC` (or a value drawn from it) is refused: the parameter and what failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpecError {
+    /// A word where the parameter takes a number.
+    #[error("{name}={word}: expected a number")]
+    NotANumber {
+        /// The parameter.
+        name: String,
+        /// The word given.
+        word: String,
+    },
+    /// No `=`, or nothing on one side of it.
+    #[error("--vary '{arg}': expected NAME=SPEC{}", if *.example { ", e.g. delay.max=0..0.05" } else { "" })]
+    Form {
+        /// The option as given.
+        arg: String,
+        /// Whether the message shows an example (when there is no `=` at all).
+        example: bool,
+    },
+    /// A bound or value that does not parse as a number.
+    #[error("--vary {name}: '{text}' is not a number")]
+    Number {
+        /// The parameter.
+        name: String,
+        /// The text refused.
+        text: String,
+    },
+    /// A bound or value that is infinite or NaN.
+    #[error("--vary {name}: '{text}' is not finite")]
+    NotFinite {
+        /// The parameter.
+        name: String,
+        /// The text refused.
+        text: String,
+    },
+    /// The COUNT after `/` is not a whole number.
+    #[error("--vary {name}: count '{count}' after '/' is not a whole number")]
+    Count {
+        /// The parameter.
+        name: String,
+        /// The text refused.
+        count: String,
+    },
+    /// A COUNT below 2.
+    #[error("--vary {name}: a count needs at least 2 values")]
+    CountTooSmall {
+        /// The parameter.
+        name: String,
+    },
+    /// LO > HI.
+    #[error("--vary {name}: {lo}..{hi} is empty (LO > HI)")]
+    Empty {
+        /// The parameter.
+        name: String,
+        /// LO.
+        lo: f64,
+        /// HI.
+        hi: f64,
+    },
+    /// A fractional value of a whole-number parameter.
+    #[error("--vary {name}: takes whole numbers, got {got}")]
+    NotWhole {
+        /// The parameter.
+        name: String,
+        /// The spec or value refused.
+        got: String,
+    },
+    /// An empty entry of a list.
+    #[error("--vary {name}: empty value in '{spec}'")]
+    EmptyValue {
+        /// The parameter.
+        name: String,
+        /// The spec.
+        spec: String,
+    },
+    /// A continuous range in a grid.
+    #[error("--grid: {0} is a continuous range; give a count (LO..HI/COUNT) or a list")]
+    Continuous(String),
 }
 
 /// The set of values of one parameter.
@@ -62,46 +145,63 @@ pub struct Vary {
     pub set: Set,
 }
 
-fn number(name: &str, s: &str) -> Result<f64, String> {
-    let x: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("--vary {name}: '{s}' is not a number"))?;
+fn number(name: &str, s: &str) -> Result<f64, SpecError> {
+    let (name, text) = (name.to_string(), s.to_string());
+    let x: f64 = match s.trim().parse() {
+        Ok(x) => x,
+        Err(_) => return Err(SpecError::Number { name, text }),
+    };
     if !x.is_finite() {
-        return Err(format!("--vary {name}: '{s}' is not finite"));
+        return Err(SpecError::NotFinite { name, text });
     }
     Ok(x)
 }
 
 /// Parses one `NAME=SPEC`; `integer` says whether the parameter takes integers only.
-pub fn parse(arg: &str, integer: impl Fn(&str) -> bool) -> Result<Vary, String> {
-    let (name, spec) = arg
-        .split_once('=')
-        .ok_or_else(|| format!("--vary '{arg}': expected NAME=SPEC, e.g. delay.max=0..0.05"))?;
+pub fn parse(arg: &str, integer: impl Fn(&str) -> bool) -> Result<Vary, SpecError> {
+    let form = |example| SpecError::Form {
+        arg: arg.to_string(),
+        example,
+    };
+    let (name, spec) = arg.split_once('=').ok_or_else(|| form(true))?;
     let (name, spec) = (name.trim().to_string(), spec.trim());
     if name.is_empty() || spec.is_empty() {
-        return Err(format!("--vary '{arg}': expected NAME=SPEC"));
+        return Err(form(false));
     }
-    let int = integer(&name);
-    let set = if let Some((lo, rest)) = spec.split_once("..") {
+    let set = parse_set(&name, spec, integer(&name))?;
+    Ok(Vary { name, set })
+}
+
+/// The set of `SPEC` for parameter `name`; `int` when it takes whole numbers only.
+fn parse_set(name: &str, spec: &str, int: bool) -> Result<Set, SpecError> {
+    let named = || name.to_string();
+    Ok(if let Some((lo, rest)) = spec.split_once("..") {
         let (hi, count) = match rest.split_once('/') {
             Some((h, c)) => {
-                let c: usize = c.trim().parse().map_err(|_| {
-                    format!("--vary {name}: count '{c}' after '/' is not a whole number")
+                let c: usize = c.trim().parse().map_err(|_| SpecError::Count {
+                    name: named(),
+                    count: c.to_string(),
                 })?;
                 if c < 2 {
-                    return Err(format!("--vary {name}: a count needs at least 2 values"));
+                    return Err(SpecError::CountTooSmall { name: named() });
                 }
                 (h, Some(c))
             }
             None => (rest, None),
         };
-        let (lo, hi) = (number(&name, lo)?, number(&name, hi)?);
+        let (lo, hi) = (number(name, lo)?, number(name, hi)?);
         if lo > hi {
-            return Err(format!("--vary {name}: {lo}..{hi} is empty (LO > HI)"));
+            return Err(SpecError::Empty {
+                name: named(),
+                lo,
+                hi,
+            });
         }
         if int && (lo.fract() != 0.0 || hi.fract() != 0.0) {
-            return Err(format!("--vary {name}: takes whole numbers, got {spec}"));
+            return Err(SpecError::NotWhole {
+                name: named(),
+                got: spec.to_string(),
+            });
         }
         match (count, int) {
             (Some(c), _) => {
@@ -122,22 +222,28 @@ pub fn parse(arg: &str, integer: impl Fn(&str) -> bool) -> Result<Vary, String> 
                 match v.parse::<f64>() {
                     Ok(x) if x.is_finite() => {
                         if int && x.fract() != 0.0 {
-                            Err(format!("--vary {name}: takes whole numbers, got {v}"))
+                            Err(SpecError::NotWhole {
+                                name: named(),
+                                got: v.to_string(),
+                            })
                         } else {
                             Ok(Value::Num(x))
                         }
                     }
-                    Ok(_) => Err(format!("--vary {name}: '{v}' is not finite")),
-                    Err(_) if v.is_empty() => {
-                        Err(format!("--vary {name}: empty value in '{spec}'"))
-                    }
+                    Ok(_) => Err(SpecError::NotFinite {
+                        name: named(),
+                        text: v.to_string(),
+                    }),
+                    Err(_) if v.is_empty() => Err(SpecError::EmptyValue {
+                        name: named(),
+                        spec: spec.to_string(),
+                    }),
                     Err(_) => Ok(Value::Word(v.to_string())),
                 }
             })
             .collect::<Result<Vec<_>, _>>()?;
         Set::List(vals)
-    };
-    Ok(Vary { name, set })
+    })
 }
 
 impl Set {
@@ -197,16 +303,13 @@ pub fn monte_carlo(vary: &[Vary], count: usize, seed: u64) -> Vec<Sample> {
 }
 
 /// The Cartesian product of the sets (the first `--vary` varies slowest).
-pub fn grid(vary: &[Vary]) -> Result<Vec<Sample>, String> {
+pub fn grid(vary: &[Vary]) -> Result<Vec<Sample>, SpecError> {
     let sets: Vec<Vec<Value>> = vary
         .iter()
         .map(|v| {
-            v.set.values().ok_or_else(|| {
-                format!(
-                    "--grid: {} is a continuous range; give a count (LO..HI/COUNT) or a list",
-                    v.name
-                )
-            })
+            v.set
+                .values()
+                .ok_or_else(|| SpecError::Continuous(v.name.clone()))
         })
         .collect::<Result<_, _>>()?;
     let total: usize = sets.iter().map(Vec::len).product();
@@ -228,7 +331,7 @@ mod tests {
     use super::*;
 
     fn p(s: &str) -> Result<Vary, String> {
-        parse(s, |n| n == "n")
+        parse(s, |n| n == "n").map_err(|e| e.to_string())
     }
 
     #[test]
@@ -327,6 +430,9 @@ mod tests {
                 (2.0, 1.0)
             ]
         );
-        assert!(grid(&[p("c=0..1").unwrap()]).unwrap_err().contains("count"));
+        assert!(grid(&[p("c=0..1").unwrap()])
+            .unwrap_err()
+            .to_string()
+            .contains("count"));
     }
 }

@@ -97,30 +97,62 @@ fn owned_regular(f: &File, path: &Path) -> io::Result<()> {
     Ok(())
 }
 
+/// Why a folder must not hold this user's files ([`check_private_dir`]).
+#[derive(Debug, thiserror::Error)]
+pub enum DirProblem {
+    /// Its metadata cannot be read (it does not exist, or a parent is not searchable).
+    #[error("{}: {source}", dir.display())]
+    Unreadable {
+        /// The folder.
+        dir: std::path::PathBuf,
+        /// What the system said.
+        source: io::Error,
+    },
+    /// It is a symbolic link.
+    #[error("it is a symbolic link")]
+    Link,
+    /// It is not a directory.
+    #[error("it is not a directory")]
+    NotDir,
+    /// It belongs to another user.
+    #[error("it belongs to {}, not to {}", user_label(*owner), user_label(*me))]
+    Owner {
+        /// Its owner's uid.
+        owner: u32,
+        /// This process's uid.
+        me: u32,
+    },
+    /// Others (group or world) may write to it.
+    #[error(
+        "it is {}-writable (mode {mode:04o}): other users could plant files in it",
+        if mode & 0o002 != 0 { "world" } else { "group" }
+    )]
+    Writable {
+        /// Its permission bits.
+        mode: u32,
+    },
+}
+
 /// Why `dir` must not hold this user's files, if it must not: it is a symbolic link, not a
 /// directory, belongs to another user, or others (group or world) may write to it.
-pub fn check_private_dir(dir: &Path) -> Result<(), String> {
-    let m = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+pub fn check_private_dir(dir: &Path) -> Result<(), DirProblem> {
+    let m = std::fs::symlink_metadata(dir).map_err(|source| DirProblem::Unreadable {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
     if m.file_type().is_symlink() {
-        return Err("it is a symbolic link".into());
+        return Err(DirProblem::Link);
     }
     if !m.is_dir() {
-        return Err("it is not a directory".into());
+        return Err(DirProblem::NotDir);
     }
     let me = current_uid();
     if m.uid() != me {
-        return Err(format!(
-            "it belongs to {}, not to {}",
-            user_label(m.uid()),
-            user_label(me)
-        ));
+        return Err(DirProblem::Owner { owner: m.uid(), me });
     }
     let mode = m.mode() & 0o7777;
     if mode & 0o022 != 0 {
-        return Err(format!(
-            "it is {}-writable (mode {mode:04o}): other users could plant files in it",
-            if mode & 0o002 != 0 { "world" } else { "group" }
-        ));
+        return Err(DirProblem::Writable { mode });
     }
     Ok(())
 }
@@ -185,9 +217,9 @@ pub fn ensure_private_dir(dir: &Path) -> Result<(), UnsafeDir> {
             Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {}
             Err(e) => return Err(refuse(m, format!("cannot create it: {e}"))),
         }
-        check_private_dir(m).map_err(|why| refuse(m, why))?;
+        check_private_dir(m).map_err(|why| refuse(m, why.to_string()))?;
     }
-    check_private_dir(dir).map_err(|why| refuse(dir, why))
+    check_private_dir(dir).map_err(|why| refuse(dir, why.to_string()))
 }
 
 /// Reads `path` as text without following a symbolic link at its name (nor blocking on a FIFO).

@@ -84,52 +84,159 @@ fn encode_framed(
     out
 }
 
+/// Why the bytes of a checkpoint or rejoin file (`what`) were refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refusal {
+    /// Shorter than a header and a checksum.
+    #[error("truncated ({len} bytes)")]
+    Truncated {
+        /// Bytes present.
+        len: usize,
+    },
+    /// The first eight bytes are not this kind of file's magic number.
+    #[error("not a {what} (wrong magic number)")]
+    Magic {
+        /// `checkpoint` or `rejoin file`.
+        what: &'static str,
+    },
+    /// Another format version.
+    #[error("format version {found}, this build reads {reads}")]
+    Version {
+        /// The file's version.
+        found: u32,
+        /// The version this build reads.
+        reads: u32,
+    },
+    /// The body length announced is not the body present.
+    #[error("truncated or padded: {announced} body bytes announced, {present} present")]
+    Length {
+        /// Body bytes the header announces.
+        announced: u64,
+        /// Body bytes present.
+        present: usize,
+    },
+    /// The checksum does not match.
+    #[error("checksum mismatch (the file was altered or damaged)")]
+    Checksum,
+    /// Another agent's file.
+    #[error("it is agent {found}'s {what}, not agent {want}'s")]
+    Agent {
+        /// `checkpoint` or `rejoin file`.
+        what: &'static str,
+        /// The file's agent id (1-based).
+        found: usize,
+        /// The agent id expected (1-based).
+        want: usize,
+    },
+    /// Another run's file.
+    #[error("it belongs to another scenario (its scenario hash differs from this run's)")]
+    Scenario,
+    /// A rejoin file for another step.
+    #[error("it rejoins at step {step}, not at {rejoin_at}")]
+    Step {
+        /// The step the file rejoins at.
+        step: u64,
+        /// The step expected.
+        rejoin_at: u64,
+    },
+    /// The body is not bincode of the expected type.
+    #[error("its body does not decode: {0}")]
+    Body(String),
+    /// A rejoin file whose window does not hold what it announces.
+    #[error("its window is inconsistent (agent, steps, states, commands or flown)")]
+    Inconsistent,
+}
+
+/// A checkpoint or rejoin file that could not be read or was refused: which file and why.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadError {
+    /// The file could not be opened or read.
+    #[error("{what} {}: {source}", path.display())]
+    Io {
+        /// `checkpoint` or `rejoin file`.
+        what: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        source: io::Error,
+    },
+    /// The file was read and refused.
+    #[error("{what} {} refused: {why}", path.display())]
+    Refused {
+        /// `checkpoint` or `rejoin file`.
+        what: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        why: Refusal,
+    },
+}
+
 /// The `(step, body)` of a framed file if it is a `what` of agent i of the run whose scenario
 /// hashes to `scenario`; otherwise what failed.
 fn decode_framed<'a>(
     bytes: &'a [u8],
-    (what, magic, version): (&str, &[u8; 8], u32),
+    (what, magic, version): (&'static str, &[u8; 8], u32),
     agent: usize,
     scenario: u64,
-) -> Result<(u64, &'a [u8]), String> {
+) -> Result<(u64, &'a [u8]), Refusal> {
     let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
     let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().expect("8 bytes"));
     if bytes.len() < HEADER_LEN + 8 {
-        return Err(format!("truncated ({} bytes)", bytes.len()));
+        return Err(Refusal::Truncated { len: bytes.len() });
     }
     if bytes[..8] != *magic {
-        return Err(format!("not a {what} (wrong magic number)"));
+        return Err(Refusal::Magic { what });
     }
     let found = u32_at(8);
     if found != version {
-        return Err(format!(
-            "format version {found}, this build reads {version}"
-        ));
+        return Err(Refusal::Version {
+            found,
+            reads: version,
+        });
     }
     let len = u64_at(32);
     if len != (bytes.len() - HEADER_LEN - 8) as u64 {
-        return Err(format!(
-            "truncated or padded: {len} body bytes announced, {} present",
-            bytes.len() - HEADER_LEN - 8
-        ));
+        return Err(Refusal::Length {
+            announced: len,
+            present: bytes.len() - HEADER_LEN - 8,
+        });
     }
     let body = bytes.len() - 8;
     if fnv1a(&bytes[..body]) != u64_at(body) {
-        return Err("checksum mismatch (the file was altered or damaged)".into());
+        return Err(Refusal::Checksum);
     }
     let id = u32_at(12) as usize;
     if id != agent + 1 {
-        return Err(format!(
-            "it is agent {id}'s {what}, not agent {}'s",
-            agent + 1
-        ));
+        return Err(Refusal::Agent {
+            what,
+            found: id,
+            want: agent + 1,
+        });
     }
     if u64_at(16) != scenario {
-        return Err(
-            "it belongs to another scenario (its scenario hash differs from this run's)".into(),
-        );
+        return Err(Refusal::Scenario);
     }
     Ok((u64_at(24), &bytes[HEADER_LEN..body]))
+}
+
+/// The bytes of the file at `path` (a `what`), read without following a symbolic link at its name
+/// nor blocking on a FIFO.
+fn read_nofollow(what: &'static str, path: &Path) -> Result<Vec<u8>, ReadError> {
+    use std::io::Read;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut bytes = Vec::new();
+    std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)
+        .and_then(|mut f| f.read_to_end(&mut bytes))
+        .map_err(|source| ReadError::Io {
+            what,
+            path: path.to_path_buf(),
+            source,
+        })?;
+    Ok(bytes)
 }
 
 /// The bytes of agent i's checkpoint `c` in a run whose scenario hashes to `scenario`.
@@ -146,7 +253,7 @@ pub fn encode_checkpoint(agent: usize, scenario: u64, c: &Checkpoint) -> Vec<u8>
 
 /// The checkpoint in `bytes` if it is agent i's of the run whose scenario hashes to `scenario`;
 /// otherwise what failed.
-pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Checkpoint, String> {
+pub fn decode_checkpoint(bytes: &[u8], agent: usize, scenario: u64) -> Result<Checkpoint, Refusal> {
     let (step, state) = decode_framed(
         bytes,
         ("checkpoint", &CHECKPOINT_MAGIC, CHECKPOINT_VERSION),
@@ -174,18 +281,14 @@ pub fn write_checkpoint(
 
 /// Reads agent i's checkpoint, refusing (with the file named and why) one that is not agent i's
 /// of this run, damaged, or of another format.
-pub fn read_checkpoint(path: &Path, agent: usize, scenario: u64) -> Result<Checkpoint, String> {
-    use std::io::Read;
-    use std::os::unix::fs::OpenOptionsExt;
-    let mut bytes = Vec::new();
-    std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
-        .open(path)
-        .and_then(|mut f| f.read_to_end(&mut bytes))
-        .map_err(|e| format!("checkpoint {}: {e}", path.display()))?;
-    decode_checkpoint(&bytes, agent, scenario)
-        .map_err(|why| format!("checkpoint {} refused: {why}", path.display()))
+pub fn read_checkpoint(path: &Path, agent: usize, scenario: u64) -> Result<Checkpoint, ReadError> {
+    const WHAT: &str = "checkpoint";
+    let bytes = read_nofollow(WHAT, path)?;
+    decode_checkpoint(&bytes, agent, scenario).map_err(|why| ReadError::Refused {
+        what: WHAT,
+        path: path.to_path_buf(),
+        why,
+    })
 }
 
 /// What a new agent process rebuilds from.
@@ -265,7 +368,7 @@ pub fn decode_rejoin(
     agent: usize,
     scenario: u64,
     rejoin_at: u64,
-) -> Result<RejoinFile, String> {
+) -> Result<RejoinFile, Refusal> {
     let (step, body) = decode_framed(
         bytes,
         ("rejoin file", &REJOIN_MAGIC, REJOIN_VERSION),
@@ -273,11 +376,11 @@ pub fn decode_rejoin(
         scenario,
     )?;
     if step != rejoin_at {
-        return Err(format!("it rejoins at step {step}, not at {rejoin_at}"));
+        return Err(Refusal::Step { step, rejoin_at });
     }
     let f: RejoinFile = bincode::serde::decode_from_slice(body, bincode::config::standard())
         .map(|(v, _)| v)
-        .map_err(|e| format!("its body does not decode: {e}"))?;
+        .map_err(|e| Refusal::Body(e.to_string()))?;
     let window = f.rejoin_at.checked_sub(f.first);
     let consistent = f.agent == agent
         && f.rejoin_at == rejoin_at
@@ -287,7 +390,7 @@ pub fn decode_rejoin(
         && f.flown.len() as u64 == f.rejoin_at - f.down_from
         && f.checkpoint.is_none_or(|c| c < f.rejoin_at);
     if !consistent {
-        return Err("its window is inconsistent (agent, steps, states, commands or flown)".into());
+        return Err(Refusal::Inconsistent);
     }
     Ok(f)
 }
@@ -307,18 +410,14 @@ pub fn read_rejoin(
     agent: usize,
     scenario: u64,
     rejoin_at: u64,
-) -> Result<RejoinFile, String> {
-    use std::io::Read;
-    use std::os::unix::fs::OpenOptionsExt;
-    let mut bytes = Vec::new();
-    std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
-        .open(path)
-        .and_then(|mut f| f.read_to_end(&mut bytes))
-        .map_err(|e| format!("rejoin file {}: {e}", path.display()))?;
-    decode_rejoin(&bytes, agent, scenario, rejoin_at)
-        .map_err(|why| format!("rejoin file {} refused: {why}", path.display()))
+) -> Result<RejoinFile, ReadError> {
+    const WHAT: &str = "rejoin file";
+    let bytes = read_nofollow(WHAT, path)?;
+    decode_rejoin(&bytes, agent, scenario, rejoin_at).map_err(|why| ReadError::Refused {
+        what: WHAT,
+        path: path.to_path_buf(),
+        why,
+    })
 }
 
 fn encode<T: Serialize>(v: &T) -> io::Result<Vec<u8>> {
@@ -337,7 +436,8 @@ mod tests {
         };
         let good = encode_checkpoint(2, 77, &c);
         assert_eq!(decode_checkpoint(&good, 2, 77).unwrap(), c);
-        let why = |b: &[u8], agent, hash| decode_checkpoint(b, agent, hash).unwrap_err();
+        let why =
+            |b: &[u8], agent, hash| decode_checkpoint(b, agent, hash).unwrap_err().to_string();
         assert!(why(&good, 1, 77).contains("agent 3's"), "another agent's");
         assert!(why(&good, 2, 78).contains("scenario"), "another run's");
         for bit in [8 * 9, 8 * 30, 8 * 100, 8 * (good.len() - 3)] {
@@ -395,7 +495,8 @@ mod tests {
         };
         let good = encode_rejoin(55, &f).unwrap();
         assert_eq!(decode_rejoin(&good, 3, 55, 102).unwrap(), f);
-        let why = |b: &[u8], agent, hash, at| decode_rejoin(b, agent, hash, at).unwrap_err();
+        let why =
+            |b: &[u8], agent, hash, at| decode_rejoin(b, agent, hash, at).unwrap_err().to_string();
         assert!(
             why(&good, 2, 55, 102).contains("agent 4's"),
             "another agent's"

@@ -231,6 +231,30 @@ fn check_fault_identification(s: &Scenario, c: &mut Collector) {
 
 fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
     let p = format!("agents[{i}]");
+    check_agent_delay_and_attitude(s, i, a, c);
+    check_agent_fault(s, i, a, c);
+    for k in 0..3 {
+        if !(a.uncertainty.velocity_power[k] == 1 || a.uncertainty.velocity_power[k] == 2) {
+            c.push(
+                format!("{p}.uncertainty.velocity_power[{k}]"),
+                PHYS,
+                "must be 1 or 2 (eq. (61))",
+            );
+        }
+    }
+    if norm3(a.disturbance.direction) == 0.0 {
+        c.push(
+            format!("{p}.disturbance.direction"),
+            PHYS,
+            "must be a non-zero vector",
+        );
+    }
+}
+
+/// Agent i's delay within [0, tau_M] (Assumption 2) and initial attitude inside the constraints
+/// (Assumption 4).
+fn check_agent_delay_and_attitude(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
+    let p = format!("agents[{i}]");
     // Assumption 2: tau_i(t) in [0, tau_M] for all t.
     let d = &a.delay;
     let hi = d.base_s + d.amplitude_s.abs();
@@ -271,7 +295,11 @@ fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
             );
         }
     }
-    // Assumption 5: fault bounds.
+}
+
+/// Agent i's actuator faults within the bounds of Assumption 5, leaving torque authority.
+fn check_agent_fault(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
+    let p = format!("agents[{i}]");
     let ad = &s.controller.adaptive;
     let f = &a.fault;
     for k in 0..3 {
@@ -346,22 +374,6 @@ fn check_agent(s: &Scenario, i: usize, a: &AgentSpec, c: &mut Collector) {
                 ),
             );
         }
-    }
-    for k in 0..3 {
-        if !(a.uncertainty.velocity_power[k] == 1 || a.uncertainty.velocity_power[k] == 2) {
-            c.push(
-                format!("{p}.uncertainty.velocity_power[{k}]"),
-                PHYS,
-                "must be 1 or 2 (eq. (61))",
-            );
-        }
-    }
-    if norm3(a.disturbance.direction) == 0.0 {
-        c.push(
-            format!("{p}.disturbance.direction"),
-            PHYS,
-            "must be a non-zero vector",
-        );
     }
 }
 
@@ -687,8 +699,14 @@ fn check_graph(s: &Scenario, c: &mut Collector) {
 
 /// Checks the position loop, RBFNN and command filters.
 fn check_position_and_filters(s: &Scenario, c: &mut Collector) {
+    check_position(s, c);
+    check_rbfnn(s, c);
+    check_command_filters(s, c);
+}
+
+/// Checks the position loop's gains and limits.
+fn check_position(s: &Scenario, c: &mut Collector) {
     let sim = &s.simulation;
-    // Controller.
     let ctl = &s.controller;
     c.positive(
         "controller.position.k_p",
@@ -761,6 +779,11 @@ fn check_position_and_filters(s: &Scenario, c: &mut Collector) {
             format!("must be in (0, pi/2), got {}", ctl.position.max_tilt_rad),
         );
     }
+}
+
+/// Checks the RBFNN's size, spread and spans.
+fn check_rbfnn(s: &Scenario, c: &mut Collector) {
+    let ctl = &s.controller;
     if ctl.rbfnn.neurons_per_axis == 0 || ctl.rbfnn.neurons_per_axis > 64 {
         c.push(
             "controller.rbfnn.neurons_per_axis",
@@ -800,6 +823,12 @@ fn check_position_and_filters(s: &Scenario, c: &mut Collector) {
         ctl.rbfnn.velocity_span_m_s,
         CTRL,
     );
+}
+
+/// Checks the attitude and rate command filters, and that the step resolves them.
+fn check_command_filters(s: &Scenario, c: &mut Collector) {
+    let sim = &s.simulation;
+    let ctl = &s.controller;
     for (name, f) in [
         (
             "controller.attitude_command_filter",
@@ -1045,7 +1074,6 @@ pub fn validate_event(
 /// One event of the timeline: the fields its kind needs, in range.
 fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: &mut Collector) {
     use crate::scenario::events::EventKind as K;
-    let n = s.n_agents();
     if !(e.at_s >= 0.0 && e.at_s < s.simulation.duration_s) {
         c.push(
             format!("{path}.at_s"),
@@ -1056,107 +1084,141 @@ fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: 
             ),
         );
     }
-    let agent_ok = |c: &mut Collector, field: &str, a: Option<usize>, required: bool| match a {
-        Some(a) if a == 0 || a > n => c.push(
-            format!("{path}.{field}"),
-            TIMELINE,
-            format!("agent ids are 1-based, 1..={n}; got {a}"),
-        ),
-        None if required => c.push(
-            format!("{path}.{field}"),
-            TIMELINE,
-            format!("a `{}` event needs `{field}`", e.kind.name()),
-        ),
-        _ => {}
-    };
+    let ev = EventAt { s, path, e };
     match e.kind {
-        K::Fault => {
-            agent_ok(c, "agent", e.agent, true);
-            match e.gamma {
-                Some(g) => {
-                    for (k, g) in g.iter().enumerate() {
-                        if !(*g > 0.0 && *g <= 1.0) {
-                            c.push(
-                                format!("{path}.gamma[{k}]"),
-                                "eq. (4): Gamma_i in (0, 1] (a partial loss of effectiveness)",
-                                format!("must be in (0, 1], got {g}"),
-                            );
-                        }
+        K::Fault => ev.check_fault(c),
+        K::Delay => ev.check_delay(c),
+        K::Crash | K::Hang => ev.check_down(c),
+        K::LinkDown | K::LinkUp => ev.check_link(c),
+        K::MessageLoss => ev.check_loss(c),
+    }
+}
+
+/// An event of the timeline being checked: the scenario, its path (`events[k]`) and the event.
+struct EventAt<'a> {
+    s: &'a Scenario,
+    path: &'a str,
+    e: &'a crate::scenario::events::Event,
+}
+
+impl EventAt<'_> {
+    /// Agent id `a` of the event's `field`: 1-based within the formation, present if `required`.
+    fn agent_ok(&self, c: &mut Collector, field: &str, a: Option<usize>, required: bool) {
+        let (path, n) = (self.path, self.s.n_agents());
+        match a {
+            Some(a) if a == 0 || a > n => c.push(
+                format!("{path}.{field}"),
+                TIMELINE,
+                format!("agent ids are 1-based, 1..={n}; got {a}"),
+            ),
+            None if required => c.push(
+                format!("{path}.{field}"),
+                TIMELINE,
+                format!("a `{}` event needs `{field}`", self.e.kind.name()),
+            ),
+            _ => {}
+        }
+    }
+
+    /// A `fault` event: its agent, Gamma in (0, 1], |delta| within half the torque range.
+    fn check_fault(&self, c: &mut Collector) {
+        let (s, path, e) = (self.s, self.path, self.e);
+        self.agent_ok(c, "agent", e.agent, true);
+        match e.gamma {
+            Some(g) => {
+                for (k, g) in g.iter().enumerate() {
+                    if !(*g > 0.0 && *g <= 1.0) {
+                        c.push(
+                            format!("{path}.gamma[{k}]"),
+                            "eq. (4): Gamma_i in (0, 1] (a partial loss of effectiveness)",
+                            format!("must be in (0, 1], got {g}"),
+                        );
                     }
                 }
-                None => c.push(
-                    format!("{path}.gamma"),
-                    TIMELINE,
-                    "a `fault` event needs `gamma`",
-                ),
             }
-            for (k, d) in e.delta.unwrap_or([0.0; 3]).iter().enumerate() {
-                let max = max_fault_delta_nm(s, k);
-                if !(d.is_finite() && d.abs() <= max) {
-                    c.push(
-                        format!("{path}.delta[{k}]"),
-                        SAT,
-                        format!(
-                            "|delta| must be at most half the torque range ({max} N m), got {d}"
-                        ),
-                    );
-                }
-            }
+            None => c.push(
+                format!("{path}.gamma"),
+                TIMELINE,
+                "a `fault` event needs `gamma`",
+            ),
         }
-        K::Delay => {
-            agent_ok(c, "agent", e.agent, true);
-            let tau_m = s.simulation.max_delay_s;
-            let base = e.base_s.unwrap_or(f64::NAN);
-            let amp = e.amplitude_s.unwrap_or(0.0);
-            if !(base >= 0.0 && base + amp.abs() <= tau_m) {
+        for (k, d) in e.delta.unwrap_or([0.0; 3]).iter().enumerate() {
+            let max = max_fault_delta_nm(s, k);
+            if !(d.is_finite() && d.abs() <= max) {
                 c.push(
-                    format!("{path}.base_s"),
-                    "Assumption 2: 0 <= tau_i(t) <= tau_M",
-                    format!("base {base} + |amplitude| {amp} must be in [0, tau_M = {tau_m}] s"),
-                );
-            }
-            let rate = e.angular_rate_rad_s.unwrap_or(0.0);
-            if !rate.is_finite() {
-                c.push(
-                    format!("{path}.angular_rate_rad_s"),
-                    A2,
-                    format!("must be a finite number, got {rate}"),
+                    format!("{path}.delta[{k}]"),
+                    SAT,
+                    format!("|delta| must be at most half the torque range ({max} N m), got {d}"),
                 );
             }
         }
-        K::Crash | K::Hang => {
-            agent_ok(c, "agent", e.agent, true);
-            // Down at most until the end of the run: a longer window changes nothing the run can
-            // show, and it sizes the replay history (docs/failures.md).
-            let remaining = s.simulation.duration_s - e.at_s.max(0.0);
-            match e.down_s {
-                Some(d) if d >= s.simulation.dt_s && d <= remaining.max(s.simulation.dt_s) => {}
-                Some(d) if d.is_finite() && d >= s.simulation.dt_s => c.push(
-                    format!("{path}.down_s"),
-                    TIMELINE,
-                    format!(
-                        "must be at most the run's remaining time after at_s ({remaining} s), got {d}"
-                    ),
-                ),
-                Some(d) => c.push(
-                    format!("{path}.down_s"),
-                    TIMELINE,
-                    format!(
-                        "must be a finite time of at least one step ({} s), got {d}",
-                        s.simulation.dt_s
-                    ),
-                ),
-                None => c.push(
-                    format!("{path}.down_s"),
-                    TIMELINE,
-                    format!("a `{}` event needs `down_s`", e.kind.name()),
-                ),
-            }
+    }
+
+    /// A `delay` event: its agent, the delay within [0, tau_M], a finite angular rate.
+    fn check_delay(&self, c: &mut Collector) {
+        let (s, path, e) = (self.s, self.path, self.e);
+        self.agent_ok(c, "agent", e.agent, true);
+        let tau_m = s.simulation.max_delay_s;
+        let base = e.base_s.unwrap_or(f64::NAN);
+        let amp = e.amplitude_s.unwrap_or(0.0);
+        if !(base >= 0.0 && base + amp.abs() <= tau_m) {
+            c.push(
+                format!("{path}.base_s"),
+                "Assumption 2: 0 <= tau_i(t) <= tau_M",
+                format!("base {base} + |amplitude| {amp} must be in [0, tau_M = {tau_m}] s"),
+            );
         }
-        K::LinkDown | K::LinkUp => match e.agents {
+        let rate = e.angular_rate_rad_s.unwrap_or(0.0);
+        if !rate.is_finite() {
+            c.push(
+                format!("{path}.angular_rate_rad_s"),
+                A2,
+                format!("must be a finite number, got {rate}"),
+            );
+        }
+    }
+
+    /// A `crash` or `hang` event: its agent, down for at least one step and at most the rest of
+    /// the run.
+    fn check_down(&self, c: &mut Collector) {
+        let (s, path, e) = (self.s, self.path, self.e);
+        self.agent_ok(c, "agent", e.agent, true);
+        // Down at most until the end of the run: a longer window changes nothing the run can
+        // show, and it sizes the replay history (docs/failures.md).
+        let remaining = s.simulation.duration_s - e.at_s.max(0.0);
+        match e.down_s {
+            Some(d) if d >= s.simulation.dt_s && d <= remaining.max(s.simulation.dt_s) => {}
+            Some(d) if d.is_finite() && d >= s.simulation.dt_s => c.push(
+                format!("{path}.down_s"),
+                TIMELINE,
+                format!(
+                    "must be at most the run's remaining time after at_s ({remaining} s), got {d}"
+                ),
+            ),
+            Some(d) => c.push(
+                format!("{path}.down_s"),
+                TIMELINE,
+                format!(
+                    "must be a finite time of at least one step ({} s), got {d}",
+                    s.simulation.dt_s
+                ),
+            ),
+            None => c.push(
+                format!("{path}.down_s"),
+                TIMELINE,
+                format!("a `{}` event needs `down_s`", e.kind.name()),
+            ),
+        }
+    }
+
+    /// A `link_down` or `link_up` event: two agents joined by an edge of the graph.
+    fn check_link(&self, c: &mut Collector) {
+        let (s, path, e) = (self.s, self.path, self.e);
+        let n = s.n_agents();
+        match e.agents {
             Some([a, b]) => {
-                agent_ok(c, "agents[0]", Some(a), true);
-                agent_ok(c, "agents[1]", Some(b), true);
+                self.agent_ok(c, "agents[0]", Some(a), true);
+                self.agent_ok(c, "agents[1]", Some(b), true);
                 let edge = s
                     .graph
                     .edges
@@ -1175,33 +1237,36 @@ fn check_event(s: &Scenario, path: &str, e: &crate::scenario::events::Event, c: 
                 TIMELINE,
                 format!("a `{}` event needs `agents = [i, j]`", e.kind.name()),
             ),
-        },
-        K::MessageLoss => {
-            agent_ok(c, "from", e.from, false);
-            agent_ok(c, "to", e.to, false);
-            if e.from.is_some() != e.to.is_some() {
+        }
+    }
+
+    /// A `message_loss` event: both ends or neither, a probability in [0, 1], a duration > 0.
+    fn check_loss(&self, c: &mut Collector) {
+        let (path, e) = (self.path, self.e);
+        self.agent_ok(c, "from", e.from, false);
+        self.agent_ok(c, "to", e.to, false);
+        if e.from.is_some() != e.to.is_some() {
+            c.push(
+                format!("{path}.to"),
+                TIMELINE,
+                "give both `from` and `to`, or neither (every edge)",
+            );
+        }
+        match e.probability {
+            Some(p) if (0.0..=1.0).contains(&p) => {}
+            p => c.push(
+                format!("{path}.probability"),
+                TIMELINE,
+                format!("must be in [0, 1], got {p:?}"),
+            ),
+        }
+        if let Some(d) = e.duration_s {
+            if !(d.is_finite() && d > 0.0) {
                 c.push(
-                    format!("{path}.to"),
+                    format!("{path}.duration_s"),
                     TIMELINE,
-                    "give both `from` and `to`, or neither (every edge)",
+                    format!("must be a finite time > 0 s, got {d}"),
                 );
-            }
-            match e.probability {
-                Some(p) if (0.0..=1.0).contains(&p) => {}
-                p => c.push(
-                    format!("{path}.probability"),
-                    TIMELINE,
-                    format!("must be in [0, 1], got {p:?}"),
-                ),
-            }
-            if let Some(d) = e.duration_s {
-                if !(d.is_finite() && d > 0.0) {
-                    c.push(
-                        format!("{path}.duration_s"),
-                        TIMELINE,
-                        format!("must be a finite time > 0 s, got {d}"),
-                    );
-                }
             }
         }
     }

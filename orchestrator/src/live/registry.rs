@@ -146,30 +146,90 @@ pub fn runs_dir() -> PathBuf {
     PathBuf::from(format!("/tmp/formation-runs-{}", files::current_uid()))
 }
 
+/// Why the runs folder or a run's record cannot be used, or which run is meant is unclear.
+#[derive(Debug, thiserror::Error)]
+pub enum RegistryError {
+    /// The runs folder cannot be created.
+    #[error("cannot create the runs folder {}: {source}", dir.display())]
+    Create {
+        /// The runs folder.
+        dir: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The runs folder cannot be looked at.
+    #[error("cannot use the runs folder {}: {source}", dir.display())]
+    Unusable {
+        /// The runs folder.
+        dir: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The runs folder is not this user's alone.
+    #[error(
+        "refusing the runs folder {}: {why} (set FORMATION_RUNS_DIR to a folder of your own \
+         with mode 0700)",
+        dir.display()
+    )]
+    Refused {
+        /// The runs folder.
+        dir: PathBuf,
+        /// Why.
+        why: files::DirProblem,
+    },
+    /// The runs folder cannot be listed.
+    #[error("cannot read {}: {source}", dir.display())]
+    Read {
+        /// The runs folder.
+        dir: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// A run's record cannot be written.
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        /// The record.
+        path: PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// `--run ID` names no running run.
+    #[error("no running run with id '{0}' (see `formation ps`)")]
+    NoSuchRun(String),
+    /// No run is running.
+    #[error("no run is running (start one with `formation run`)")]
+    NoRun,
+    /// Several runs are running and none was chosen (their ids).
+    #[error("{} runs are running ({}): choose one with --run ID", .0.len(), .0.join(", "))]
+    Several(Vec<String>),
+}
+
 /// Why `dir` must not be used as the runs folder, if it must not: it is not a directory (a
 /// symbolic link counts as not one), belongs to another user, or others may write to it.
-pub fn check_dir(dir: &Path) -> Result<(), String> {
-    std::fs::symlink_metadata(dir)
-        .map_err(|e| format!("cannot use the runs folder {}: {e}", dir.display()))?;
-    files::check_private_dir(dir).map_err(|why| {
-        format!(
-            "refusing the runs folder {}: {why} (set FORMATION_RUNS_DIR to a folder of your own \
-             with mode 0700)",
-            dir.display()
-        )
+pub fn check_dir(dir: &Path) -> Result<(), RegistryError> {
+    std::fs::symlink_metadata(dir).map_err(|source| RegistryError::Unusable {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
+    files::check_private_dir(dir).map_err(|why| RegistryError::Refused {
+        dir: dir.to_path_buf(),
+        why,
     })
 }
 
 /// The runs directory, checked ([`check_dir`]); created with mode 0700 when `create` is set,
 /// else `None` when it does not exist.
-pub fn checked_runs_dir(create: bool) -> Result<Option<PathBuf>, String> {
+pub fn checked_runs_dir(create: bool) -> Result<Option<PathBuf>, RegistryError> {
     let dir = runs_dir();
     if create {
         std::fs::DirBuilder::new()
             .recursive(true)
             .mode(0o700)
             .create(&dir)
-            .map_err(|e| format!("cannot create the runs folder {}: {e}", dir.display()))?;
+            .map_err(|source| RegistryError::Create {
+                dir: dir.clone(),
+                source,
+            })?;
     } else if std::fs::symlink_metadata(&dir).is_err() {
         return Ok(None);
     }
@@ -259,12 +319,14 @@ fn classify(path: &Path) -> Entry {
 /// Every live run, sorted by start time. Records of runs that are over (orchestrator gone) which
 /// this program wrote are deleted; nothing else in the folder is touched. Fails (exit 2) on a
 /// runs folder that must not be used ([`check_dir`]).
-pub fn list() -> Result<Vec<RunRecord>, String> {
+pub fn list() -> Result<Vec<RunRecord>, RegistryError> {
     let Some(dir) = checked_runs_dir(false)? else {
         return Ok(Vec::new());
     };
-    let entries =
-        std::fs::read_dir(&dir).map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+    let entries = std::fs::read_dir(&dir).map_err(|source| RegistryError::Read {
+        dir: dir.clone(),
+        source,
+    })?;
     let mut runs = Vec::new();
     for e in entries.flatten() {
         let path = e.path();
@@ -293,22 +355,18 @@ pub fn reload(id: &str) -> Option<RunRecord> {
 }
 
 /// The run `id`, or the only live run when `id` is `None`; a clear error otherwise.
-pub fn find(id: Option<&str>) -> Result<RunRecord, String> {
+pub fn find(id: Option<&str>) -> Result<RunRecord, RegistryError> {
     let runs = list()?;
     match id {
         Some(id) => runs
             .into_iter()
             .find(|r| r.id == id)
-            .ok_or_else(|| format!("no running run with id '{id}' (see `formation ps`)")),
+            .ok_or_else(|| RegistryError::NoSuchRun(id.to_string())),
         None => match runs.len() {
-            0 => Err("no run is running (start one with `formation run`)".into()),
+            0 => Err(RegistryError::NoRun),
             1 => Ok(runs.into_iter().next().expect("one run")),
-            k => Err(format!(
-                "{k} runs are running ({}): choose one with --run ID",
-                runs.iter()
-                    .map(|r| r.id.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
+            _ => Err(RegistryError::Several(
+                runs.into_iter().map(|r| r.id).collect(),
             )),
         },
     }
@@ -327,7 +385,7 @@ const REFRESH: Duration = Duration::from_millis(500);
 
 impl Registration {
     /// Writes the record of this run (the orchestrator must be the first process).
-    pub fn create(mut rec: RunRecord) -> Result<Registration, String> {
+    pub fn create(mut rec: RunRecord) -> Result<Registration, RegistryError> {
         let dir = checked_runs_dir(true)?.unwrap_or_else(runs_dir);
         rec.format = RECORD_FORMAT.to_string();
         rec.owner_uid = files::current_uid();
@@ -335,8 +393,10 @@ impl Registration {
             .map(|s| s.start_ticks)
             .unwrap_or(0);
         let path = dir.join(format!("{}.json", rec.id));
-        write_atomically(&path, &rec)
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        write_atomically(&path, &rec).map_err(|source| RegistryError::Write {
+            path: path.clone(),
+            source,
+        })?;
         Ok(Registration {
             path,
             rec,
@@ -499,26 +559,32 @@ mod tests {
     #[test]
     fn runs_folders_others_may_write_to_or_own_are_refused_naming_why() {
         let d = temp("dir");
-        assert_eq!(check_dir(&d), Ok(()));
+        assert!(check_dir(&d).is_ok());
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o777)).unwrap();
-        let e = check_dir(&d).unwrap_err();
+        let e = check_dir(&d).unwrap_err().to_string();
         assert!(
             e.contains(&d.display().to_string()) && e.contains("world-writable"),
             "{e}"
         );
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o770)).unwrap();
-        assert!(check_dir(&d).unwrap_err().contains("group-writable"));
+        assert!(check_dir(&d)
+            .unwrap_err()
+            .to_string()
+            .contains("group-writable"));
         std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o700)).unwrap();
         let link = d.with_extension("link");
         let _ = std::fs::remove_file(&link);
         std::os::unix::fs::symlink(&d, &link).unwrap();
-        assert!(check_dir(&link).unwrap_err().contains("symbolic link"));
+        assert!(check_dir(&link)
+            .unwrap_err()
+            .to_string()
+            .contains("symbolic link"));
         let _ = std::fs::remove_file(&link);
         // Another owner (needs root, as in CI's container; skipped otherwise).
         let c = std::ffi::CString::new(d.as_os_str().as_encoded_bytes()).unwrap();
         // SAFETY: chown on a valid C string path.
         if unsafe { libc::chown(c.as_ptr(), 65534, 65534) } == 0 {
-            let e = check_dir(&d).unwrap_err();
+            let e = check_dir(&d).unwrap_err().to_string();
             assert!(e.contains("uid 65534"), "{e}");
         }
         let _ = std::fs::remove_dir_all(&d);

@@ -21,12 +21,59 @@ pub enum Cleaned {
     LeftTo(Vec<ipc::AliveNode>),
 }
 
+/// Why the files of a run's prefix could not all be removed, or its iceoryx2 configuration
+/// written; each names the prefix or file.
+#[derive(Debug, thiserror::Error)]
+pub enum CleanupError {
+    /// The prefix's nodes cannot be listed, or its configuration made.
+    #[error("{0}")]
+    Ipc(#[from] ipc::IpcError),
+    /// The prefix's files cannot be removed.
+    #[error("cannot remove the files of {prefix}: {source}")]
+    Remove {
+        /// The run's prefix.
+        prefix: String,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// Files of the prefix are still there after their removal (their paths).
+    #[error(
+        "files of run prefix {prefix} are left behind: {}",
+        left.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+    )]
+    LeftBehind {
+        /// The run's prefix.
+        prefix: String,
+        /// The files left.
+        left: Vec<std::path::PathBuf>,
+    },
+    /// The prefix's files cannot be listed.
+    #[error("cannot list the files of {prefix}: {source}")]
+    List {
+        /// The run's prefix.
+        prefix: String,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The iceoryx2 configuration cannot be written as TOML.
+    #[error("cannot serialise the iceoryx2 config: {0}")]
+    Serialise(#[from] toml::ser::Error),
+    /// The iceoryx2 configuration cannot be written into the run's folder.
+    #[error("cannot write {}: {source}", dir.display())]
+    Write {
+        /// The folder.
+        dir: std::path::PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+}
+
 /// Deletes the run's files in /dev/shm and /tmp/iceoryx2, once no outside node is attached any
 /// more (waiting up to `grace`); errors name what is left.
-pub fn remove(prefix: &str, grace: Duration) -> Result<Cleaned, String> {
+pub fn remove(prefix: &str, grace: Duration) -> Result<Cleaned, CleanupError> {
     let start = Instant::now();
     loop {
-        let outside = ipc::alive_nodes(prefix).map_err(|e| e.to_string())?;
+        let outside = ipc::alive_nodes(prefix)?;
         if outside.is_empty() {
             break;
         }
@@ -39,28 +86,30 @@ pub fn remove(prefix: &str, grace: Duration) -> Result<Cleaned, String> {
 }
 
 /// Deletes every file of the prefix.
-fn remove_all(prefix: &str) -> Result<(), String> {
-    ipc::remove_residue(prefix).map_err(|e| format!("cannot remove the files of {prefix}: {e}"))?;
+fn remove_all(prefix: &str) -> Result<(), CleanupError> {
+    ipc::remove_residue(prefix).map_err(|source| CleanupError::Remove {
+        prefix: prefix.to_string(),
+        source,
+    })?;
     match ipc::residue(prefix) {
         Ok(left) if left.is_empty() => Ok(()),
-        Ok(left) => Err(format!(
-            "files of run prefix {prefix} are left behind: {}",
-            left.iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )),
-        Err(e) => Err(format!("cannot list the files of {prefix}: {e}")),
+        Ok(left) => Err(CleanupError::LeftBehind {
+            prefix: prefix.to_string(),
+            left,
+        }),
+        Err(source) => Err(CleanupError::List {
+            prefix: prefix.to_string(),
+            source,
+        }),
     }
 }
 
 /// Writes `<run dir>/iox2/config/iceoryx2.toml`: the iceoryx2 config of the run (its prefix), so that
 /// `cd <run dir>/iox2 && iox2 service list` (iceoryx2 looks for `./config/iceoryx2.toml`) shows the
 /// run's nodes and services while it is running.
-pub fn write_iox2_config(run_dir: &std::path::Path, prefix: &str) -> Result<(), String> {
-    let cfg = ipc::config_for_prefix(prefix).map_err(|e| e.to_string())?;
-    let text =
-        toml::to_string(&cfg).map_err(|e| format!("cannot serialise the iceoryx2 config: {e}"))?;
+pub fn write_iox2_config(run_dir: &std::path::Path, prefix: &str) -> Result<(), CleanupError> {
+    let cfg = ipc::config_for_prefix(prefix)?;
+    let text = toml::to_string(&cfg)?;
     let dir = run_dir.join("iox2").join("config");
     formation_config::node::files::ensure_private_dir(&run_dir.join("iox2"))
         .and_then(|()| formation_config::node::files::ensure_private_dir(&dir))
@@ -68,5 +117,8 @@ pub fn write_iox2_config(run_dir: &std::path::Path, prefix: &str) -> Result<(), 
         .and_then(|()| {
             formation_config::node::files::write_atomic(&dir.join("iceoryx2.toml"), text.as_bytes())
         })
-        .map_err(|e| format!("cannot write {}: {e}", dir.display()))
+        .map_err(|source| CleanupError::Write {
+            dir: dir.clone(),
+            source,
+        })
 }

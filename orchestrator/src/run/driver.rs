@@ -4,6 +4,7 @@
 use super::progress::Progress;
 use super::spawn::{self, RoleProcess};
 use crate::record::Recorder;
+use formation_config::node::error::PortError;
 use formation_config::node::ports::{
     notifier, poke, publisher, slice_subscriber, subscriber, Input, Output, RunNode, Sub, Svc, Wake,
 };
@@ -44,7 +45,11 @@ pub struct Ports {
 
 impl Ports {
     /// Makes the orchestrator's ports on the created services.
-    pub fn open(node: &RunNode, n: usize, wake_plant_on_progress: bool) -> Result<Ports, String> {
+    pub fn open(
+        node: &RunNode,
+        n: usize,
+        wake_plant_on_progress: bool,
+    ) -> Result<Ports, PortError> {
         let mut wakes = vec![
             notifier(node, &services::WAKE_PLANT.named())?,
             notifier(node, &services::WAKE_LEADER.named())?,
@@ -76,7 +81,7 @@ impl Ports {
         self.wakes.iter().for_each(poke);
     }
 
-    fn announce(&self, recorded: u64) -> Result<(), String> {
+    fn announce(&self, recorded: u64) -> Result<(), PortError> {
         formation_config::node::ports::send(&self.progress, RunProgress { recorded })?;
         if self.wake_plant_on_progress || recorded == 0 {
             poke(&self.wakes[0]);
@@ -276,7 +281,7 @@ pub fn drive(
     let realtime = !ports.wake_plant_on_progress;
     let mut heard: Vec<Option<Instant>> = vec![None; n];
     if let Err(e) = ports.announce(0) {
-        return (Outcome::Failed(e), 0);
+        return (Outcome::Failed(e.to_string()), 0);
     }
     loop {
         if let Err(e) = ports.wake.wait(SUPERVISE_EVERY) {

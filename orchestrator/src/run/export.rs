@@ -33,9 +33,25 @@ pub struct Facts<'a> {
     pub mode: &'a str,
 }
 
+/// Why the export cannot listen or start.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// `--zenoh-listen` refused: an endpoint, the `--auth` file, a port in use.
+    #[cfg(feature = "multihost")]
+    #[error("--zenoh-listen: {0}")]
+    Listen(formation_net::export::ExportError),
+    /// The export thread could not open the run's services or start.
+    #[cfg(feature = "multihost")]
+    #[error("{0}")]
+    Start(formation_net::export::ExportError),
+    /// `--zenoh-listen` in a build without Zenoh.
+    #[error("{}", NO_ZENOH)]
+    NoZenoh,
+}
+
 #[cfg(feature = "multihost")]
 mod on {
-    use super::{ExportArgs, Facts};
+    use super::{ExportArgs, ExportError, Facts};
     use formation_net::export::{Export, ExportConfig, Listening, RunFacts};
     use std::path::Path;
 
@@ -64,7 +80,7 @@ mod on {
         auth: Option<&Path>,
         prefix: &str,
         f: &Facts,
-    ) -> Result<Option<Opened>, String> {
+    ) -> Result<Option<Opened>, ExportError> {
         if !args.enabled() {
             return Ok(None);
         }
@@ -84,20 +100,20 @@ mod on {
         };
         Listening::open(cfg)
             .map(|l| Some(Opened(l)))
-            .map_err(|e| format!("--zenoh-listen: {e}"))
+            .map_err(ExportError::Listen)
     }
 
     impl Opened {
         /// Starts reading the run's services (they must exist).
-        pub fn start(self) -> Result<Running, String> {
-            self.0.start().map(Running)
+        pub fn start(self) -> Result<Running, ExportError> {
+            self.0.start().map(Running).map_err(ExportError::Start)
         }
     }
 }
 
 #[cfg(not(feature = "multihost"))]
 mod on {
-    use super::{ExportArgs, Facts};
+    use super::{ExportArgs, ExportError, Facts};
     use std::path::Path;
 
     /// Never built without the `multihost` feature.
@@ -112,16 +128,16 @@ mod on {
         _: Option<&Path>,
         _: &str,
         _: &Facts,
-    ) -> Result<Option<Opened>, String> {
+    ) -> Result<Option<Opened>, ExportError> {
         if args.enabled() {
-            return Err(super::NO_ZENOH.into());
+            return Err(ExportError::NoZenoh);
         }
         Ok(None)
     }
 
     impl Opened {
         /// Unreachable.
-        pub fn start(self) -> Result<Running, String> {
+        pub fn start(self) -> Result<Running, ExportError> {
             match self {}
         }
     }
@@ -172,7 +188,8 @@ mod tests {
         };
         let e = open(&wide, None, "fmt1_", &facts_of(&s))
             .err()
-            .expect("refused");
+            .expect("refused")
+            .to_string();
         assert!(e.starts_with("--zenoh-listen"), "{e}");
         #[cfg(feature = "multihost")]
         assert!(e.contains("requires authentication"), "{e}");

@@ -312,11 +312,11 @@ impl Pins {
 
     /// Starts a process at `place` with `spawn` (given its CPU now, `None`: not pinned) and
     /// records it; the placement does not change meanwhile.
-    pub fn spawn(
+    pub fn spawn<E>(
         &self,
         place: Place,
-        spawn: impl FnOnce(Option<usize>) -> Result<RoleProcess, String>,
-    ) -> Result<RoleProcess, String> {
+        spawn: impl FnOnce(Option<usize>) -> Result<RoleProcess, E>,
+    ) -> Result<RoleProcess, E> {
         let mut state = self.lock();
         let child = spawn(self.cpu_of(place, state.quiet))?;
         if place != Place::Anywhere {
@@ -369,7 +369,7 @@ impl Pins {
     /// `allowed`) where the placement adapts, and scheduled as [`Pins::sched`] says. The first
     /// failure other than an exited process is returned, the others are still moved. Returns
     /// whether [`BUSY_NICE`] was granted (true when not asked for).
-    fn apply(&self, quiet: bool, allowed: &[usize]) -> Result<bool, String> {
+    fn apply(&self, quiet: bool, allowed: &[usize]) -> Result<bool, MoveError> {
         let mut state = self.lock();
         state.quiet = quiet;
         let mut first_error = None;
@@ -384,17 +384,20 @@ impl Pins {
                     None => allowed.to_vec(),
                 };
                 if let Err(e) = proc_load::set_process_affinity(m.pid, &cpus) {
-                    first_error.get_or_insert(format!("cannot set the CPUs of pid {}: {e}", m.pid));
+                    first_error.get_or_insert(MoveError::Cpus {
+                        pid: m.pid,
+                        source: e,
+                    });
                 }
             }
             if let Some(sched) = self.sched(quiet) {
                 match proc_load::set_process_sched(m.pid, sched) {
                     Ok(g) => granted &= g,
                     Err(e) => {
-                        first_error.get_or_insert(format!(
-                            "cannot set the scheduling of pid {}: {e}",
-                            m.pid
-                        ));
+                        first_error.get_or_insert(MoveError::Sched {
+                            pid: m.pid,
+                            source: e,
+                        });
                     }
                 }
             }
@@ -482,6 +485,27 @@ pub fn decide_start(
             (Pins::fixed(layout), None)
         }
     }
+}
+
+/// Why a process of the run could not be moved to the governor's mode.
+#[derive(Debug, thiserror::Error)]
+pub enum MoveError {
+    /// Its CPUs cannot be set.
+    #[error("cannot set the CPUs of pid {pid}: {source}")]
+    Cpus {
+        /// The process.
+        pid: u32,
+        /// The system's error.
+        source: std::io::Error,
+    },
+    /// Its scheduling cannot be set.
+    #[error("cannot set the scheduling of pid {pid}: {source}")]
+    Sched {
+        /// The process.
+        pid: u32,
+        /// The system's error.
+        source: std::io::Error,
+    },
 }
 
 /// The governor's thread; dropping it stops the thread (at once: it sleeps on a channel).
@@ -782,10 +806,12 @@ mod tests {
         let pins = Pins::with(auto_layout(), Adapts::SchedulingAndPinning, true, None);
         assert_eq!(pins.sched(true), Some(Sched::Batch));
         assert_eq!(pins.sched(false), Some(Sched::Other { nice: BUSY_NICE }));
-        assert!(
-            BUSY_NICE < 0,
-            "busy processes must outweigh nice-0 programs"
-        );
+        const {
+            assert!(
+                BUSY_NICE < 0,
+                "busy processes must outweigh nice-0 programs"
+            )
+        };
         // Realtime runs keep their own scheduling.
         assert_eq!(Pins::fixed(auto_layout()).sched(false), None);
     }

@@ -139,9 +139,14 @@ pub struct Prober {
     answer: mpsc::Receiver<ProbeStats>,
 }
 
+/// The probe's thread cannot be started.
+#[derive(Debug, thiserror::Error)]
+#[error("host probe: cannot start a thread: {0}")]
+pub struct ProbeError(std::io::Error);
+
 impl Prober {
     /// Starts the thread; `fifo` is the `SCHED_FIFO` priority the run's plant gets (0: none).
-    pub fn start(fifo: u32) -> Result<Prober, String> {
+    pub fn start(fifo: u32) -> Result<Prober, ProbeError> {
         let (ask, asked) = mpsc::channel::<()>();
         let (tell, answer) = mpsc::channel::<ProbeStats>();
         std::thread::Builder::new()
@@ -154,7 +159,7 @@ impl Prober {
                     }
                 }
             })
-            .map_err(|e| format!("host probe: cannot start a thread: {e}"))?;
+            .map_err(ProbeError)?;
         Ok(Prober { ask, answer })
     }
 

@@ -9,6 +9,7 @@
 
 use crate::live::registry::unix_now;
 use crate::live::validate::{self, DelayProfile};
+use formation_config::node::error::PortError;
 use formation_config::node::ports::{publisher, send, subscriber, Input, Output, RunNode};
 use formation_config::protocol::messages::{
     InjectRequest, RuntimeEvent, INJECT_ASAP, INJECT_CRASH, INJECT_DELAY, INJECT_FAULT,
@@ -18,6 +19,7 @@ use formation_config::protocol::pacing::PLANT_LEAD;
 use formation_config::protocol::services;
 use formation_config::protocol::wire::{DelayInjection, FaultInjection};
 use formation_config::scenario::events::{Event, EventKind};
+use formation_config::scenario::validate::ValidationErrors;
 use formation_config::Scenario;
 use serde_json::json;
 use std::fs::File;
@@ -28,6 +30,39 @@ use std::path::Path;
 /// injection services every `HOUSEKEEPING_EVERY` steps, so one such read always falls between the
 /// forwarding and the step the injection applies at (plus margin).
 pub const SLACK: u64 = formation_config::protocol::pacing::HOUSEKEEPING_EVERY + 4;
+
+/// Why the injections of a run cannot be taken or forwarded (the run then stops).
+#[derive(Debug, thiserror::Error)]
+pub enum InjectionsError {
+    /// A port of the injection services cannot be opened or sent on.
+    #[error("{0}")]
+    Port(#[from] PortError),
+    /// `events.jsonl` cannot be created.
+    #[error("cannot create {}: {source}", path.display())]
+    Create {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// A line cannot be appended to `events.jsonl`.
+    #[error("cannot write events.jsonl: {0}")]
+    Write(std::io::Error),
+}
+
+/// Why one injection request is refused (logged in `events.jsonl`, the run goes on).
+#[derive(Debug, thiserror::Error)]
+enum Refusal {
+    /// An option outside its range.
+    #[error("{0}")]
+    Check(#[from] validate::InjectError),
+    /// A request kind this orchestrator does not know.
+    #[error("unknown injection kind {0}")]
+    UnknownKind(u32),
+    /// The event breaks the rules of a timeline event.
+    #[error("{0}")]
+    Event(#[from] ValidationErrors),
+}
 
 /// Ports and log of the injections of one run.
 pub struct Injections {
@@ -44,14 +79,22 @@ pub struct Injections {
 
 impl Injections {
     /// Opens the ports and creates `out/events.jsonl`.
-    pub fn open(node: &RunNode, scenario: &Scenario, out: &Path) -> Result<Injections, String> {
+    pub fn open(
+        node: &RunNode,
+        scenario: &Scenario,
+        out: &Path,
+    ) -> Result<Injections, InjectionsError> {
         let path = out.join("events.jsonl");
         Ok(Injections {
             requests: subscriber(node, &services::INJECT_REQUEST.named())?,
             faults: publisher(node, &services::FAULT_INJECTION.named())?,
             delays: publisher(node, &services::DELAY_INJECTION.named())?,
-            events: formation_config::node::files::create_replacing(&path)
-                .map_err(|e| format!("cannot create {}: {e}", path.display()))?,
+            events: formation_config::node::files::create_replacing(&path).map_err(|source| {
+                InjectionsError::Create {
+                    path: path.clone(),
+                    source,
+                }
+            })?,
             logged: Vec::new(),
             changes: Vec::new(),
             scenario: scenario.clone(),
@@ -60,7 +103,7 @@ impl Injections {
 
     /// Handles every pending request; call it before announcing `recorded` as progress. Returns
     /// the runtime events to publish (crashes, hangs, links).
-    pub fn poll(&mut self, recorded: u64) -> Result<Vec<RuntimeEvent>, String> {
+    pub fn poll(&mut self, recorded: u64) -> Result<Vec<RuntimeEvent>, InjectionsError> {
         let mut out = Vec::new();
         while let Ok(Some(r)) = self.requests.receive() {
             let r = *r;
@@ -73,22 +116,26 @@ impl Injections {
 
     /// The checks of a timeline event of the same kind at the step it applies (`down_s` at most
     /// the run's remaining time from there), after the client's own.
-    fn check(&self, r: &InjectRequest, step: u64) -> Result<(), String> {
+    fn check(&self, r: &InjectRequest, step: u64) -> Result<(), Refusal> {
         validate::agent(r.agent as usize + 1, self.scenario.n_agents())?;
         match r.kind {
             INJECT_FAULT => validate::fault(&self.scenario, r.gamma, r.delta)?,
             INJECT_DELAY => validate::delay(&self.scenario, &profile(r))?,
             INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP => {}
-            k => return Err(format!("unknown injection kind {k}")),
+            k => return Err(Refusal::UnknownKind(k)),
         }
         // An injection after the end is checked as if at the last step (it changes nothing).
         let last = self.scenario.n_steps().saturating_sub(1);
         let e = event_of(r, self.scenario.simulation.dt_s, step.min(last));
-        formation_config::scenario::validate::validate_event(&self.scenario, "inject", &e)
-            .map_err(|e| e.to_string())
+        formation_config::scenario::validate::validate_event(&self.scenario, "inject", &e)?;
+        Ok(())
     }
 
-    fn handle(&mut self, r: &InjectRequest, recorded: u64) -> Result<Option<RuntimeEvent>, String> {
+    fn handle(
+        &mut self,
+        r: &InjectRequest,
+        recorded: u64,
+    ) -> Result<Option<RuntimeEvent>, InjectionsError> {
         let wall = unix_now();
         let earliest = recorded + PLANT_LEAD + SLACK;
         let step = if r.at_step != INJECT_ASAP && r.at_step >= earliest {
@@ -101,7 +148,7 @@ impl Injections {
             return self
                 .log(json!({
                     "wall_time_unix_s": wall, "event": "rejected", "nonce": r.nonce,
-                    "recorded_step": recorded, "error": e,
+                    "recorded_step": recorded, "error": e.to_string(),
                 }))
                 .map(|_| None);
         }
@@ -195,10 +242,10 @@ impl Injections {
         std::mem::take(&mut self.logged)
     }
 
-    fn log(&mut self, v: serde_json::Value) -> Result<(), String> {
+    fn log(&mut self, v: serde_json::Value) -> Result<(), InjectionsError> {
         writeln!(self.events, "{v}")
             .and_then(|_| self.events.flush())
-            .map_err(|e| format!("cannot write events.jsonl: {e}"))?;
+            .map_err(InjectionsError::Write)?;
         self.logged.push(v);
         Ok(())
     }

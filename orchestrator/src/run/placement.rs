@@ -42,14 +42,14 @@ impl Slot {
 /// Claims the lowest free slot in `dir`. Two runs starting at the same moment get different slots
 /// (each `flock` succeeds for one process only), so their plants go to different CPUs; a slot of a
 /// run that ended is free again.
-pub fn claim_slot(dir: &Path) -> Result<Slot, String> {
+pub fn claim_slot(dir: &Path) -> Result<Slot, SlotError> {
     for index in 0..MAX_SLOTS {
         let path = dir.join(format!("cpu-slot-{index}.lock"));
-        let file = files::open_lock_file(&path, true)
-            .map_err(|e| format!("cannot claim a CPU slot: {e}"))?;
-        if files::try_lock(&file, Lock::Exclusive)
-            .map_err(|e| format!("cannot lock {}: {e}", path.display()))?
-        {
+        let file = files::open_lock_file(&path, true).map_err(SlotError::Open)?;
+        if files::try_lock(&file, Lock::Exclusive).map_err(|source| SlotError::Lock {
+            path: path.clone(),
+            source,
+        })? {
             return Ok(Slot {
                 index,
                 _file: Some(file),
@@ -76,18 +76,37 @@ pub enum PinRequest {
 
 impl PinRequest {
     /// Parses `auto`, `off` or a CPU list (`0,1`, `0-3`) of CPUs in `allowed`.
-    pub fn parse(s: &str, allowed: &[usize]) -> Result<PinRequest, String> {
+    pub fn parse(s: &str, allowed: &[usize]) -> Result<PinRequest, PinError> {
         match s.trim() {
             "auto" => Ok(PinRequest::Auto),
             "always" => Ok(PinRequest::Always),
             "off" | "none" => Ok(PinRequest::Off),
             list => cpus::parse_list(list, allowed)
                 .map(PinRequest::Cpus)
-                .map_err(|e| {
-                    format!("--pin: {e} (expected auto, always, off or a CPU list like 0,1)")
-                }),
+                .map_err(PinError),
         }
     }
+}
+
+/// Why `--pin` is refused: its CPU list is.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("--pin: {0} (expected auto, always, off or a CPU list like 0,1)")]
+pub struct PinError(pub cpus::CpuListError);
+
+/// Why no CPU slot could be claimed ([`claim_slot`]): the layout is then not rotated.
+#[derive(Debug, thiserror::Error)]
+pub enum SlotError {
+    /// A slot's lock file cannot be opened.
+    #[error("cannot claim a CPU slot: {0}")]
+    Open(std::io::Error),
+    /// A slot's lock file cannot be locked.
+    #[error("cannot lock {}: {source}", path.display())]
+    Lock {
+        /// The slot's lock file.
+        path: std::path::PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
 }
 
 /// Share of the agents the plant's CPU takes in the automatic layout, against an even share
@@ -296,7 +315,7 @@ mod tests {
             PinRequest::parse("1,0", &[0, 1]),
             Ok(PinRequest::Cpus(vec![1, 0]))
         );
-        let e = PinRequest::parse("5", &[0, 1]).unwrap_err();
+        let e = PinRequest::parse("5", &[0, 1]).unwrap_err().to_string();
         assert!(e.starts_with("--pin:"), "{e}");
     }
 }

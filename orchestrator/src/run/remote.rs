@@ -7,9 +7,10 @@
 //! then are processes started: plant, leader and this machine's agents here, the others by their
 //! daemons. Plant, leader and orchestrator always stay on the launching machine.
 
+pub use super::remote_error::RemoteError;
 use super::spawn::{RemoteProcess, RoleProcess};
 use super::HostPacing;
-use crate::hosts::LinkArgs;
+use crate::link::LinkArgs;
 use formation_config::node::args::ChildArgs;
 use formation_config::node::restart;
 use formation_config::protocol::services::Sizing;
@@ -59,12 +60,13 @@ impl PlaceArgs {
 }
 
 /// The host of every agent (0-based index), [`LAUNCHER`] for this machine.
-pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<String>, String> {
+pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<String>, RemoteError> {
     for h in hosts {
         if !proto::valid_name(h) || h == LAUNCHER {
-            return Err(format!(
-                "--hosts: '{h}' is not a host name (1..=32 of [A-Za-z0-9_-], not '{LAUNCHER}')"
-            ));
+            return Err(RemoteError::HostName {
+                host: h.clone(),
+                launcher: LAUNCHER,
+            });
         }
     }
     if place.is_empty() {
@@ -78,22 +80,30 @@ pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<Str
     for p in place {
         let (ids, host) = p
             .split_once('@')
-            .ok_or_else(|| format!("--place {p}: expected IDS@HOST, e.g. 4,5@b"))?;
+            .ok_or_else(|| RemoteError::PlaceForm(p.clone()))?;
         if host != LAUNCHER && !hosts.iter().any(|h| h == host) {
-            return Err(format!("--place {p}: host '{host}' is not in --hosts"));
+            return Err(RemoteError::PlaceHost {
+                place: p.clone(),
+                host: host.to_string(),
+            });
         }
         for id in ids.split(',') {
-            let k: usize = id
-                .trim()
-                .parse()
-                .map_err(|_| format!("--place {p}: '{id}' is not an agent id"))?;
+            let k: usize = id.trim().parse().map_err(|_| RemoteError::PlaceId {
+                place: p.clone(),
+                id: id.to_string(),
+            })?;
             if k == 0 || k > n {
-                return Err(format!(
-                    "--place {p}: agent {k} does not exist (ids 1..={n})"
-                ));
+                return Err(RemoteError::PlaceRange {
+                    place: p.clone(),
+                    agent: k,
+                    n,
+                });
             }
             if placed[k - 1] {
-                return Err(format!("--place {p}: agent {k} is placed twice"));
+                return Err(RemoteError::PlaceTwice {
+                    place: p.clone(),
+                    agent: k,
+                });
             }
             placed[k - 1] = true;
             v[k - 1] = host.to_string();
@@ -104,21 +114,20 @@ pub fn placement(n: usize, hosts: &[String], place: &[String]) -> Result<Vec<Str
 
 /// A handshake error, with what is wrong with each endpoint when hosts did not answer (an
 /// authentication failure, a socket or an address that cannot be reached).
-fn why_missing(opts: &Options, e: HandshakeError) -> String {
-    let mut text = e.to_string();
+fn why_missing(opts: &Options, e: HandshakeError) -> RemoteError {
+    let mut diagnoses = Vec::new();
     if let HandshakeError::Missing(_) = e {
-        let found: Vec<String> = opts
+        diagnoses = opts
             .connect
             .iter()
             .filter_map(|ep| session::diagnose(opts, ep))
             .map(|f| f.to_string())
             .collect();
-        if !found.is_empty() {
-            text.push_str(": ");
-            text.push_str(&found.join("; "));
-        }
     }
-    text
+    RemoteError::Handshake {
+        source: e,
+        diagnoses,
+    }
 }
 
 /// Hosts reached and checked, before the run is prepared.
@@ -134,10 +143,10 @@ pub struct Remote {
 }
 
 /// Opens the session and runs the handshake; `None` without `--hosts`.
-pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, String> {
+pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, RemoteError> {
     if a.hosts.is_empty() {
         if !a.place.is_empty() || !a.connect.is_empty() {
-            return Err("--place and --connect need --hosts".into());
+            return Err(RemoteError::NeedsHosts);
         }
         return Ok(None);
     }
@@ -154,14 +163,16 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
         hosts
             .iter()
             .map(|h| session::local_endpoint(h))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| e.to_string())?
+            .collect::<Result<Vec<_>, _>>()?
     } else {
         a.connect.clone()
     };
     let opts = a.link.options(Mode::Orchestrator, vec![], connect);
-    crate::hosts::ignore_sigpipe();
-    let cluster = Cluster::open(&opts).map_err(|e| e.to_string())?;
+    crate::link::ignore_sigpipe();
+    let cluster = Cluster::open(&opts).map_err(|source| RemoteError::Handshake {
+        source,
+        diagnoses: Vec::new(),
+    })?;
     let me = formation_net::identity::local();
     let infos = cluster
         .handshake(&hosts, &me, session::REPLY_TIMEOUT)
@@ -171,7 +182,7 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
     let here = Facts::here();
     let mut colocated = Vec::new();
     for (h, i) in &infos {
-        match colocate::data_plane(h, &here, &i.facts()).map_err(|e| e.to_string())? {
+        match colocate::data_plane(h, &here, &i.facts())? {
             DataPlane::Colocated => {
                 tracing::info!(host = h.as_str(), pid = i.pid, "co-located host");
                 colocated.push(h.clone());
@@ -183,7 +194,7 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Str
     for h in &hosts {
         let o = cluster
             .clock_offset(h, std::time::Duration::from_secs(1))
-            .ok_or_else(|| format!("host {h} did not answer the clock probe"))?;
+            .ok_or_else(|| RemoteError::ClockProbe(h.clone()))?;
         tracing::info!(
             host = h.as_str(),
             offset_ns = o.offset_ns,
@@ -214,14 +225,11 @@ impl Remote {
         scenario: &Scenario,
         variant: &str,
         pacing: HostPacing,
-    ) -> Result<RemoteRun, String> {
+    ) -> Result<RemoteRun, RemoteError> {
         self.cluster.announce(run_id)?;
         let req = RunRequest {
             run_id: run_id.to_string(),
-            secret: self
-                .cluster
-                .run_secret()
-                .ok_or("the run's secret was not made")?,
+            secret: self.cluster.run_secret().ok_or(RemoteError::NoSecret)?,
             prefix: prefix.to_string(),
             scenario_toml: scenario.to_toml_string(),
             variant: variant.to_string(),
@@ -348,7 +356,7 @@ impl RemoteRun {
     }
 
     /// Prepares the run on `host`; it is ended with the run from then on.
-    fn prepare_host(&self, host: &str, req: RunRequest) -> Result<(), String> {
+    fn prepare_host(&self, host: &str, req: RunRequest) -> Result<(), RemoteError> {
         match self
             .cluster
             .request(host, &Request::Prepare(req), &[], session::REPLY_TIMEOUT)?
@@ -357,14 +365,17 @@ impl RemoteRun {
                 self.hosts.borrow_mut().push(host.to_string());
                 Ok(())
             }
-            (Reply::Refused(why), _) => Err(format!("host {host} refused the run: {why}")),
+            (Reply::Refused(why), _) => Err(RemoteError::Refused {
+                host: host.to_string(),
+                why,
+            }),
         }
     }
 
     /// Once the orchestrator has created the run's services (no process started yet): prepares
     /// the co-located hosts, which check that those services are in their `/dev/shm` and their
     /// user's, and starts this machine's bridge if any host is not co-located.
-    pub fn attach(&self, prefix: &str, sizing: Sizing, run_dir: &Path) -> Result<(), String> {
+    pub fn attach(&self, prefix: &str, sizing: Sizing, run_dir: &Path) -> Result<(), RemoteError> {
         let placement = self.placement.borrow().clone();
         for h in &self.colocated {
             let req = RunRequest {
@@ -393,7 +404,7 @@ impl RemoteRun {
         prefix: &str,
         sizing: Sizing,
         placement: Placement,
-    ) -> Result<(), String> {
+    ) -> Result<(), RemoteError> {
         let b = Bridge::start(
             self.cluster.session(),
             BridgeConfig {
@@ -403,10 +414,7 @@ impl RemoteRun {
                 placement,
                 sizing,
                 create: false,
-                key: self
-                    .cluster
-                    .run_key()
-                    .ok_or("the run's secret was not made")?,
+                key: self.cluster.run_key().ok_or(RemoteError::NoSecret)?,
                 clock_offsets_ns: clock_offsets_ns(&self.offsets),
                 rt_priority: if self.request.realtime {
                     self.request.rt_priority
@@ -430,11 +438,11 @@ impl RemoteRun {
     /// Brings the run's timing files of every host into `<run_dir>/timing/` (the remote agents'
     /// `agent-<id>.json`, each bridge's link delays as `bridge-<host>.json`, this machine's
     /// included), once the processes have stopped.
-    pub fn collect_timing(&self, run_dir: &Path) -> Result<(), String> {
+    pub fn collect_timing(&self, run_dir: &Path) -> Result<(), RemoteError> {
         if let Some(b) = self.bridge.borrow().as_ref() {
             b.link_report()
                 .write(run_dir, &format!("bridge-{LAUNCHER}"))
-                .map_err(|e| e.to_string())?;
+                .map_err(RemoteError::TimingReport)?;
         }
         let dir = formation_config::node::timing::dir(run_dir);
         for h in self.hosts.borrow().iter() {
@@ -443,17 +451,26 @@ impl RemoteRun {
             };
             let (reply, bytes) = self.cluster.request(h, &req, &[], session::REPLY_TIMEOUT)?;
             if let Reply::Refused(why) = reply {
-                return Err(format!("host {h}: {why}"));
+                return Err(RemoteError::Host {
+                    host: h.clone(),
+                    why,
+                });
             }
-            let report: proto::HostReport = serde_json::from_slice(&bytes)
-                .map_err(|e| format!("host {h}: a malformed report: {e}"))?;
+            let report: proto::HostReport =
+                serde_json::from_slice(&bytes).map_err(|source| RemoteError::Report {
+                    host: h.clone(),
+                    source,
+                })?;
             for (name, text) in report.timing {
                 if !timing_file_name(&name) {
-                    return Err(format!("host {h}: refused a timing file named '{name}'"));
+                    return Err(RemoteError::TimingName {
+                        host: h.clone(),
+                        name,
+                    });
                 }
                 let p = dir.join(&name);
                 formation_config::node::files::write_atomic(&p, text.as_bytes())
-                    .map_err(|e| format!("{}: {e}", p.display()))?;
+                    .map_err(RemoteError::file(&p))?;
             }
         }
         Ok(())
@@ -508,12 +525,12 @@ impl RemoteRun {
         agent: usize,
         label: String,
         args: &ChildArgs,
-    ) -> Result<RoleProcess, String> {
+    ) -> Result<RoleProcess, RemoteError> {
         let host = self.placement.borrow().agent_hosts[agent].clone();
         let rejoin = match args.rejoin_at {
             Some(_) => {
                 let p = restart::rejoin_path(&args.run_dir, agent);
-                std::fs::read(&p).map_err(|e| format!("{}: {e}", p.display()))?
+                std::fs::read(&p).map_err(RemoteError::file(&p))?
             }
             None => Vec::new(),
         };
@@ -536,16 +553,14 @@ impl RemoteRun {
                     pid,
                 }),
             )),
-            (Reply::Ok { pid: None }, _) => {
-                Err(format!("host {host} started {label} without a pid"))
-            }
-            (Reply::Refused(why), _) => Err(format!("host {host} cannot start {label}: {why}")),
+            (Reply::Ok { pid: None }, _) => Err(RemoteError::NoPid { host, label }),
+            (Reply::Refused(why), _) => Err(RemoteError::Spawn { host, label, why }),
         }
     }
 
     /// Copies agent `agent`'s latest checkpoint from its host into `run_dir` (a warm takeover
     /// reads it here).
-    pub fn fetch_checkpoint(&self, agent: usize, run_dir: &Path) -> Result<(), String> {
+    pub fn fetch_checkpoint(&self, agent: usize, run_dir: &Path) -> Result<(), RemoteError> {
         let host = &self.placement.borrow().agent_hosts[agent].clone();
         let req = Request::Checkpoint {
             run_id: self.run_id.clone(),
@@ -556,7 +571,10 @@ impl RemoteRun {
             .request(host, &req, &[], session::REPLY_TIMEOUT)?
         {
             (Reply::Ok { .. }, bytes) => write_checkpoint(run_dir, agent, &bytes),
-            (Reply::Refused(why), _) => Err(format!("host {host}: {why}")),
+            (Reply::Refused(why), _) => Err(RemoteError::Host {
+                host: host.clone(),
+                why,
+            }),
         }
     }
 }
@@ -591,7 +609,7 @@ impl RemoteRun {
     /// remaining host's (`Request::Replan`), and the lost host leaves the run. Returns the agents
     /// moved (0-based), or `None` if `host` was handled already. `Err`: a remaining host could
     /// not re-plan, and the run must stop.
-    pub fn take_over_host(&self, host: &str) -> Result<Option<Vec<usize>>, String> {
+    pub fn take_over_host(&self, host: &str) -> Result<Option<Vec<usize>>, RemoteError> {
         if !self.hosts.borrow().iter().any(|h| h == host) {
             return Ok(None);
         }
@@ -617,9 +635,11 @@ impl RemoteRun {
             match answer? {
                 (Reply::Ok { .. }, _) => {}
                 (Reply::Refused(why), _) => {
-                    return Err(format!(
-                        "host {h} cannot re-plan after {host} was lost: {why}"
-                    ))
+                    return Err(RemoteError::Replan {
+                        host: h.clone(),
+                        lost: host.to_string(),
+                        why,
+                    })
                 }
             }
         }
@@ -644,7 +664,7 @@ impl RemoteRun {
         run_dir: &Path,
         down_from: u64,
         oldest: u64,
-    ) -> Result<Option<u64>, String> {
+    ) -> Result<Option<u64>, RemoteError> {
         // Once: a later restart of the moved agent reads the checkpoints it writes here.
         if self.moved.borrow_mut().remove(&agent).is_none() {
             return Ok(None);
@@ -659,13 +679,12 @@ impl RemoteRun {
 
 /// Puts a checkpoint that came from a host where agent `agent`'s successor reads it: whole, owner
 /// only, never through a symbolic link (`files::write_atomic`).
-fn write_checkpoint(run_dir: &Path, agent: usize, bytes: &[u8]) -> Result<(), String> {
+fn write_checkpoint(run_dir: &Path, agent: usize, bytes: &[u8]) -> Result<(), RemoteError> {
     let p = restart::checkpoint_path(run_dir, agent);
     if let Some(d) = p.parent() {
-        std::fs::create_dir_all(d).map_err(|e| format!("{}: {e}", d.display()))?;
+        std::fs::create_dir_all(d).map_err(RemoteError::file(d))?;
     }
-    formation_config::node::files::write_atomic(&p, bytes)
-        .map_err(|e| format!("{}: {e}", p.display()))
+    formation_config::node::files::write_atomic(&p, bytes).map_err(RemoteError::file(&p))
 }
 
 /// Longest wait for a daemon to say whether an agent is stopped: asked only once a run has made no
@@ -800,18 +819,23 @@ mod tests {
         let h = vec!["b".to_string()];
         assert!(placement(5, &h, &["6@b".into()])
             .unwrap_err()
+            .to_string()
             .contains("agent 6 does not exist"));
         assert!(placement(5, &h, &["4@c".into()])
             .unwrap_err()
+            .to_string()
             .contains("not in --hosts"));
         assert!(placement(5, &h, &["4@b".into(), "4@b".into()])
             .unwrap_err()
+            .to_string()
             .contains("placed twice"));
         assert!(placement(5, &h, &["x@b".into()])
             .unwrap_err()
+            .to_string()
             .contains("not an agent id"));
         assert!(placement(5, &h, &["4b".into()])
             .unwrap_err()
+            .to_string()
             .contains("IDS@HOST"));
         assert!(placement(5, &["local".into()], &[]).is_err());
         assert!(placement(5, &["a/b".into()], &[]).is_err());

@@ -1,6 +1,7 @@
 //! `formation run` built without the `multihost` feature: no placement options, every process on
 //! this machine.
 
+pub use super::remote_error::RemoteError;
 use super::spawn::RoleProcess;
 use formation_config::node::args::ChildArgs;
 use formation_config::protocol::services::Sizing;
@@ -29,7 +30,7 @@ pub enum Remote {}
 pub enum RemoteRun {}
 
 /// Every run is local.
-pub fn connect(_: &PlaceArgs, _: &Scenario) -> Result<Option<Remote>, String> {
+pub fn connect(_: &PlaceArgs, _: &Scenario) -> Result<Option<Remote>, RemoteError> {
     Ok(None)
 }
 
@@ -42,14 +43,14 @@ impl Remote {
         _: &Scenario,
         _: &str,
         _: super::HostPacing,
-    ) -> Result<RemoteRun, String> {
+    ) -> Result<RemoteRun, RemoteError> {
         match self {}
     }
 }
 
 impl RemoteRun {
     /// Unreachable.
-    pub fn start_bridge(&self, _: &str, _: Sizing) -> Result<(), String> {
+    pub fn attach(&self, _: &str, _: Sizing, _: &Path) -> Result<(), RemoteError> {
         match *self {}
     }
     /// Unreachable.
@@ -61,11 +62,11 @@ impl RemoteRun {
         match *self {}
     }
     /// Unreachable.
-    pub fn spawn(&self, _: usize, _: String, _: &ChildArgs) -> Result<RoleProcess, String> {
+    pub fn spawn(&self, _: usize, _: String, _: &ChildArgs) -> Result<RoleProcess, RemoteError> {
         match *self {}
     }
     /// Unreachable.
-    pub fn collect_timing(&self, _: &Path) -> Result<(), String> {
+    pub fn collect_timing(&self, _: &Path) -> Result<(), RemoteError> {
         match *self {}
     }
     /// Unreachable.
@@ -73,7 +74,7 @@ impl RemoteRun {
         match *self {}
     }
     /// Unreachable.
-    pub fn fetch_checkpoint(&self, _: usize, _: &Path) -> Result<(), String> {
+    pub fn fetch_checkpoint(&self, _: usize, _: &Path) -> Result<(), RemoteError> {
         match *self {}
     }
     /// Unreachable.
@@ -85,7 +86,7 @@ impl RemoteRun {
         match *self {}
     }
     /// Unreachable.
-    pub fn take_over_host(&self, _: &str) -> Result<Option<Vec<usize>>, String> {
+    pub fn take_over_host(&self, _: &str) -> Result<Option<Vec<usize>>, RemoteError> {
         match *self {}
     }
     /// Unreachable.
@@ -95,7 +96,7 @@ impl RemoteRun {
         _: &Path,
         _: u64,
         _: u64,
-    ) -> Result<Option<u64>, String> {
+    ) -> Result<Option<u64>, RemoteError> {
         match *self {}
     }
     /// Unreachable.

@@ -22,14 +22,19 @@ pub enum Requested {
     Priority(u32),
 }
 
+/// `--rt-priority` is neither `auto` nor a priority 0..=99 (the text given).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}`: expected `auto` or a priority 0..=99")]
+pub struct PriorityError(String);
+
 /// Parses `--rt-priority`: `auto` or a whole number 0..=99.
-pub fn parse(text: &str) -> Result<Requested, String> {
+pub fn parse(text: &str) -> Result<Requested, PriorityError> {
     if text == "auto" {
         return Ok(Requested::Auto);
     }
     match text.parse::<u32>() {
         Ok(p) if p <= 99 => Ok(Requested::Priority(p)),
-        _ => Err(format!("`{text}`: expected `auto` or a priority 0..=99")),
+        _ => Err(PriorityError(text.to_string())),
     }
 }
 

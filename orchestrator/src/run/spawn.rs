@@ -56,8 +56,42 @@ fn start(mut cmd: Command) -> std::io::Result<Child> {
 
 /// The executable the role processes are started from: the running `formation` itself, whose hidden
 /// subcommand `formation node <role> ...` runs a role (one install, no second binary to find).
-pub fn self_exe() -> Result<PathBuf, String> {
-    std::env::current_exe().map_err(|e| format!("cannot locate the formation executable: {e}"))
+pub fn self_exe() -> Result<PathBuf, SpawnError> {
+    std::env::current_exe().map_err(SpawnError::Exe)
+}
+
+/// Why a role process could not be started; each names the process (its label) or file.
+#[derive(Debug, thiserror::Error)]
+pub enum SpawnError {
+    /// The running executable cannot be located.
+    #[error("cannot locate the formation executable: {0}")]
+    Exe(std::io::Error),
+    /// The process's CPU set cannot be built.
+    #[error("cannot pin {label}: {source}")]
+    Pin {
+        /// The process, e.g. `agent 2 (--agent 1)`.
+        label: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The process cannot be started.
+    #[error("cannot start {label} ({}): {source}", exe.display())]
+    Start {
+        /// The process, e.g. `agent 2 (--agent 1)`.
+        label: String,
+        /// The executable.
+        exe: PathBuf,
+        /// The system's error.
+        source: std::io::Error,
+    },
+}
+
+// The supervision's takeover and the remote layer still report their errors as text: a start
+// that fails there is said with this message.
+impl From<SpawnError> for String {
+    fn from(e: SpawnError) -> String {
+        e.to_string()
+    }
 }
 
 /// A role process started on another host by its daemon (`formation host`, crate
@@ -190,7 +224,7 @@ pub fn spawn(
     label: String,
     args: &ChildArgs,
     cpu: Option<usize>,
-) -> Result<RoleProcess, String> {
+) -> Result<RoleProcess, SpawnError> {
     let mut cmd = Command::new(exe);
     cmd.arg0(role.process_name(args.agent))
         .args(["node", role.name()])
@@ -199,7 +233,10 @@ pub fn spawn(
     let pin = cpu
         .map(|c| CpuSet::of(&[c]))
         .transpose()
-        .map_err(|e| format!("cannot pin {label}: {e}"))?;
+        .map_err(|source| SpawnError::Pin {
+            label: label.clone(),
+            source,
+        })?;
     // SAFETY: only async-signal-safe calls (sched_setaffinity, prctl, signal) between fork and
     // exec; the CPU set was built before the fork.
     unsafe {
@@ -211,7 +248,11 @@ pub fn spawn(
             Ok(())
         });
     }
-    let child = start(cmd).map_err(|e| format!("cannot start {label} ({}): {e}", exe.display()))?;
+    let child = start(cmd).map_err(|source| SpawnError::Start {
+        label: label.clone(),
+        exe: exe.to_path_buf(),
+        source,
+    })?;
     Ok(RoleProcess {
         label,
         proc: Proc::Local(child, None),

@@ -94,6 +94,7 @@ impl Takeover {
     /// Opens the ports; `args` is an agent's command line (its index and rejoin step are set per
     /// process), `pins` the run's placement (where a successor starts).
     #[allow(clippy::too_many_arguments)] // the run's parts, each its own kind
+                                         // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn open(
         node: &RunNode,
         scenario: &Scenario,
@@ -200,6 +201,7 @@ impl Takeover {
     }
 
     /// Publishes a runtime event to every process (a live injection, an announcement).
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn publish(&mut self, e: RuntimeEvent) -> Result<(), String> {
         send(&self.events_out, e)?;
         self.published.push(e);
@@ -211,6 +213,7 @@ impl Takeover {
 
     /// After a batch of records (`recorded` steps): reads the plant's take-downs and the hellos of
     /// new processes, and carries out what is due. `Err`: the run must stop (named on stderr).
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn poll(
         &mut self,
         recorded: u64,
@@ -253,6 +256,7 @@ impl Takeover {
     /// A child exited or died (`idx` among the children, `line` naming it): `Ok` when the run goes
     /// on (the timeline killed it, or it is being replaced), `Err` with the line to print.
     #[allow(clippy::too_many_arguments)] // what was seen, and the run's parts
+                                         // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn on_death(
         &mut self,
         idx: usize,
@@ -328,6 +332,7 @@ impl Takeover {
     /// agents move here first (once per host), whatever the supervisor decides for this one (it
     /// may be parked for a timeline crash, whose successor starts here then). `Err`: the move
     /// failed and the run must stop.
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     fn lost_host(
         &mut self,
         idx: usize,
@@ -368,6 +373,7 @@ impl Takeover {
     /// (`line` naming it). An agent lost with its host is started afresh here under on-failure
     /// (from the scenario's initial state: it has computed nothing yet); `Ok(Some(i))`: agent i
     /// was, and its hello is awaited again. `Err` with the line to print: the run must stop.
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn on_death_at_start(
         &mut self,
         idx: usize,
@@ -440,6 +446,7 @@ impl Takeover {
         self.supervisor.expects_gone(i)
     }
 
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     fn carry(
         &mut self,
         a: Action,
@@ -548,6 +555,7 @@ impl Takeover {
         }
     }
 
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     fn respawn(
         &mut self,
         plan: Plan,

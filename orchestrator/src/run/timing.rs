@@ -100,6 +100,22 @@ pub fn over_tau_m(delays: &Value) -> Vec<(u64, u64, f64)> {
         .unwrap_or_default()
 }
 
+/// Why a realtime run's timing statistics cannot be collected.
+#[derive(Debug, thiserror::Error)]
+pub enum TimingError {
+    /// A process's timing report cannot be read (its file named).
+    #[error("{0}")]
+    Report(#[from] formation_config::node::error::NodeError),
+    /// The timing folder cannot be listed.
+    #[error("{}: {source}", dir.display())]
+    List {
+        /// The folder.
+        dir: std::path::PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+}
+
 /// Reads `<run dir>/timing/{plant,agent-i,bridge-*}.json` and builds the `timing` object;
 /// `tau_m_s` is the paper's bound tau_M (`simulation.max_delay_s`).
 pub fn collect(
@@ -109,7 +125,7 @@ pub fn collect(
     spin_us: u32,
     rt_priority: u32,
     tau_m_s: f64,
-) -> Result<Value, String> {
+) -> Result<Value, TimingError> {
     let dir = timing::dir(run_dir);
     let plant = TimingReport::read(&dir.join("plant.json"))?;
     let agents: Vec<TimingReport> = (0..n)
@@ -154,7 +170,10 @@ pub fn collect(
     let misses = count(&plant, "deadline_misses");
     let timed = count(&plant, "timed_steps");
     let bridges: Vec<TimingReport> = std::fs::read_dir(&dir)
-        .map_err(|e| format!("{}: {e}", dir.display()))?
+        .map_err(|source| TimingError::List {
+            dir: dir.clone(),
+            source,
+        })?
         .flatten()
         .filter(|e| e.file_name().to_string_lossy().starts_with("bridge-"))
         .map(|e| TimingReport::read(&e.path()))

@@ -3,24 +3,17 @@
 //! It announces itself with a liveliness token (`formation/host/<name>`) and answers
 //! `formation/host/<name>/info` ([`HostInfo`]) and `formation/host/<name>/req` ([`Request`]).
 //! For a run it creates a private run folder (mode 0700) with the validated scenario, every
-//! iceoryx2 service of the run and the bridge ([`crate::bridge`]), then starts the agent processes
+//! iceoryx2 service of the run and the bridge ([`formation_net::bridge`]), then starts the agent processes
 //! the orchestrator asks for — only `formation node agent ...` from its own executable — and
 //! reports each one's exit. A daemon that shares the orchestrator's `/dev/shm` as its user
-//! (co-located, [`crate::colocate`]) creates no service and runs no bridge: it checks that the
+//! (co-located, [`formation_net::colocate`]) creates no service and runs no bridge: it checks that the
 //! run's services are in its `/dev/shm` and its user's, and its agents open them and join the
 //! orchestrator's membership of the run. A run ends when its orchestrator says so, or when the orchestrator's
 //! liveliness token disappears (it died, or its link was lost): the processes are stopped, the
 //! run's iceoryx2 files and its folder removed. The daemon is a single-threaded state machine:
 //! one loop serves requests, reaps children and watches the orchestrators.
 
-use crate::auth::{Purpose, Replay, RunKey};
-use crate::bridge::{Bridge, BridgeConfig};
-use crate::colocate::{self, Facts};
-use crate::identity::{self, Identity};
-use crate::logs::LogLimit;
-use crate::plan::Placement;
-use crate::proto::{self, ExitReport, HostInfo, Reply, Request, RunRequest};
-use crate::session;
+use crate::refusal::{FolderError, Refusal, ServeError};
 use formation_config::node::args::ChildArgs;
 use formation_config::node::ipc;
 use formation_config::node::members::Membership;
@@ -29,14 +22,21 @@ use formation_config::node::restart;
 use formation_config::protocol::messages::Role;
 use formation_config::protocol::services::{self, Sizing};
 use formation_config::{Scenario, Variant};
+use formation_net::auth::{Purpose, Replay, RunKey};
+use formation_net::bridge::{Bridge, BridgeConfig};
+use formation_net::colocate::{self, Facts};
+use formation_net::daemon_link::{DaemonLink, Orchestrator, Outbox};
+use formation_net::identity::{self, Identity};
+use formation_net::logs::LogLimit;
+use formation_net::plan::Placement;
+use formation_net::proto::{self, ExitReport, HostInfo, Reply, Request, RunRequest};
+use formation_net::session;
 use std::collections::HashMap;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use zenoh::sample::SampleKind;
-use zenoh::Wait;
 
 /// How long a prepared run waits for its orchestrator's liveliness token before it is dropped.
 pub const ORCHESTRATOR_WAIT: Duration = Duration::from_secs(10);
@@ -76,7 +76,7 @@ struct HostRun {
     scenario_hash: u64,
     /// The checkpoint file of each agent last forwarded (see [`Daemon::forward_checkpoints`]).
     forwarded: HashMap<usize, FileStamp>,
-    /// The run's keys ([`crate::auth`]).
+    /// The run's keys ([`formation_net::auth`]).
     key: RunKey,
     /// Sequence numbers of the requests about the run accepted so far.
     replay: Replay,
@@ -135,65 +135,37 @@ pub fn default_root(name: &str) -> PathBuf {
 }
 
 /// Creates `dir` owner-only (mode 0700), refusing a symbolic link or another user's folder.
-fn private_dir(dir: &Path) -> Result<(), String> {
+fn private_dir(dir: &Path) -> Result<(), FolderError> {
     use std::os::unix::fs::{DirBuilderExt, MetadataExt, PermissionsExt};
     let _ = std::fs::DirBuilder::new()
         .recursive(true)
         .mode(0o700)
         .create(dir);
-    let m = std::fs::symlink_metadata(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let io = |source| FolderError::Io {
+        dir: dir.to_path_buf(),
+        source,
+    };
+    let m = std::fs::symlink_metadata(dir).map_err(io)?;
     // SAFETY: getuid has no preconditions.
     if !m.is_dir() || m.uid() != unsafe { libc::getuid() } {
-        return Err(format!(
-            "{}: not a folder of this user (refusing a symbolic link or another user's folder)",
-            dir.display()
-        ));
+        return Err(FolderError::NotOwn(dir.to_path_buf()));
     }
-    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700))
-        .map_err(|e| format!("{}: {e}", dir.display()))
+    std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)).map_err(io)
 }
 
 /// Runs the daemon until `stop` is set (SIGINT/SIGTERM). `Err`: it could not start.
-pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
-    if !proto::valid_name(&o.name) || o.name == crate::cluster::LAUNCHER {
-        return Err(format!(
-            "--name '{}': use 1..=32 characters of [A-Za-z0-9_-] (and not '{}')",
-            o.name,
-            crate::cluster::LAUNCHER
-        ));
+pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), ServeError> {
+    if !proto::valid_name(&o.name) || o.name == formation_net::cluster::LAUNCHER {
+        return Err(ServeError::Name {
+            name: o.name.clone(),
+            launcher: formation_net::cluster::LAUNCHER,
+        });
     }
     private_dir(&o.root)?;
     sweep_stale(&o.root);
-    let s = o.session.open().map_err(|e| e.to_string())?;
-    let _token = s
-        .liveliness()
-        .declare_token(proto::host_token(&o.name))
-        .wait()
-        .map_err(|e| format!("cannot declare the liveliness token: {e}"))?;
-    let queries = s
-        .declare_queryable(format!("formation/host/{}/*", o.name))
-        .with(zenoh::handlers::FifoChannel::new(64))
-        .wait()
-        .map_err(|e| format!("cannot declare the queryable: {e}"))?;
-    // The clock probe is answered at once, in Zenoh's thread: an answer queued behind the request
-    // loop would bias the offset estimate (crate::clock).
-    let _clock = s
-        .declare_queryable(proto::clock_key(&o.name))
-        .callback(|q| {
-            let now = formation_config::node::clock::now_ns();
-            let _ = q
-                .reply(q.key_expr().clone(), now.to_le_bytes().to_vec())
-                .wait();
-        })
-        .wait()
-        .map_err(|e| format!("cannot declare the clock queryable: {e}"))?;
-    let orchestrators = s
-        .liveliness()
-        .declare_subscriber("formation/run/*/orchestrator")
-        .history(true)
-        .with(zenoh::handlers::FifoChannel::new(256))
-        .wait()
-        .map_err(|e| format!("cannot watch the orchestrators: {e}"))?;
+    // The token, the requests, the clock probe (answered at once, in Zenoh's thread) and the
+    // orchestrators' tokens (formation_net::daemon_link).
+    let link = DaemonLink::open(&o.session, &o.name)?;
     let me = identity::local();
     eprintln!(
         "formation host: {} listening on {} (pid {}, build {}, protocol {}, {} CPUs); runs in {}",
@@ -207,7 +179,7 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
     );
     let mut d = Daemon {
         o,
-        s: s.clone(),
+        out: link.outbox(),
         me,
         runs: HashMap::new(),
         log: LogLimit::default(),
@@ -216,30 +188,21 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), String> {
     // Runs whose orchestrator's token is alive (its Put may come before its run is prepared).
     let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
     while !stop.load(Ordering::SeqCst) {
-        if let Ok(Some(q)) = queries.recv_timeout(Duration::from_millis(20)) {
-            let bytes = q
-                .payload()
-                .map(|p| p.to_bytes().into_owned())
-                .unwrap_or_default();
-            let answer = if q.key_expr().as_str().ends_with("/info") {
+        if let Some(q) = link.next_query(Duration::from_millis(20)) {
+            let bytes = q.payload();
+            let answer = if q.asks_info() {
                 serde_json::to_vec(&d.info()).unwrap()
             } else {
                 d.request(&bytes)
             };
-            let _ = q.reply(q.key_expr().clone(), answer).wait();
+            q.reply(answer);
         }
-        while let Ok(Some(sample)) = orchestrators.try_recv() {
-            let key = sample.key_expr().as_str().to_string();
-            let run = key
-                .strip_prefix("formation/run/")
-                .and_then(|r| r.strip_suffix("/orchestrator"))
-                .unwrap_or("")
-                .to_string();
-            match sample.kind() {
-                SampleKind::Put => {
+        while let Some(change) = link.orchestrator() {
+            match change {
+                Orchestrator::Alive(run) => {
                     alive.insert(run);
                 }
-                SampleKind::Delete => {
+                Orchestrator::Gone(run) => {
                     alive.remove(&run);
                     if d.runs.contains_key(&run) {
                         eprintln!("formation host: run {run}: its orchestrator is gone; ending it");
@@ -298,13 +261,19 @@ fn cpus() -> usize {
 
 struct Daemon {
     o: DaemonOptions,
-    s: zenoh::Session,
+    /// Reports and bridges go out here (formation_net::daemon_link).
+    out: Outbox,
     me: Identity,
     runs: HashMap<String, HostRun>,
     /// Refusals are logged at most once a second per reason.
     log: LogLimit,
-    /// Its shared memory place, user and iceoryx2 root ([`crate::colocate`]).
+    /// Its shared memory place, user and iceoryx2 root ([`formation_net::colocate`]).
     facts: Facts,
+}
+
+/// A request that is no frame of a request: refused as `malformed`, saying why.
+fn malformed(e: proto::FrameError) -> (&'static str, String) {
+    ("malformed", e.to_string())
 }
 
 fn refused(why: String) -> Vec<u8> {
@@ -333,7 +302,7 @@ impl Daemon {
 
     /// Serves one request; a refusal changes nothing. A request about a run (all but `Prepare`)
     /// must carry proof of the run's secret for this host with a sequence number not seen before
-    /// ([`crate::auth`]): without it nothing is done. Replies about a run carry proof too.
+    /// ([`formation_net::auth`]): without it nothing is done. Replies about a run carry proof too.
     fn request(&mut self, bytes: &[u8]) -> Vec<u8> {
         match self.authenticated(bytes) {
             Ok((req, rest, seq)) => {
@@ -355,7 +324,7 @@ impl Daemon {
                     self.log.eprint("requests", "refused", || {
                         format!("formation host: refused: {e}")
                     });
-                    refused(e)
+                    refused(e.to_string())
                 });
                 if let Some(k) = key {
                     k.seal(Purpose::Reply, &self.o.name, seq, &mut reply);
@@ -383,9 +352,9 @@ impl Daemon {
                 format!("a request of {} bytes (at most {MAX_REQUEST})", bytes.len()),
             ));
         }
-        let (req, _): (Request, &[u8]) = proto::unframe(bytes).map_err(|e| ("malformed", e))?;
+        let (req, _): (Request, &[u8]) = proto::decode_frame(bytes).map_err(malformed)?;
         let Some(run_id) = req.run_id().map(str::to_string) else {
-            let (req, rest) = proto::unframe::<Request>(bytes).map_err(|e| ("malformed", e))?;
+            let (req, rest) = proto::decode_frame::<Request>(bytes).map_err(malformed)?;
             return Ok((req, rest.to_vec(), 0));
         };
         let me = self.o.name.clone();
@@ -405,7 +374,7 @@ impl Daemon {
                 format!("a request about run {run_id} refused: {e}"),
             )
         })?;
-        let (req, rest) = proto::unframe::<Request>(body).map_err(|e| ("malformed", e))?;
+        let (req, rest) = proto::decode_frame::<Request>(body).map_err(malformed)?;
         if req.run_id() != Some(run_id.as_str()) {
             return Err(("malformed", "a request changed its run".into()));
         }
@@ -413,7 +382,7 @@ impl Daemon {
     }
 
     /// Does what an accepted request asks.
-    fn dispatch(&mut self, req: Request, rest: &[u8]) -> Result<Vec<u8>, String> {
+    fn dispatch(&mut self, req: Request, rest: &[u8]) -> Result<Vec<u8>, Refusal> {
         match req {
             Request::Prepare(r) => self.prepare(r).map(|_| ok(None)),
             Request::Spawn {
@@ -445,67 +414,75 @@ impl Daemon {
         }
     }
 
-    fn run(&mut self, run_id: &str) -> Result<&mut HostRun, String> {
-        self.runs
-            .get_mut(run_id)
-            .ok_or_else(|| format!("no run {run_id} on host {}", self.o.name))
+    /// Run `run_id`, whose agent `agent` (0-based) is placed on this host.
+    fn placed_here(&mut self, run_id: &str, agent: usize) -> Result<&mut HostRun, Refusal> {
+        let me = self.o.name.clone();
+        let r = self.run(run_id)?;
+        if r.req.agent_hosts.get(agent) != Some(&me) {
+            return Err(Refusal::NotPlacedHere {
+                agent: agent.saturating_add(1),
+                run: run_id.to_string(),
+                host: me,
+            });
+        }
+        Ok(r)
     }
 
-    fn prepare(&mut self, r: RunRequest) -> Result<(), String> {
+    fn run(&mut self, run_id: &str) -> Result<&mut HostRun, Refusal> {
+        self.runs.get_mut(run_id).ok_or_else(|| Refusal::NoRun {
+            run: run_id.to_string(),
+            host: self.o.name.clone(),
+        })
+    }
+
+    fn prepare(&mut self, r: RunRequest) -> Result<(), Refusal> {
         let diff = identity::differences(&r.identity, &self.me);
         if !diff.is_empty() {
-            return Err(format!(
-                "the orchestrator and host {} differ: {}",
-                self.o.name,
-                diff.join("; ")
-            ));
+            return Err(Refusal::Differ {
+                host: self.o.name.clone(),
+                differences: diff,
+            });
         }
         if r.run_id.is_empty()
             || r.run_id.len() > 16
             || !r.run_id.bytes().all(|b| b.is_ascii_hexdigit())
         {
-            return Err(format!(
-                "run id '{}': expected 1..=16 hexadecimal digits",
-                r.run_id
-            ));
+            return Err(Refusal::RunId(r.run_id.clone()));
         }
         if r.prefix != services::run_prefix(&r.run_id) {
-            return Err(format!(
-                "prefix '{}' is not the run's ({})",
-                r.prefix,
-                services::run_prefix(&r.run_id)
-            ));
+            return Err(Refusal::Prefix {
+                prefix: r.prefix.clone(),
+                expected: services::run_prefix(&r.run_id),
+            });
         }
         if self.runs.contains_key(&r.run_id) {
-            return Err(format!("run {} is already prepared here", r.run_id));
+            return Err(Refusal::AlreadyPrepared(r.run_id.clone()));
         }
-        let scenario =
-            Scenario::from_toml_str(&r.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
-        formation_config::scenario::validate::validate(&scenario)
-            .map_err(|e| format!("scenario: {e}"))?;
+        let scenario = Scenario::from_toml_str(&r.scenario_toml)?;
+        formation_config::scenario::validate::validate(&scenario)?;
         let n = scenario.n_agents();
         if n > formation_config::MAX_AGENTS {
-            return Err(format!(
-                "{n} agents: at most {} are supported",
-                formation_config::MAX_AGENTS
-            ));
+            return Err(Refusal::TooManyAgents {
+                n,
+                max: formation_config::MAX_AGENTS,
+            });
         }
         let variant =
-            Variant::parse(&r.variant).ok_or_else(|| format!("unknown variant '{}'", r.variant))?;
+            Variant::parse(&r.variant).ok_or_else(|| Refusal::Variant(r.variant.clone()))?;
         if r.agent_hosts.len() != n {
-            return Err(format!(
-                "{} agent hosts for {n} agents",
-                r.agent_hosts.len()
-            ));
+            return Err(Refusal::AgentHosts {
+                hosts: r.agent_hosts.len(),
+                n,
+            });
         }
         if !r.agent_hosts.iter().all(|h| proto::valid_name(h)) || !proto::valid_name(&r.launcher) {
-            return Err("a host name of the placement is not key-safe".into());
+            return Err(Refusal::NotKeySafe);
         }
         if !r.agent_hosts.contains(&self.o.name) {
-            return Err(format!("no agent of the run is placed on {}", self.o.name));
+            return Err(Refusal::NothingHere(self.o.name.clone()));
         }
         if r.rt_priority > 99 {
-            return Err(format!("rt_priority {}: at most 99", r.rt_priority));
+            return Err(Refusal::RtPriority(r.rt_priority));
         }
         let mut r = r;
         if r.rt_priority > self.o.max_rt_priority {
@@ -516,11 +493,10 @@ impl Daemon {
             r.rt_priority = self.o.max_rt_priority;
         }
         if r.observers > services::MAX_OBSERVERS + 1 {
-            return Err(format!(
-                "{} observers: at most {}",
-                r.observers,
-                services::MAX_OBSERVERS + 1
-            ));
+            return Err(Refusal::Observers {
+                given: r.observers,
+                max: services::MAX_OBSERVERS + 1,
+            });
         }
         if let Some(c) = &r.colocated {
             self.check_colocated(&r, c)?;
@@ -529,14 +505,14 @@ impl Daemon {
         // The daemon's own log names the folder; the refusal does not.
         private_dir(&dir).map_err(|e| {
             eprintln!("formation host: run {}: {e}", r.run_id);
-            "cannot create the run's folder on this host".to_string()
+            Refusal::RunFolder
         })?;
-        let fail = |e: String, dir: &Path| {
+        let fail = |e: Refusal, dir: &Path| {
             let _ = std::fs::remove_dir_all(dir);
             e
         };
         std::fs::write(dir.join("scenario.toml"), &r.scenario_toml)
-            .map_err(|e| fail(format!("cannot write the scenario: {e}"), &dir))?;
+            .map_err(|e| fail(Refusal::WriteScenario(e), &dir))?;
         if r.colocated.is_some() {
             eprintln!(
                 "formation host: run {} prepared (co-located: the orchestrator's services in this /dev/shm, no bridge): agents {:?} here",
@@ -547,8 +523,8 @@ impl Daemon {
             return Ok(());
         }
         let membership =
-            Membership::create(&dir, &r.prefix).map_err(|e| fail(e.to_string(), &dir))?;
-        let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.to_string(), &dir))?;
+            Membership::create(&dir, &r.prefix).map_err(|e| fail(Refusal::Membership(e), &dir))?;
+        let node = ipc::node(&r.prefix, "fm-host").map_err(|e| fail(e.into(), &dir))?;
         let placement = Placement {
             agent_hosts: r.agent_hosts.clone(),
             launcher: r.launcher.clone(),
@@ -557,27 +533,24 @@ impl Daemon {
                 scenario.graph.edges.iter().map(|e| (e.a, e.b)),
             ),
         };
-        let bridge = Bridge::start(
-            self.s.clone(),
-            BridgeConfig {
-                run_id: r.run_id.clone(),
-                prefix: r.prefix.clone(),
-                me: self.o.name.clone(),
-                placement,
-                sizing: Sizing::for_scenario(&scenario, r.realtime, r.observers),
-                create: true,
-                key: r.secret.keys(&r.run_id),
-                clock_offsets_ns: r.clock_offsets_ns.clone(),
-                rt_priority: if r.realtime { r.rt_priority } else { 0 },
-            },
-        );
+        let bridge = self.out.bridge(BridgeConfig {
+            run_id: r.run_id.clone(),
+            prefix: r.prefix.clone(),
+            me: self.o.name.clone(),
+            placement,
+            sizing: Sizing::for_scenario(&scenario, r.realtime, r.observers),
+            create: true,
+            key: r.secret.keys(&r.run_id),
+            clock_offsets_ns: r.clock_offsets_ns.clone(),
+            rt_priority: if r.realtime { r.rt_priority } else { 0 },
+        });
         let bridge = match bridge {
             Ok(b) => b,
             Err(e) => {
                 drop(node);
                 drop(membership);
                 let _ = ipc::remove_residue(&r.prefix);
-                return Err(fail(e, &dir));
+                return Err(fail(e.into(), &dir));
             }
         };
         eprintln!(
@@ -602,7 +575,7 @@ impl Daemon {
     /// iceoryx2 root before anything of it is made: the orchestrator's services must be here and
     /// this user's, its iceoryx2 root this daemon's, its membership lock a private file of this
     /// user. A flag alone makes nobody's services reachable.
-    fn check_colocated(&self, r: &RunRequest, c: &proto::Colocated) -> Result<(), String> {
+    fn check_colocated(&self, r: &RunRequest, c: &proto::Colocated) -> Result<(), Refusal> {
         let euid = colocate::euid();
         let mine = self.facts.iox2_root.clone().unwrap_or_default();
         if c.iox2_root != mine {
@@ -610,15 +583,14 @@ impl Daemon {
                 theirs: c.iox2_root.clone(),
                 mine,
             }
-            .to_string());
+            .into());
         }
-        let entries = colocate::shm_entries().map_err(|e| e.to_string())?;
-        let n = colocate::check_services(&entries, &r.prefix, euid).map_err(|e| e.to_string())?;
+        let entries = colocate::shm_entries()?;
+        let n = colocate::check_services(&entries, &r.prefix, euid)?;
         colocate::check_members(&c.members, euid).map_err(|e| {
             // The daemon's own log names the path; the refusal does not.
             eprintln!("formation host: run {}: {e}", r.run_id);
-            "a co-located run whose membership lock is not a private file of this host's user"
-                .to_string()
+            Refusal::Members
         })?;
         eprintln!(
             "formation host: run {}: co-located: {n} shared memory files of {} here, uid {euid}",
@@ -663,35 +635,28 @@ impl Daemon {
         agent: usize,
         rejoin_at: Option<u64>,
         rejoin: &[u8],
-    ) -> Result<u32, String> {
+    ) -> Result<u32, Refusal> {
         let exe = self.o.exe.clone();
-        let me = self.o.name.clone();
-        let r = self.run(run_id)?;
-        if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(format!(
-                "agent {} of run {run_id} is not placed on {me}",
-                agent.saturating_add(1)
-            ));
-        }
+        let r = self.placed_here(run_id, agent)?;
         if r.children.contains_key(&agent) {
-            return Err(format!(
-                "agent {} of run {run_id} is already running here",
-                agent + 1
-            ));
+            return Err(Refusal::Running {
+                agent: agent + 1,
+                run: run_id.to_string(),
+            });
         }
         if let Some(at) = rejoin_at {
             // Verified like a checkpoint before it is written or any process reads it.
             let file =
                 restart::decode_rejoin(rejoin, agent, r.scenario_hash, at).map_err(|why| {
-                    format!("the rejoin file of agent {} is refused: {why}", agent + 1)
+                    Refusal::Rejoin {
+                        agent: agent + 1,
+                        why,
+                    }
                 })?;
             restart::write_rejoin(&restart::rejoin_path(&r.dir, agent), r.scenario_hash, &file)
-                .map_err(|e| {
-                    format!(
-                        "cannot write agent {}'s rejoin file: {}",
-                        agent + 1,
-                        e.kind()
-                    )
+                .map_err(|e| Refusal::WriteRejoin {
+                    agent: agent + 1,
+                    kind: e.kind(),
                 })?;
         }
         let args = ChildArgs {
@@ -718,9 +683,10 @@ impl Daemon {
                 Ok(())
             });
         }
-        let child = cmd
-            .spawn()
-            .map_err(|e| format!("cannot start agent {}: {e}", agent + 1))?;
+        let child = cmd.spawn().map_err(|source| Refusal::Start {
+            agent: agent + 1,
+            source,
+        })?;
         let pid = child.id();
         r.children.insert(agent, child);
         eprintln!(
@@ -730,7 +696,7 @@ impl Daemon {
         Ok(pid)
     }
 
-    fn kill(&mut self, run_id: &str, agent: usize) -> Result<(), String> {
+    fn kill(&mut self, run_id: &str, agent: usize) -> Result<(), Refusal> {
         // Idempotent: a run already ended has no process left to kill.
         let Some(r) = self.runs.get_mut(run_id) else {
             return Ok(());
@@ -745,28 +711,26 @@ impl Daemon {
         Ok(())
     }
 
-    fn signal(&mut self, run_id: &str, agent: usize, signal: i32) -> Result<(), String> {
+    fn signal(&mut self, run_id: &str, agent: usize, signal: i32) -> Result<(), Refusal> {
         if signal != libc::SIGSTOP && signal != libc::SIGCONT {
-            return Err(format!(
-                "signal {signal}: only SIGSTOP and SIGCONT are sent on request"
-            ));
+            return Err(Refusal::Signal(signal));
         }
         let r = self.run(run_id)?;
         let c = r
             .children
             .get(&agent)
-            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+            .ok_or(Refusal::NotRunning(agent + 1))?;
         // SAFETY: kill(2) on our own unreaped child.
         unsafe { libc::kill(c.id() as libc::pid_t, signal) };
         Ok(())
     }
 
-    fn stopped(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
+    fn stopped(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, Refusal> {
         let r = self.run(run_id)?;
         let c = r
             .children
             .get(&agent)
-            .ok_or_else(|| format!("agent {} is not running here", agent + 1))?;
+            .ok_or(Refusal::NotRunning(agent + 1))?;
         let stopped = formation_config::node::process::is_stopped(c.id());
         Ok(proto::frame(
             &Reply::Ok { pid: Some(c.id()) },
@@ -774,46 +738,42 @@ impl Daemon {
         ))
     }
 
-    fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, String> {
-        let me = self.o.name.clone();
-        let r = self.run(run_id)?;
-        if r.req.agent_hosts.get(agent) != Some(&me) {
-            return Err(format!(
-                "agent {} of run {run_id} is not placed on {me}",
-                agent.saturating_add(1)
-            ));
-        }
+    fn checkpoint(&mut self, run_id: &str, agent: usize) -> Result<Vec<u8>, Refusal> {
+        let r = self.placed_here(run_id, agent)?;
         let path = restart::checkpoint_path(&r.dir, agent);
-        let bytes = std::fs::read(&path)
-            .map_err(|e| format!("agent {}'s checkpoint: {}", agent + 1, e.kind()))?;
+        let bytes = std::fs::read(&path).map_err(|e| Refusal::Checkpoint {
+            agent: agent + 1,
+            kind: e.kind(),
+        })?;
         Ok(proto::frame(&Reply::Ok { pid: None }, &bytes))
     }
 
     /// A host of the run was lost and its agents moved: re-plans this host's bridge for the new
     /// placement. Only the agents of the lost host may move, and not onto this host (a moved
     /// agent goes to the launcher, `Placement::after_loss`); its own agents stay.
-    fn replan(&mut self, run_id: &str, agent_hosts: Vec<String>) -> Result<(), String> {
+    fn replan(&mut self, run_id: &str, agent_hosts: Vec<String>) -> Result<(), Refusal> {
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         if agent_hosts.len() != r.req.agent_hosts.len()
             || !agent_hosts.iter().all(|h| proto::valid_name(h))
         {
-            return Err(format!(
-                "re-plan of run {run_id}: {} agent hosts for {} agents, or a name not key-safe",
-                agent_hosts.len(),
-                r.req.agent_hosts.len()
-            ));
+            return Err(Refusal::ReplanShape {
+                run: run_id.to_string(),
+                hosts: agent_hosts.len(),
+                agents: r.req.agent_hosts.len(),
+            });
         }
         for (i, (was, now)) in r.req.agent_hosts.iter().zip(&agent_hosts).enumerate() {
             if was != now && (*was == me || *now == me) {
-                return Err(format!(
-                    "re-plan of run {run_id}: agent {} would move from {was} to {now}; agents move off a lost host to the launcher only",
-                    i + 1
-                ));
+                return Err(Refusal::ReplanMove {
+                    run: run_id.to_string(),
+                    agent: i + 1,
+                    was: was.clone(),
+                    now: now.clone(),
+                });
             }
         }
-        let scenario =
-            Scenario::from_toml_str(&r.req.scenario_toml).map_err(|e| format!("scenario: {e}"))?;
+        let scenario = Scenario::from_toml_str(&r.req.scenario_toml)?;
         let placement = Placement {
             agent_hosts: agent_hosts.clone(),
             launcher: r.req.launcher.clone(),
@@ -882,17 +842,13 @@ impl Daemon {
             let Some(msg) = self.sealed_report(&id, &key, proto::frame(&note, &bytes)) else {
                 continue;
             };
-            let _ = self
-                .s
-                .put(key, msg)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .wait();
+            self.out.put(key, msg);
         }
     }
 
     /// The run's timing files on this host (its agents', once they have stopped, and its bridge's
     /// link delays as `bridge-<host>.json`).
-    fn report(&mut self, run_id: &str) -> Result<Vec<u8>, String> {
+    fn report(&mut self, run_id: &str) -> Result<Vec<u8>, Refusal> {
         let me = self.o.name.clone();
         let r = self.run(run_id)?;
         // The agents write their files when they stop: give them the grace of an ending run.
@@ -900,18 +856,20 @@ impl Daemon {
         if let Some(b) = &r.bridge {
             b.link_report()
                 .write(&r.dir, &format!("bridge-{me}"))
-                .map_err(|e| e.to_string())?;
+                .map_err(Refusal::TimingReport)?;
         }
         let mut out = proto::HostReport::default();
         let dir = formation_config::node::timing::dir(&r.dir);
         for e in std::fs::read_dir(&dir)
-            .map_err(|e| format!("the run's timing folder: {}", e.kind()))?
+            .map_err(|e| Refusal::TimingFolder(e.kind()))?
             .flatten()
         {
             let name = e.file_name().to_string_lossy().into_owned();
             if name.ends_with(".json") {
-                let text = std::fs::read_to_string(e.path())
-                    .map_err(|x| format!("timing file {name}: {}", x.kind()))?;
+                let text = std::fs::read_to_string(e.path()).map_err(|x| Refusal::TimingFile {
+                    name: name.clone(),
+                    kind: x.kind(),
+                })?;
                 out.timing.insert(name, text);
             }
         }
@@ -954,15 +912,11 @@ impl Daemon {
             let Some(msg) = self.sealed_report(&id, &key, serde_json::to_vec(&rep).unwrap()) else {
                 continue;
             };
-            let _ = self
-                .s
-                .put(key, msg)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .wait();
+            self.out.put(key, msg);
         }
     }
 
-    /// `msg` with the proof of run `id`'s secret for key expression `key` (see [`crate::auth`]).
+    /// `msg` with the proof of run `id`'s secret for key expression `key` (see [`formation_net::auth`]).
     fn sealed_report(&mut self, id: &str, key: &str, mut msg: Vec<u8>) -> Option<Vec<u8>> {
         let r = self.runs.get_mut(id)?;
         r.reports += 1;

@@ -4,6 +4,11 @@
 //!
 //! Both runners feed it the same messages, so the files of an in-process run and of a lockstep run
 //! over iceoryx2 are byte-identical when the trajectories are.
+//!
+//! The crate `formation-record` depends on the scenario model and the wire messages
+//! (`formation-config`), not on the runtime that feeds it; the runtime re-exports it as
+//! `formation_runtime::record`. [`rng`] is the seeded generator of coverage samples, generated
+//! graphs and sweeps.
 
 pub mod coverage;
 pub mod csv;
@@ -14,6 +19,7 @@ pub mod mcap;
 mod mcap_scene;
 pub mod metrics;
 pub mod recovery;
+pub mod rng;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod separation;

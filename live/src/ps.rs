@@ -1,9 +1,9 @@
 //! `formation ps [--json]`: the running runs and their processes.
 
-use super::procstat::{self, ProcStat};
-use super::registry::{self, ProcessEntry, RunRecord, LOCAL_HOST};
+use crate::error::LiveError;
+use formation_runtime::live::procstat::{self, ProcStat};
+use formation_runtime::live::registry::{self, ProcessEntry, RunRecord, LOCAL_HOST};
 use serde_json::{json, Value};
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 /// Arguments of `formation ps`.
@@ -89,15 +89,9 @@ fn processes_json(run: &RunRecord, before: &[Option<ProcStat>], window_s: f64) -
 }
 
 /// Entry point of `formation ps`.
-pub fn main(args: PsArgs) -> ExitCode {
-    let runs = match registry::list() {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(crate::cli::EXIT_INVALID);
-        }
-    };
-    super::reap_dead_prefixes(&runs);
+pub fn main(args: PsArgs) -> Result<(), LiveError> {
+    let runs = registry::list()?;
+    formation_runtime::live::reap_dead_prefixes(&runs);
     let before: Vec<Vec<Option<ProcStat>>> = runs
         .iter()
         .map(|r| r.processes.iter().map(read_local).collect())
@@ -122,19 +116,19 @@ pub fn main(args: PsArgs) -> ExitCode {
         .collect();
     if args.json {
         println!("{}", json!({ "runs": out }));
-        return ExitCode::SUCCESS;
+        return Ok(());
     }
     if out.is_empty() {
         println!(
             "no runs (runs register in {})",
             registry::runs_dir().display()
         );
-        return ExitCode::SUCCESS;
+        return Ok(());
     }
     for r in &out {
         print_run(r);
     }
-    ExitCode::SUCCESS
+    Ok(())
 }
 
 fn print_run(r: &Value) {

@@ -4,6 +4,50 @@
 
 use std::path::Path;
 
+/// Why a `trajectory.csv` cannot be read back.
+#[derive(Debug, thiserror::Error)]
+pub enum TableError {
+    /// The file cannot be read.
+    #[error("cannot read {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The file system's error.
+        source: std::io::Error,
+    },
+    /// The file's text is no trajectory (the file and what is wrong).
+    #[error("{}: {source}", path.display())]
+    In {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        source: Box<TableError>,
+    },
+    /// No header line.
+    #[error("empty file: no header")]
+    Empty,
+    /// A value that is no number (line 1-based).
+    #[error("line {line}: column {column}: not a number: '{value}'")]
+    NotANumber {
+        /// The line, 1-based.
+        line: usize,
+        /// The column's name.
+        column: String,
+        /// The text.
+        value: String,
+    },
+    /// A row with another count of values than the header (line 1-based).
+    #[error("line {line}: {values} values for {columns} columns")]
+    Width {
+        /// The line, 1-based.
+        line: usize,
+        /// Its values.
+        values: usize,
+        /// The header's columns.
+        columns: usize,
+    },
+}
+
 /// A `trajectory.csv`, parsed.
 #[derive(Debug, Clone)]
 pub struct Trajectory {
@@ -13,18 +57,23 @@ pub struct Trajectory {
 
 impl Trajectory {
     /// Reads and parses `path`; the error names the file, the line and the column.
-    pub fn read(path: &Path) -> Result<Trajectory, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        Trajectory::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+    pub fn read(path: &Path) -> Result<Trajectory, TableError> {
+        let text = std::fs::read_to_string(path).map_err(|source| TableError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Trajectory::parse(&text).map_err(|e| TableError::In {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        })
     }
 
     /// Parses the text of a `trajectory.csv`.
-    pub fn parse(text: &str) -> Result<Trajectory, String> {
+    pub fn parse(text: &str) -> Result<Trajectory, TableError> {
         let mut lines = text.lines();
         let header: Vec<String> = lines
             .next()
-            .ok_or("empty file: no header")?
+            .ok_or(TableError::Empty)?
             .split(',')
             .map(str::to_string)
             .collect();
@@ -34,22 +83,19 @@ impl Trajectory {
                 .split(',')
                 .enumerate()
                 .map(|(c, v)| {
-                    v.parse::<f64>().map_err(|_| {
-                        format!(
-                            "line {}: column {}: not a number: '{v}'",
-                            n + 2,
-                            header[c.min(header.len() - 1)]
-                        )
+                    v.parse::<f64>().map_err(|_| TableError::NotANumber {
+                        line: n + 2,
+                        column: header[c.min(header.len() - 1)].clone(),
+                        value: v.to_string(),
                     })
                 })
                 .collect::<Result<_, _>>()?;
             if row.len() != header.len() {
-                return Err(format!(
-                    "line {}: {} values for {} columns",
-                    n + 2,
-                    row.len(),
-                    header.len()
-                ));
+                return Err(TableError::Width {
+                    line: n + 2,
+                    values: row.len(),
+                    columns: header.len(),
+                });
             }
             rows.push(row);
         }
@@ -98,9 +144,9 @@ mod tests {
 
     #[test]
     fn a_short_row_or_a_word_is_refused_naming_its_line() {
-        let e = Trajectory::parse("a,b\n1,2\n3\n").unwrap_err();
+        let e = Trajectory::parse("a,b\n1,2\n3\n").unwrap_err().to_string();
         assert!(e.contains("line 3"), "{e}");
-        let e = Trajectory::parse("a,b\n1,x\n").unwrap_err();
+        let e = Trajectory::parse("a,b\n1,x\n").unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("column b"), "{e}");
     }
 }

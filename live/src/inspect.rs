@@ -1,13 +1,12 @@
 //! `formation inspect --agent I [--run ID] [--follow] [--json]`: one agent's live telemetry.
 
-use super::registry::{self, ProcessEntry};
-use crate::cli::EXIT_INVALID;
+use crate::error::{InspectError, LiveError};
 use formation_config::node::ports::{subscriber, Input};
 use formation_config::protocol::services;
 use formation_config::protocol::wire::AgentTelemetry;
+use formation_runtime::live::registry::{self, ProcessEntry};
 use serde_json::{json, Value};
 use std::io::Write;
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -16,7 +15,7 @@ use std::time::{Duration, Instant};
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
     /// Agent id, 1-based (1..=N) as in the CSV, the figures and the paper.
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// Run id (see `formation ps`); may be omitted when exactly one run is running.
     #[arg(long)]
@@ -37,9 +36,9 @@ const FIRST_SAMPLE: Duration = Duration::from_secs(10);
 const REFRESH: Duration = Duration::from_millis(250);
 
 /// The newest sample in the subscriber's queue, if any.
-fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, String> {
+fn newest(sub: &Input<AgentTelemetry>) -> Result<Option<AgentTelemetry>, InspectError> {
     let mut last = None;
-    while let Some(s) = sub.receive().map_err(|e| format!("telemetry: {e:?}"))? {
+    while let Some(s) = sub.receive().map_err(InspectError::Telemetry)? {
         last = Some(*s);
     }
     Ok(last)
@@ -147,38 +146,22 @@ pub fn to_text(run: &str, n: usize, process: Option<&ProcessEntry>, s: &AgentTel
 }
 
 /// Entry point of `formation inspect`.
-pub fn main(args: InspectArgs) -> ExitCode {
-    let run = match registry::find(args.run.as_deref()) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
-        }
-    };
-    if let Err(e) = super::check_access(&run, "inspect")
-        .and_then(|()| super::validate::agent(args.agent, run.n_agents))
-    {
-        eprintln!("error: {e}");
-        return ExitCode::from(EXIT_INVALID);
-    }
+pub fn main(args: InspectArgs) -> Result<(), LiveError> {
+    let run = registry::find(args.run.as_deref())?;
+    formation_runtime::live::check_access(&run, "inspect")?;
+    formation_runtime::live::validate::agent(args.agent, run.n_agents)?;
     let result = follow(&run, &args);
-    super::tidy_after(&run);
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(1)
-        }
-    }
+    formation_runtime::live::tidy_after(&run);
+    Ok(result?)
 }
 
-fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
+fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), InspectError> {
     let stop = Arc::new(AtomicBool::new(false));
     if args.follow {
         let flag = stop.clone();
         let _ = ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst));
     }
-    let node = super::client_node(run, "inspect")?;
+    let node = formation_runtime::live::client_node(run, "inspect")?;
     let sub: Input<AgentTelemetry> = subscriber(&node, &services::TELEMETRY.at(args.agent - 1))?;
     let start = Instant::now();
     let mut last_step = None;
@@ -219,12 +202,11 @@ fn follow(run: &registry::RunRecord, args: &InspectArgs) -> Result<(), String> {
                 }
             }
         } else if last_step.is_none() && start.elapsed() > FIRST_SAMPLE {
-            return Err(format!(
-                "no telemetry from agent {} of run {} within {} s",
-                args.agent,
-                run.id,
-                FIRST_SAMPLE.as_secs()
-            ));
+            return Err(InspectError::NoSample {
+                agent: args.agent,
+                run: run.id.clone(),
+                seconds: FIRST_SAMPLE.as_secs(),
+            });
         }
         if stop.load(Ordering::SeqCst) {
             return Ok(());

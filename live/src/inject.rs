@@ -2,16 +2,15 @@
 //! nothing sent on a bad value), then sent to the run's orchestrator, which picks the apply step,
 //! forwards it and confirms by writing it to `DIR/events.jsonl`.
 
-use super::registry::{self, RunRecord};
-use super::validate;
-use crate::cli::EXIT_INVALID;
+use crate::error::{ConfirmError, LiveError, RequestError};
 use formation_config::node::ports::{notifier, poke, publisher, send};
 use formation_config::protocol::messages::{
     InjectRequest, INJECT_ASAP, INJECT_CRASH, INJECT_DELAY, INJECT_FAULT, INJECT_HANG,
     INJECT_LINK_DOWN, INJECT_LINK_UP,
 };
 use formation_config::protocol::services;
-use std::process::ExitCode;
+use formation_runtime::live::registry::{self, RunRecord};
+use formation_runtime::live::validate;
 use std::time::{Duration, Instant};
 
 /// Arguments of `formation inject`.
@@ -46,7 +45,7 @@ pub enum InjectWhat {
 #[derive(clap::Args, Debug)]
 pub struct DownArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// How long the agent is down, s of simulation time.
     #[arg(long, allow_negative_numbers = true)]
@@ -89,7 +88,7 @@ pub struct LinkArgs {
 #[derive(clap::Args, Debug)]
 pub struct FaultArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// Gamma per axis, e.g. 0.5,0.5,0.5.
     #[arg(
@@ -119,7 +118,7 @@ pub struct FaultArgs {
 #[derive(clap::Args, Debug)]
 pub struct DelayArgs {
     /// Agent id, 1-based (1..=N).
-    #[arg(long, value_parser = crate::cli::whole_number::<usize>, allow_negative_numbers = true)]
+    #[arg(long, value_parser = formation_runtime::cli::whole_number::<usize>, allow_negative_numbers = true)]
     pub agent: usize,
     /// tau(t) in s: a constant (0.03) or base+amp*sin(w*t) (0.02+0.01*sin(0.5*t)).
     #[arg(long, allow_hyphen_values = true)]
@@ -135,12 +134,12 @@ pub struct DelayArgs {
 /// How long to wait for the orchestrator's confirmation.
 const CONFIRM: Duration = Duration::from_secs(10);
 
-fn three(v: &[f64], name: &str) -> Result<[f64; 3], String> {
-    <[f64; 3]>::try_from(v).map_err(|_| format!("--{name}: expected three comma-separated values"))
+fn three(v: &[f64], name: &'static str) -> Result<[f64; 3], RequestError> {
+    <[f64; 3]>::try_from(v).map_err(|_| RequestError::Three(name))
 }
 
 /// Validates and builds the request (agent id 1-based on the command line, 0-based on the wire).
-fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
+fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), RequestError> {
     let (run_id, agent, at) = match what {
         InjectWhat::Fault(a) => (a.run.as_deref(), a.agent, a.at),
         InjectWhat::Delay(a) => (a.run.as_deref(), a.agent, a.at),
@@ -156,8 +155,8 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         validate::at_sign(t)?;
     }
     let run = registry::find(run_id)?;
-    super::check_access(&run, "inject into")?;
-    let s = super::run_scenario(&run)?;
+    formation_runtime::live::check_access(&run, "inject into")?;
+    let s = formation_runtime::live::run_scenario(&run)?;
     validate::agent(agent, run.n_agents)?;
     let at_step = match at {
         Some(t) => {
@@ -197,8 +196,8 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
             r.down_s = a.down;
         }
         InjectWhat::Link(a) => {
-            let [_, b] = <[usize; 2]>::try_from(a.agents.as_slice())
-                .map_err(|_| "--agents: expected two comma-separated agent ids".to_string())?;
+            let [_, b] =
+                <[usize; 2]>::try_from(a.agents.as_slice()).map_err(|_| RequestError::Agents)?;
             validate::agent(b, run.n_agents)?;
             r.kind = if a.state == LinkState::Down {
                 INJECT_LINK_DOWN
@@ -213,9 +212,8 @@ fn request(what: &InjectWhat) -> Result<(RunRecord, InjectRequest), String> {
         r.kind,
         INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP
     ) {
-        let e = super::super::run::injections::event_of(&r, s.simulation.dt_s, 0);
-        formation_config::scenario::validate::validate_event(&s, "inject", &e)
-            .map_err(|e| e.to_string())?;
+        let e = formation_runtime::run::injections::event_of(&r, s.simulation.dt_s, 0);
+        formation_config::scenario::validate::validate_event(&s, "inject", &e)?;
     }
     Ok((run, r))
 }
@@ -228,52 +226,39 @@ fn nonce() -> u64 {
 }
 
 /// Entry point of `formation inject`.
-pub fn main(args: InjectArgs) -> ExitCode {
-    let (run, req) = match request(&args.what) {
-        Ok(x) => x,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(EXIT_INVALID);
-        }
-    };
+pub fn main(args: InjectArgs) -> Result<(), LiveError> {
+    let (run, req) = request(&args.what)?;
     let result = send_and_confirm(&run, &req);
-    super::tidy_after(&run);
-    match result {
-        Ok(line) => {
-            let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
-            if args.json {
-                if let Some(o) = v.as_object_mut() {
-                    o.insert("run".into(), run.id.clone().into());
-                }
-                println!("{v}");
-                return ExitCode::SUCCESS;
-            }
-            println!(
-                "{} injection for agent {} of run {} applies at step {} (t = {:.3} s){}",
-                v["event"].as_str().unwrap_or("?"),
-                req.agent + 1,
-                run.id,
-                v["step"],
-                v["t"].as_f64().unwrap_or(f64::NAN),
-                if v["after_end"].as_bool() == Some(true) {
-                    ", after the end of the run"
-                } else {
-                    ""
-                }
-            );
-            ExitCode::SUCCESS
+    formation_runtime::live::tidy_after(&run);
+    let line = result?;
+    let mut v: serde_json::Value = serde_json::from_str(&line).unwrap_or_default();
+    if args.json {
+        if let Some(o) = v.as_object_mut() {
+            o.insert("run".into(), run.id.clone().into());
         }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(1)
-        }
+        println!("{v}");
+        return Ok(());
     }
+    println!(
+        "{} injection for agent {} of run {} applies at step {} (t = {:.3} s){}",
+        v["event"].as_str().unwrap_or("?"),
+        req.agent + 1,
+        run.id,
+        v["step"],
+        v["t"].as_f64().unwrap_or(f64::NAN),
+        if v["after_end"].as_bool() == Some(true) {
+            ", after the end of the run"
+        } else {
+            ""
+        }
+    );
+    Ok(())
 }
 
 /// Sends the request and waits for its line in `events.jsonl` (the publisher stays alive until
 /// then, so the sample cannot be lost).
-fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, String> {
-    let node = super::client_node(run, "inject")?;
+fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, ConfirmError> {
+    let node = formation_runtime::live::client_node(run, "inject")?;
     let p = publisher::<InjectRequest>(&node, &services::INJECT_REQUEST.named())?;
     let wake = notifier(&node, &services::WAKE_ORCHESTRATOR.named())?;
     send(&p, *req)?;
@@ -290,22 +275,18 @@ fn send_and_confirm(run: &RunRecord, req: &InjectRequest) -> Result<String, Stri
                 .find(|l| l.contains(&needle))
             {
                 if line.contains("\"event\":\"rejected\"") {
-                    return Err(format!("the run rejected the injection: {line}"));
+                    return Err(ConfirmError::Rejected(line.to_string()));
                 }
                 return Ok(line.to_string());
             }
         }
         if !run.is_live() {
-            return Err(format!(
-                "run {} ended before confirming the injection",
-                run.id
-            ));
+            return Err(ConfirmError::Ended(run.id.clone()));
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    Err(format!(
-        "run {} did not confirm the injection within {} s",
-        run.id,
-        CONFIRM.as_secs()
-    ))
+    Err(ConfirmError::Timeout {
+        run: run.id.clone(),
+        seconds: CONFIRM.as_secs(),
+    })
 }

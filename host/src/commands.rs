@@ -1,49 +1,17 @@
 //! `formation host` (the daemon that lends a machine's CPUs to runs), `formation hosts` (the
 //! daemons an orchestrator can reach) and `formation certs` (a CA and per-host certificates for
-//! `tls/` endpoints). The daemon itself is `formation_net::daemon`; this module is its command
+//! `tls/` endpoints). The daemon itself is [`crate::daemon`]; this module is its command
 //! line. See docs/multi-host.md.
 
-use crate::cli;
-use formation_net::session::{self, Mode, Options};
+use formation_net::session::{self, Mode};
 use formation_net::tls;
+use formation_runtime::cli;
+use formation_runtime::link::{ignore_sigpipe, LinkArgs};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
-
-/// Zenoh link options shared by `host`, `hosts` and `run --hosts`.
-#[derive(clap::Args, Debug, Clone)]
-pub struct LinkArgs {
-    /// `user:password` file (mode 0600): a daemon accepts only orchestrators that present one of
-    /// its lines; an orchestrator presents its first line. Required by every tcp/ endpoint.
-    #[arg(long, value_name = "FILE")]
-    pub auth: Option<PathBuf>,
-    /// Folder with `ca.pem`, `cert.pem` and `key.pem` (`formation certs issue`): mutual TLS on
-    /// tls/HOST:PORT and quic/HOST:PORT endpoints; a peer whose certificate this CA did not sign
-    /// is refused.
-    #[arg(long, value_name = "DIR")]
-    pub tls: Option<PathBuf>,
-    /// Zenoh link lease, ms: a host whose link stays silent this long is declared lost (a killed
-    /// daemon is seen at once over a socket, TCP or TLS, whose link closes; over QUIC, which is
-    /// UDP, only when the lease runs out).
-    #[arg(long, default_value_t = session::DEFAULT_LEASE_MS, value_name = "MS")]
-    pub lease_ms: u64,
-}
-
-impl LinkArgs {
-    /// The session options of these link options.
-    pub fn options(&self, mode: Mode, listen: Vec<String>, connect: Vec<String>) -> Options {
-        Options {
-            mode,
-            listen,
-            connect,
-            auth: self.auth.clone(),
-            tls: self.tls.clone(),
-            lease_ms: self.lease_ms,
-        }
-    }
-}
 
 /// Arguments of `formation host`.
 #[derive(clap::Args, Debug)]
@@ -67,8 +35,8 @@ pub struct HostArgs {
     /// may use it (CAP_SYS_NICE or RLIMIT_RTPRIO), else the normal policy; 0: the normal policy
     /// whatever a run asks; 1..=99: at most that. A run asking for more gets this, never more
     /// than this daemon may use itself (a request never raises privileges).
-    #[arg(long, default_value = "auto", value_name = "auto|P", value_parser = crate::run::rt::parse)]
-    pub max_rt_priority: crate::run::rt::Requested,
+    #[arg(long, default_value = "auto", value_name = "auto|P", value_parser = formation_runtime::run::rt::parse)]
+    pub max_rt_priority: formation_runtime::run::rt::Requested,
     /// Link options.
     #[command(flatten)]
     pub link: LinkArgs,
@@ -115,16 +83,6 @@ pub fn machine_name() -> String {
     }
 }
 
-/// Ignores SIGPIPE (restored to its default by `main` for pipelines): Zenoh's TLS link writes to
-/// its socket with `writev`, which raises SIGPIPE on a link whose peer is gone, and the default
-/// would kill a daemon or an orchestrator instead of failing the link's write.
-pub fn ignore_sigpipe() {
-    // SAFETY: setting a signal disposition to SIG_IGN has no preconditions.
-    unsafe {
-        libc::signal(libc::SIGPIPE, libc::SIG_IGN);
-    }
-}
-
 /// `formation host`.
 pub fn host_main(a: HostArgs) -> ExitCode {
     ignore_sigpipe();
@@ -149,7 +107,7 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(cli::EXIT_INVALID);
     }
-    let exe = match crate::run::self_exe() {
+    let exe = match formation_runtime::run::self_exe() {
         Ok(e) => e,
         Err(e) => {
             eprintln!("error: {e}");
@@ -175,12 +133,12 @@ pub fn host_main(a: HostArgs) -> ExitCode {
     let root = a
         .root
         .clone()
-        .unwrap_or_else(|| formation_net::daemon::default_root(&name));
+        .unwrap_or_else(|| crate::daemon::default_root(&name));
     // A daemon's agents block on events like the run's plant: no busy loop under SCHED_FIFO.
-    let granted = match crate::run::rt::decide(
+    let granted = match formation_runtime::run::rt::decide(
         a.max_rt_priority,
         false,
-        crate::run::rt::Privilege::of_this_process(),
+        formation_runtime::run::rt::Privilege::of_this_process(),
     ) {
         Ok(g) => g,
         Err(e) => {
@@ -191,14 +149,14 @@ pub fn host_main(a: HostArgs) -> ExitCode {
     eprintln!(
         "formation host: {name}: a realtime run's agents and message path get at most {granted}"
     );
-    let o = formation_net::daemon::DaemonOptions {
+    let o = crate::daemon::DaemonOptions {
         name,
         session: opts,
         exe,
         root,
         max_rt_priority: granted.priority,
     };
-    match formation_net::daemon::serve(o, &stop) {
+    match crate::daemon::serve(o, &stop) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e}");

@@ -5,6 +5,7 @@
 //! offset, size, type, unit; `formation_config::protocol::layout`). `docs/services.md` is its
 //! `--markdown` output.
 
+use crate::error::LiveError;
 use formation_config::protocol::layout::{every_type, TypeLayout};
 use formation_config::protocol::services::{
     self, wire_type_name, Event, Limits, Message, Named, Party, Scope, Sizing, Slice, Topic,
@@ -12,13 +13,12 @@ use formation_config::protocol::services::{
 };
 use serde::Serialize;
 use std::convert::Infallible;
-use std::process::ExitCode;
 
 /// Arguments of `formation schema`.
 #[derive(clap::Args, Debug)]
 pub struct SchemaArgs {
     /// Number of agents the limits are sized for (1..=128).
-    #[arg(long, default_value_t = 5, value_parser = crate::cli::whole_number::<usize>)]
+    #[arg(long, default_value_t = 5, value_parser = formation_runtime::cli::whole_number::<usize>)]
     pub n: usize,
     /// Print `{"n", "services": [{"pattern", "scope", "kind", "message", ...}]}`.
     #[arg(long, conflicts_with = "markdown")]
@@ -426,30 +426,22 @@ pub fn markdown(schema: &Schema) -> String {
 }
 
 /// Entry point of `formation schema`.
-pub fn main(args: SchemaArgs) -> ExitCode {
+pub fn main(args: SchemaArgs) -> Result<(), LiveError> {
     if !(1..=formation_config::MAX_AGENTS).contains(&args.n) {
-        eprintln!(
-            "error: --n {}: must be within 1..={} agents",
-            args.n,
-            formation_config::MAX_AGENTS
-        );
-        return ExitCode::from(crate::cli::EXIT_INVALID);
+        return Err(LiveError::AgentCount {
+            n: args.n,
+            max: formation_config::MAX_AGENTS,
+        });
     }
     let s = schema(args.n);
     if args.json {
-        match serde_json::to_string_pretty(&s) {
-            Ok(j) => println!("{j}"),
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::FAILURE;
-            }
-        }
+        println!("{}", serde_json::to_string_pretty(&s)?);
     } else if args.markdown {
         print!("{}", markdown(&s));
     } else {
         print!("{}", text(&s));
     }
-    ExitCode::SUCCESS
+    Ok(())
 }
 
 #[cfg(test)]

@@ -306,8 +306,11 @@ impl LiveRos2 {
     }
 }
 
+/// A ROS 2 environment variable that makes no sense ([`env_options`]).
+pub use formation_ros2::dds::EnvError;
+
 /// The DDS options of the environment (`ROS_DOMAIN_ID`, `ROS_AUTOMATIC_DISCOVERY_RANGE`,
 /// `ROS_LOCALHOST_ONLY`).
-pub fn env_options() -> Result<formation_ros2::dds::Options, formation_ros2::dds::EnvError> {
+pub fn env_options() -> Result<formation_ros2::dds::Options, EnvError> {
     formation_ros2::dds::Options::from_env(|k| std::env::var(k).ok())
 }
