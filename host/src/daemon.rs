@@ -189,11 +189,13 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), ServeError> {
     let mut alive: std::collections::HashSet<String> = std::collections::HashSet::new();
     while !stop.load(Ordering::SeqCst) {
         if let Some(q) = link.next_query(Duration::from_millis(20)) {
-            let bytes = q.payload();
+            // The request's bytes (up to what the link accepts, tens of MiB from a stranger) are
+            // freed before the reply, which ends the query: the querier sees the daemon's memory
+            // as it is between requests.
             let answer = if q.asks_info() {
                 serde_json::to_vec(&d.info()).unwrap()
             } else {
-                d.request(&bytes)
+                d.request(&q.payload())
             };
             q.reply(answer);
         }
