@@ -111,6 +111,7 @@ impl Agent {
             nn_spec.position_span_m,
             nn_spec.velocity_span_m_s,
             nn_spec.spread,
+            nn_spec.position_norm_sq,
             |k, j| amp * uniform(seed, k, j),
         );
         let attitude_filter =
