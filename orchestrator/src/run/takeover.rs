@@ -317,7 +317,9 @@ impl Takeover {
                         });
                         children[FIRST_AGENT + i].kill_and_reap();
                         node.try_cleanup_dead_nodes();
-                        let from = self.flown_to[i].unwrap_or(recorded);
+                        let from = self.flown_to[i]
+                            .unwrap_or(recorded)
+                            .max(self.history.oldest());
                         match self.supervisor.on_dead_realtime(i, from, recorded) {
                             Some(a) => a,
                             None => return Err(format!("{line}; stopping the run")),
@@ -612,8 +614,10 @@ impl Takeover {
             rejoin_at: plan.rejoin_at,
             recorded_from: self.history.oldest(),
         };
+        // The down window's states too: the re-seed observes the fallback over all of it.
         let first = window
             .first_needed(self.capacity as u64)
+            .min(plan.down_from)
             .max(self.history.oldest());
         let file = RejoinFile {
             agent: i,
