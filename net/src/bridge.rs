@@ -43,6 +43,7 @@ use crate::auth::{Purpose, Replay, RunKey};
 use crate::clock::{self, LinkDelays};
 use crate::logs::LogLimit;
 use crate::plan::{agent_index, Placement};
+use crate::priority::{LinkPriority, Raised};
 use crate::proto;
 use formation_config::node::clock::now_ns;
 use formation_config::node::ipc::{self, event_with_limits, pubsub_with_limits, service_name};
@@ -98,6 +99,10 @@ pub struct BridgeConfig {
     pub clock_offsets_ns: BTreeMap<String, i64>,
     /// The run's keys: every frame carries proof of the run's secret ([`crate::auth`]).
     pub key: RunKey,
+    /// `SCHED_FIFO` priority of the message path in a realtime run (the run's granted
+    /// `--rt-priority`; 0: the normal policy, always in lockstep): the bridge's sending thread
+    /// and this process's Zenoh link threads ([`crate::priority`]).
+    pub rt_priority: u32,
 }
 
 /// Counters of a bridge.
@@ -131,6 +136,11 @@ pub struct Bridge {
     inbound: Arc<Mutex<Option<Inbound>>>,
     /// This host's frames, handled in Zenoh's receiving thread; undeclared on drop.
     subscriber: Option<zenoh::pubsub::Subscriber<()>>,
+    /// What the realtime message path's scheduling came to (priority 0 and no thread in lockstep).
+    pub scheduling: Raised,
+    /// Held while the bridge runs: the link threads' realtime priority (dropped after the
+    /// sending thread is joined).
+    _link_priority: Option<LinkPriority>,
 }
 
 impl Bridge {
@@ -667,6 +677,7 @@ impl Bridge {
         };
         let (ready_tx, ready_rx) = mpsc::channel::<Result<usize, String>>();
         let (out_tx, out_rx) = mpsc::channel::<Replan>();
+        let (link_priority, scheduling) = LinkPriority::raise(cfg.rt_priority);
         let mut bridge = Bridge {
             stop: stop.clone(),
             threads: Vec::new(),
@@ -676,10 +687,12 @@ impl Bridge {
             links,
             inbound,
             subscriber: Some(subscriber),
+            scheduling,
+            _link_priority: link_priority,
         };
         bridge.threads.push(
             std::thread::Builder::new()
-                .name("bridge-out".into())
+                .name(crate::priority::BRIDGE_THREAD.into())
                 .spawn(move || run_out(session, cfg, hosts, stop, stats, ready_tx, out_rx))
                 .map_err(|e| format!("bridge: cannot start a thread: {e}"))?,
         );
@@ -951,6 +964,11 @@ fn run_out(
     ready: mpsc::Sender<Result<usize, String>>,
     replan: mpsc::Receiver<Replan>,
 ) {
+    if cfg.rt_priority > 0 {
+        // This thread only (its name is not a Zenoh runtime's); a failure leaves it under the
+        // normal policy, as the link threads' report says.
+        let _ = formation_config::node::sched::set_thread_policy(0, cfg.rt_priority);
+    }
     let node = match ipc::node(&cfg.prefix, "fm-bridge-out") {
         Ok(n) => n,
         Err(e) => {

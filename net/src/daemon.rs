@@ -568,6 +568,7 @@ impl Daemon {
                 create: true,
                 key: r.secret.keys(&r.run_id),
                 clock_offsets_ns: r.clock_offsets_ns.clone(),
+                rt_priority: if r.realtime { r.rt_priority } else { 0 },
             },
         );
         let bridge = match bridge {
@@ -586,6 +587,13 @@ impl Daemon {
             bridge.forwarded.0,
             bridge.forwarded.1
         );
+        if r.realtime {
+            eprintln!(
+                "formation host: run {}: {}",
+                r.run_id,
+                bridge.scheduling.describe()
+            );
+        }
         self.insert(r, dir, variant, Some(bridge), Some(node), Some(membership));
         Ok(())
     }

@@ -15,6 +15,8 @@
 //!   the launcher's services, and nothing is bridged for it.
 //! * [`bridge`]: the per-host bridge forwarding exactly those services, as the same `#[repr(C)]`
 //!   bytes with their wire type name.
+//! * [`priority`]: in a realtime run, the bridge's and Zenoh's link threads under `SCHED_FIFO`
+//!   at the run's priority, like the plant and the agents they carry messages between.
 //! * [`clock`]: the hosts' clock offsets and the one-way delay of every cross-host link.
 //! * [`bench`]: bare Zenoh links and the frames of a split lockstep step, for `formation bench`.
 //! * [`daemon`]: `formation host`, which spawns a run's role processes on its machine.
@@ -43,6 +45,7 @@ pub mod export;
 pub mod identity;
 pub mod logs;
 pub mod plan;
+pub mod priority;
 pub mod probe;
 pub mod proto;
 pub mod session;

@@ -62,11 +62,13 @@ pub struct HostArgs {
     /// Folder for the run folders (created with mode 0700).
     #[arg(long, value_name = "DIR")]
     pub root: Option<PathBuf>,
-    /// The highest SCHED_FIFO priority this daemon grants a run's agents (0..=99). A run asking
-    /// for more (`formation run --realtime --rt-priority P`) gets this; 0, the default: the agents
-    /// run under the normal policy whatever a run asks (a request never raises privileges).
-    #[arg(long, default_value_t = 0, value_name = "P", value_parser = clap::value_parser!(u32).range(0..=99))]
-    pub max_rt_priority: u32,
+    /// The highest SCHED_FIFO priority this daemon grants a realtime run's agents and its
+    /// message path (bridge and Zenoh link threads): `auto` (the default) is 10 when this daemon
+    /// may use it (CAP_SYS_NICE or RLIMIT_RTPRIO), else the normal policy; 0: the normal policy
+    /// whatever a run asks; 1..=99: at most that. A run asking for more gets this, never more
+    /// than this daemon may use itself (a request never raises privileges).
+    #[arg(long, default_value = "auto", value_name = "auto|P", value_parser = crate::run::rt::parse)]
+    pub max_rt_priority: crate::run::rt::Requested,
     /// Link options.
     #[command(flatten)]
     pub link: LinkArgs,
@@ -174,12 +176,27 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         .root
         .clone()
         .unwrap_or_else(|| formation_net::daemon::default_root(&name));
+    // A daemon's agents block on events like the run's plant: no busy loop under SCHED_FIFO.
+    let granted = match crate::run::rt::decide(
+        a.max_rt_priority,
+        false,
+        crate::run::rt::Privilege::of_this_process(),
+    ) {
+        Ok(g) => g,
+        Err(e) => {
+            eprintln!("error: --max-rt-priority: {e}");
+            return ExitCode::from(cli::EXIT_INVALID);
+        }
+    };
+    eprintln!(
+        "formation host: {name}: a realtime run's agents and message path get at most {granted}"
+    );
     let o = formation_net::daemon::DaemonOptions {
         name,
         session: opts,
         exe,
         root,
-        max_rt_priority: a.max_rt_priority,
+        max_rt_priority: granted.priority,
     };
     match formation_net::daemon::serve(o, &stop) {
         Ok(()) => ExitCode::SUCCESS,

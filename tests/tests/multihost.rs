@@ -1277,6 +1277,160 @@ fn mean_rms(s: &serde_json::Value) -> f64 {
 /// (4-8x before the late-command policy) without failing on the machine's noise.
 const SPLIT_RMS_FACTOR: f64 = 1.5;
 
+/// Each thread of process `pid`: (name, scheduling policy, realtime priority), from
+/// `/proc/<pid>/task/*/stat` (fields 41 and 40, counted after the parenthesised name).
+fn thread_policies(pid: u32) -> Vec<(String, u32, u32)> {
+    let mut v = Vec::new();
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return v;
+    };
+    for t in tasks.flatten() {
+        let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
+        let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
+        let Some(rest) = stat.rsplit_once(") ").map(|(_, r)| r) else {
+            continue;
+        };
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        // `rest` starts at field 3 (state): field n is f[n - 3].
+        if let (Some(prio), Some(policy)) = (f.get(37), f.get(38)) {
+            v.push((
+                comm.trim().to_string(),
+                policy.parse().unwrap_or(u32::MAX),
+                prio.parse().unwrap_or(u32::MAX),
+            ));
+        }
+    }
+    v
+}
+
+/// The pid of the `formation run` whose command line names `out`.
+fn run_pid(out: &Path) -> Option<u32> {
+    let out = out.display().to_string();
+    std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
+        let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+        let cmd = std::fs::read_to_string(e.path().join("cmdline")).ok()?;
+        let args: Vec<&str> = cmd.split('\0').collect();
+        (args.get(1) == Some(&"run") && args.contains(&out.as_str())).then_some(pid)
+    })
+}
+
+/// Whether a process's message path is under `SCHED_FIFO` `prio` (policy 1): its bridge's sending
+/// thread and every Zenoh runtime thread (`tx-*`, `rx-*`, `acc-*`, `net-*`, `app-*`; at least
+/// three).
+fn message_path_raised(threads: &[(String, u32, u32)], prio: u32) -> bool {
+    let link = |n: &str| {
+        ["tx-", "rx-", "acc-", "net-", "app-"].iter().any(|p| {
+            n.strip_prefix(p)
+                .is_some_and(|d| d.bytes().all(|b| b.is_ascii_digit()))
+        })
+    };
+    let bridge = threads
+        .iter()
+        .any(|(n, p, r)| n == "bridge-out" && *p == 1 && *r == prio);
+    let raised = threads
+        .iter()
+        .filter(|(n, _, _)| link(n))
+        .collect::<Vec<_>>();
+    bridge && raised.len() >= 3 && raised.iter().all(|(_, p, r)| *p == 1 && *r == prio)
+}
+
+#[test]
+fn a_realtime_split_run_carries_its_messages_under_its_fifo_priority_on_both_hosts_and_the_daemon_drops_it_after(
+) {
+    const TEST: &str = "a_realtime_split_run_carries_its_messages_under_its_fifo_priority_on_both_hosts_and_the_daemon_drops_it_after";
+    if !available(TEST) {
+        return;
+    }
+    // Root (needed for the namespaces) has CAP_SYS_NICE: `--rt-priority auto` and the daemon's
+    // `--max-rt-priority auto` both come to SCHED_FIFO 10.
+    let dir = work_dir("rt-sched");
+    let mut hosts = Hosts::new(2, &dir);
+    hosts.start_daemon(1, &dir, &[]);
+    let daemon = hosts.daemons[0].id();
+    let out = dir.join("split");
+    let log = dir.join("run.log");
+    let mut v: Vec<String> = [
+        "run",
+        "paper",
+        "--realtime",
+        "--set",
+        "simulation.duration_s=6",
+        "--hosts",
+        "h1",
+        "--place",
+        "4,5@h1",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    v.extend(hosts.connect_args());
+    v.extend(["--auth".into(), hosts.auth.display().to_string()]);
+    v.extend(["--out".into(), out.display().to_string()]);
+    let refs: Vec<&str> = v.iter().map(String::as_str).collect();
+    let residue = dir.join("residue-launcher.txt");
+    let mut run = hosts
+        .command(0, Some(&residue), &refs)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .expect("formation run starts");
+    // Both message paths raised at one moment of the run (each bridge raises its threads when it
+    // starts, before any role process does).
+    let t0 = Instant::now();
+    let mut seen = (Vec::new(), Vec::new());
+    let raised = loop {
+        let orchestrator = run_pid(&out).map(thread_policies).unwrap_or_default();
+        let host = thread_policies(daemon);
+        if message_path_raised(&orchestrator, 10) && message_path_raised(&host, 10) {
+            break true;
+        }
+        if !orchestrator.is_empty() {
+            seen = (orchestrator, host);
+        }
+        if t0.elapsed() > START_BOUND || run.try_wait().unwrap().is_some() {
+            break false;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let code = run.wait().unwrap().code().unwrap_or(-1);
+    let err = std::fs::read_to_string(&log).unwrap_or_default();
+    assert!(
+        raised,
+        "threads (name, policy, priority), launcher: {:?}\nhost h1: {:?}\n{err}",
+        seen.0, seen.1
+    );
+    assert_eq!(code, 0, "realtime split run failed:\n{err}");
+    assert!(
+        err.contains("formation run: the bridge and")
+            && err.contains("Zenoh link threads under SCHED_FIFO 10"),
+        "the run says what its message path runs under:\n{err}"
+    );
+    // The run over, the daemon's link threads go back to the normal policy.
+    let t0 = Instant::now();
+    let back = loop {
+        let host = thread_policies(daemon);
+        if host.iter().all(|(_, p, _)| *p == 0) {
+            break None;
+        }
+        if t0.elapsed() > Duration::from_secs(20) {
+            break Some(host);
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let daemon_log = std::fs::read_to_string(dir.join("daemon-1.log")).unwrap_or_default();
+    assert!(
+        back.is_none(),
+        "threads of h1 after the run: {back:?}\n{daemon_log}"
+    );
+    assert!(
+        daemon_log.contains("get at most SCHED_FIFO 10")
+            && daemon_log.contains("Zenoh link threads under SCHED_FIFO 10"),
+        "the daemon says what it grants and what the run's message path got:\n{daemon_log}"
+    );
+    let left = hosts.stop_daemons();
+    assert_no_residue("host h1", &left[0]);
+}
+
 #[test]
 fn a_realtime_split_run_measures_every_cross_host_link_and_flies_as_well_as_on_one_host() {
     if !available(

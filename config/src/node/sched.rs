@@ -58,15 +58,49 @@ pub fn other_policy() -> Result<(), NodeError> {
 }
 
 fn set_normal_policy(policy: libc::c_int, name: &str) -> Result<(), NodeError> {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: valid pointer to a sched_param; pid 0 is the calling thread.
-    let rc = unsafe { libc::sched_setscheduler(0, policy, &param) };
+    set_policy(0, policy, 0, name)
+}
+
+/// `sched_setscheduler(tid, policy, priority)`; an error names the policy (`name`) and the thread.
+fn set_policy(
+    tid: i32,
+    policy: libc::c_int,
+    priority: libc::c_int,
+    name: &str,
+) -> Result<(), NodeError> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: valid pointer to a sched_param; a tid of this process or 0 (the calling thread).
+    let rc = unsafe { libc::sched_setscheduler(tid, policy, &param) };
     if rc == 0 {
         Ok(())
     } else {
+        let who = if tid == 0 {
+            String::new()
+        } else {
+            format!(" for thread {tid}")
+        };
         Err(NodeError::System(format!(
-            "cannot use {name}: {}",
+            "cannot use {name}{who}: {}",
             std::io::Error::last_os_error()
         )))
+    }
+}
+
+/// Puts thread `tid` of this process (0: the calling thread) under `SCHED_FIFO` at `priority`
+/// (1..=99), or back under `SCHED_OTHER` when `priority` is 0. Linux applies the policy to that
+/// one thread; threads it creates afterwards inherit it.
+pub fn set_thread_policy(tid: i32, priority: u32) -> Result<(), NodeError> {
+    if priority == 0 {
+        set_policy(tid, libc::SCHED_OTHER, 0, "SCHED_OTHER")
+    } else {
+        let p = priority.clamp(1, 99);
+        set_policy(
+            tid,
+            libc::SCHED_FIFO,
+            p as libc::c_int,
+            &format!("SCHED_FIFO {p}"),
+        )
     }
 }

@@ -408,8 +408,16 @@ impl RemoteRun {
                     .run_key()
                     .ok_or("the run's secret was not made")?,
                 clock_offsets_ns: clock_offsets_ns(&self.offsets),
+                rt_priority: if self.request.realtime {
+                    self.request.rt_priority
+                } else {
+                    0
+                },
             },
         )?;
+        if self.request.realtime {
+            eprintln!("formation run: {}", b.scheduling.describe());
+        }
         tracing::info!(
             out = b.forwarded.0,
             inbound = b.forwarded.1,
