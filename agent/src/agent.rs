@@ -574,7 +574,16 @@ impl Agent {
         };
         let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader, self.p.leader_data);
         let u_p = limit(&g.position, self.p.gravity, u_raw);
-        let saturated = u_p != u_raw;
+        // Command conversion (28) with psi_iC = 0, tilt-limited.
+        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
+        let tilt = g.position.max_tilt_rad;
+        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
+        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
+        // D15: the position loop's command is not what the vehicle gets while U_iP sits on the
+        // acceleration limit of D5 or the attitude command it asks for moves command filter 1 at
+        // its rate limit (D14); the error then measures the limits, not what F-hat misses, and
+        // the network does not learn from it (conditional integration).
+        let saturated = u_p != u_raw || self.attitude_filter.rate_limited(att_raw);
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
             // The network learns from the same (shaped, D18) position error the law acts on.
@@ -609,12 +618,6 @@ impl Agent {
             self.nn
                 .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
         }
-
-        // Command conversion (28) with psi_iC = 0, tilt-limited.
-        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
-        let tilt = g.position.max_tilt_rad;
-        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
-        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
 
         // Attitude loop on the filtered command (command filter 1).
         let a_c = Vector3::from(self.attitude_filter.value());

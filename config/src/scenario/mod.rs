@@ -469,8 +469,9 @@ pub struct RbfnnSpec {
     /// Projection bound W_M on the weight norm of each axis, ||W-hat_ik|| <= W_M (Remark 1's bound made
     /// explicit). Paper: not given. Ours: see docs/deviations.md (D15).
     pub max_weight_norm: f64,
-    /// Stop the update (15) while the acceleration limit of U_iP is active (conditional-integration
-    /// anti-windup). Paper: false (no limit). Ours: true (D15).
+    /// Stop the update (15) while the acceleration limit of U_iP is active or the attitude command
+    /// drives command filter 1 at its rate limit (conditional-integration anti-windup on both
+    /// limits of the position loop's actuator path). Paper: false (no limit). Ours: true (D15).
     pub freeze_when_saturated: bool,
     /// Initial weights are drawn uniformly from [-a, a]. Paper: "randomly". Ours: a = 0.05.
     pub initial_weight_amplitude: f64,
