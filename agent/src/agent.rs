@@ -111,6 +111,7 @@ impl Agent {
             nn_spec.position_span_m,
             nn_spec.velocity_span_m_s,
             nn_spec.spread,
+            nn_spec.position_norm_sq,
             |k, j| amp * uniform(seed, k, j),
         );
         let attitude_filter =
@@ -459,8 +460,13 @@ impl Agent {
         // its first step back, a neighbour at its first usable share from then on; and a
         // controller that comes back resumes the generators still running (its neighbours', and
         // its own when it does not re-arm it; cold, all it knows of) from their states then: it
-        // did not advance them while it was down.
+        // did not advance them while it was down. One that re-arms its own reference re-arms every
+        // neighbour's too, from its newest usable share, over or not (a cold one resumes them): its
+        // own offset starts at zero, so its consensus errors (8)-(9) must start at zero on the
+        // neighbours' side as well, or they charge it with its neighbours' tracking errors and
+        // the RBFNN integrates them (docs/failures.md, bumpless re-entry).
         let mut self_back = false;
+        let mut self_rearmed = false;
         for m in 0..self.startup.len() {
             let mut rejoin = None;
             if let Some(gains) = self.p.rejoin_reference {
@@ -479,6 +485,9 @@ impl Agent {
                         members.neighbours()
                     };
                     rejoin = rearm.then_some((gains, seen));
+                    self_rearmed |= m == 0 && rejoin.is_some();
+                } else if let (true, Some(seen)) = (m > 0 && self_rearmed, seen) {
+                    rejoin = Some((gains, seen));
                 }
             }
             let resume = self_back && (!self.startup_set || self.startup[m].is_some());
@@ -565,7 +574,16 @@ impl Agent {
         };
         let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader, self.p.leader_data);
         let u_p = limit(&g.position, self.p.gravity, u_raw);
-        let saturated = u_p != u_raw;
+        // Command conversion (28) with psi_iC = 0, tilt-limited.
+        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
+        let tilt = g.position.max_tilt_rad;
+        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
+        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
+        // D15: the position loop's command is not what the vehicle gets while U_iP sits on the
+        // acceleration limit of D5 or the attitude command it asks for moves command filter 1 at
+        // its rate limit (D14); the error then measures the limits, not what F-hat misses, and
+        // the network does not learn from it (conditional integration).
+        let saturated = u_p != u_raw || self.attitude_filter.rate_limited(att_raw);
         if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
             let pg = &g.position;
             // The network learns from the same (shaped, D18) position error the law acts on.
@@ -600,12 +618,6 @@ impl Agent {
             self.nn
                 .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
         }
-
-        // Command conversion (28) with psi_iC = 0, tilt-limited.
-        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
-        let tilt = g.position.max_tilt_rad;
-        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
-        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
 
         // Attitude loop on the filtered command (command filter 1).
         let a_c = Vector3::from(self.attitude_filter.value());
@@ -709,6 +721,72 @@ mod lost_neighbour_tests {
         a.taken_down(j, 151);
         assert!(a.ready(200), "not awaited once its process is known lost");
         a.taken_down(99, 151);
+    }
+}
+
+#[cfg(test)]
+mod rejoin_tests {
+    use super::*;
+    use formation_config::scenario::events::{Event, EventKind};
+
+    /// Agent 3 (0-based 2) of the paper graph, its neighbours 0.2 m off their slots on x, itself
+    /// 0.05 m off, no start-up generator (D19 off: nothing runs before the crash), down from step
+    /// 200 to 300. Returns the consensus errors (e_P, e_V) of its first command back.
+    fn first_errors_back(
+        rejoin_for: formation_config::scenario::events::RejoinMembers,
+    ) -> [[f64; 3]; 2] {
+        let mut s = Scenario::paper();
+        s.controller.position.startup_blend_accel_m_s2 = None;
+        s.runtime.rejoin_reference_for = rejoin_for;
+        let mut crash = Event::new(0.2, EventKind::Crash);
+        crash.agent = Some(3);
+        crash.down_s = Some(0.1);
+        s.events = vec![crash];
+        let me = 2;
+        let mut a = Agent::new(&s, me, Variant::Proposed);
+        let at = |step: u64, agent: usize, x: f64| VehicleState {
+            step,
+            agent: agent as u32,
+            position: [x, 0.0, 0.0],
+            ..VehicleState::default()
+        };
+        for step in 0..=300 {
+            a.observe_reference(&ReferenceFrame {
+                step,
+                n_agents: s.n_agents() as u32,
+                ..ReferenceFrame::default()
+            });
+            let own = at(step, me, 0.05);
+            a.observe_own(&own);
+            for &(n, _) in &a.p.neighbours.clone() {
+                a.observe_neighbour(&share_of(&at(step, n, 0.2)));
+            }
+            if !(200..300).contains(&step) {
+                let c = a.step(&own);
+                if step == 300 {
+                    return [c.telemetry.e_p, c.telemetry.e_v];
+                }
+            }
+        }
+        unreachable!()
+    }
+
+    /// A controller that comes back and re-arms its own reference at the vehicle (its offset from
+    /// the slot hidden) re-arms its neighbours' as well, so its first consensus errors are zero;
+    /// re-arming only its own would charge it with its two neighbours' 0.2 m (e_P,x = -0.4 m).
+    /// When it does not re-arm its own, it sees the true errors, 2 (0.05 - 0.2) = -0.3 m.
+    #[test]
+    fn a_returning_controller_that_re_arms_itself_starts_from_zero_consensus_errors() {
+        use formation_config::scenario::events::RejoinMembers;
+        for members in [RejoinMembers::All, RejoinMembers::Itself] {
+            let [ep, ev] = first_errors_back(members);
+            assert!(
+                ep.iter().chain(&ev).all(|e| e.abs() < 1e-12),
+                "{members:?}: {ep:?} {ev:?}"
+            );
+        }
+        let [ep, _] = first_errors_back(RejoinMembers::Neighbours);
+        assert!((ep[0] + 0.3).abs() < 1e-12, "{ep:?}");
     }
 }
 

@@ -51,6 +51,15 @@ impl CommandFilter {
         self.mag
     }
 
+    /// Whether input `u` would drive a channel at its rate limit: its wanted rate
+    /// w / (2 xi) (S_M(u) - q1) is beyond the limit.
+    pub fn rate_limited(&self, u: [f64; 3]) -> bool {
+        (0..3).any(|k| {
+            let target = u[k].clamp(-self.mag[k], self.mag[k]);
+            ((self.w / (2.0 * self.xi)) * (target - self.q1[k])).abs() > self.rate[k]
+        })
+    }
+
     /// Advances the filter by `dt` with input `u` (semi-implicit Euler: q2 first, then q1 with the new
     /// q2). The magnitude limit also bounds the output, so |q1| never exceeds it.
     pub fn advance(&mut self, u: [f64; 3], dt: f64) {
@@ -62,5 +71,29 @@ impl CommandFilter {
             self.q2[k] += dt * q2_dot;
             self.q1[k] = (self.q1[k] + dt * self.q2[k]).clamp(-self.mag[k], self.mag[k]);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A step beyond 2 xi rate / w from the output drives the rate limiter; a smaller one, or the
+    /// magnitude limit's own value when the output already sits there, does not.
+    #[test]
+    fn a_command_far_from_the_output_is_rate_limited() {
+        let spec = CommandFilterSpec {
+            natural_frequency_rad_s: 23.0,
+            damping: 1.0,
+            magnitude_limit: [0.35, 0.35, 3.2],
+            rate_limit: [0.47, 0.47, 0.47],
+        };
+        let mut f = CommandFilter::new(&spec, [0.0; 3]);
+        // 2 xi rate / w = 0.0409 rad.
+        assert!(!f.rate_limited([0.04, -0.04, 0.0]));
+        assert!(f.rate_limited([0.0, -0.042, 0.0]));
+        f.reset([0.35, 0.0, 0.0]);
+        assert!(!f.rate_limited([1.0, 0.0, 0.0]), "clamped to where it is");
+        assert!(f.rate_limited([-0.3, 0.0, 0.0]));
     }
 }

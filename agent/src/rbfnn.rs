@@ -2,10 +2,22 @@
 //!
 //! Input of axis k: the delayed (P_ik, V_ik), normalised by the spans of the scenario. The l centres form
 //! a grid of (l / n_v) positions x n_v velocities evenly spread over [-1, 1]² of the normalised input;
-//! every Gaussian has the same spread (docs/deviations.md D6).
+//! every Gaussian has the same spread (docs/deviations.md D6). With `position_norm_sq` c_P (D24) the position
+//! factors of an axis are scaled so that their squared norm is c_P wherever the quadrotor is.
 
 /// Largest number of neurons per axis.
 pub const MAX_NEURONS: usize = 64;
+
+/// D24: the factor that scales the position Gaussians `g` of one axis to the squared norm `c_p`
+/// (1.0 where they all vanish: far outside the span nothing is rescaled from nothing).
+pub fn position_factor_scale(g: &[f64], c_p: f64) -> f64 {
+    let norm_sq: f64 = g.iter().map(|x| x * x).sum();
+    if norm_sq > f64::MIN_POSITIVE {
+        (c_p / norm_sq).sqrt()
+    } else {
+        1.0
+    }
+}
 
 /// Three RBF networks (one per axis) with their weights W-hat_ik.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -19,6 +31,9 @@ pub struct Rbfnn {
     inv_spread_sq: f64,
     inv_pos_span: f64,
     inv_vel_span: f64,
+    /// c_P of D24: the squared norm the position factors of Psi_ik are scaled to (None: plain
+    /// Gaussians).
+    position_norm_sq: Option<f64>,
     /// W-hat_ik, axis-major.
     #[serde(with = "crate::checkpoint::rows")]
     weights: [[f64; MAX_NEURONS]; 3],
@@ -29,13 +44,15 @@ pub struct Rbfnn {
 
 impl Rbfnn {
     /// A network of `l` neurons per axis (`n_v` velocity values) with the given spans and spread;
-    /// `initial` fills the weights.
+    /// `initial` fills the weights. `position_norm_sq` c_P (D24) scales the position factors of
+    /// Psi to the squared norm c_P at every position; `None` keeps the plain Gaussians.
     pub fn new(
         l: usize,
         n_v: usize,
         pos_span: f64,
         vel_span: f64,
         spread: f64,
+        position_norm_sq: Option<f64>,
         initial: impl Fn(usize, usize) -> f64,
     ) -> Rbfnn {
         let l = l.clamp(1, MAX_NEURONS);
@@ -69,6 +86,7 @@ impl Rbfnn {
             inv_spread_sq: 1.0 / (spread * spread),
             inv_pos_span: 1.0 / pos_span,
             inv_vel_span: 1.0 / vel_span,
+            position_norm_sq,
             weights,
             psi: [[0.0; MAX_NEURONS]; 3],
         }
@@ -88,15 +106,22 @@ impl Rbfnn {
                 let dy = y - c;
                 *g = (-dy * dy * self.inv_spread_sq).exp();
             }
+            let mut gx = [0.0; MAX_NEURONS];
+            let centres = self.centres[..l].iter().step_by(n_v);
+            for (g, c) in gx[..n_p].iter_mut().zip(centres) {
+                let dx = x - c;
+                *g = (-dx * dx * self.inv_spread_sq).exp();
+            }
+            if let Some(c_p) = self.position_norm_sq {
+                let s = position_factor_scale(&gx[..n_p], c_p);
+                gx[..n_p].iter_mut().for_each(|g| *g *= s);
+            }
             // Neuron j = a n_v + b (position centre a, velocity centre b), in increasing j: the sum
             // runs in the order of the definition.
             let mut acc = 0.0;
             let psi_rows = self.psi[k][..l].chunks_exact_mut(n_v);
             let w_rows = self.weights[k][..l].chunks_exact(n_v);
-            let centres = self.centres[..l].iter().step_by(n_v);
-            for ((psi_row, w_row), c) in psi_rows.zip(w_rows).zip(centres).take(n_p) {
-                let dx = x - c;
-                let gx = (-dx * dx * self.inv_spread_sq).exp();
+            for ((psi_row, w_row), gx) in psi_rows.zip(w_rows).zip(&gx[..n_p]) {
                 for ((psi, w), g) in psi_row.iter_mut().zip(w_row).zip(&gy[..n_v]) {
                     *psi = gx * g;
                     acc += w * *psi;
@@ -184,7 +209,7 @@ mod tests {
     /// the change is the smallest one: along Psi only.
     #[test]
     fn a_reseeded_network_outputs_the_target_at_its_input() {
-        let mut nn = Rbfnn::new(10, 5, 20.0, 2.0, 0.88, |k, j| 0.05 * uniform(7, k, j));
+        let mut nn = Rbfnn::new(10, 5, 20.0, 2.0, 0.88, None, |k, j| 0.05 * uniform(7, k, j));
         let (p, v) = ([1.0, 15.0, 5.0], [0.3, -0.8, 0.0]);
         let before = nn.weight_norm();
         nn.reseed(p, v, [0.5, 0.99, -0.2]);
@@ -193,5 +218,32 @@ mod tests {
             assert!((o - t).abs() < 1e-12, "{out:?}");
         }
         assert!(nn.weight_norm() > before);
+    }
+
+    /// D24: with c_P set, the basis has the same norm at every position of an axis (the plain
+    /// Gaussians' norm falls 6.6x from an outer centre to midway between the two), and the
+    /// velocity factors are untouched.
+    #[test]
+    fn scaled_position_factors_give_the_same_basis_norm_everywhere() {
+        let norm_sq = |nn: &Rbfnn| -> f64 { nn.psi[1][..nn.l].iter().map(|x| x * x).sum() };
+        let mut plain = Rbfnn::new(10, 5, 20.0, 2.0, 0.88, None, |_, _| 0.0);
+        let mut scaled = Rbfnn::new(10, 5, 20.0, 2.0, 0.88, Some(1.0), |_, _| 0.0);
+        let at = |nn: &mut Rbfnn, y: f64| {
+            nn.evaluate([0.0, y, 0.0], [0.0, 0.3, 0.0]);
+            norm_sq(nn)
+        };
+        let (edge, mid) = (at(&mut plain, 20.0), at(&mut plain, 0.0));
+        assert!(edge / mid > 6.0, "{edge} {mid}");
+        let reference = at(&mut scaled, 20.0);
+        for y in [-25.0, -20.0, -7.0, 0.0, 3.0, 12.0, 20.0, 30.0] {
+            let n = at(&mut scaled, y);
+            assert!(
+                (n - reference).abs() < 1e-12 * reference,
+                "{y}: {n} vs {reference}"
+            );
+        }
+        // At an outer centre the plain Gaussians already have a norm of about c_P = 1.
+        assert!((edge / reference - 1.0).abs() < 0.01, "{edge} {reference}");
+        assert_eq!(position_factor_scale(&[0.0, 0.0], 1.0), 1.0);
     }
 }

@@ -111,7 +111,7 @@ fn command_conversion_inverts_the_thrust_direction_of_eq_1() {
 
 #[test]
 fn rbfnn_learns_a_constant_under_the_update_law() {
-    let mut nn = Rbfnn::new(10, 1, 20.0, 3.0, 0.35, |_, _| 0.0);
+    let mut nn = Rbfnn::new(10, 1, 20.0, 3.0, 0.35, None, |_, _| 0.0);
     // Drive = target - output: a gradient step on the squared error drives the output to the target.
     let target = [0.7, -0.4, 0.2];
     for _ in 0..20000 {

@@ -42,6 +42,20 @@ fn residue_of(run: &RunningRun) -> Vec<PathBuf> {
         .unwrap_or_default()
 }
 
+/// The worst `e_norm` of the rows of `csv` (a `trajectory.csv`) with t in [from, to] s.
+fn worst_error_between(csv: &Path, from: f64, to: f64) -> f64 {
+    let text = std::fs::read_to_string(csv).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (t, e) = (col("t"), col("e_norm"));
+    lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| (from..=to + 1e-9).contains(&f[t].parse::<f64>().unwrap()))
+        .map(|f| f[e].parse::<f64>().unwrap())
+        .fold(0.0, f64::max)
+}
+
 /// Runs `formation run` to its end; returns (exit code, stderr).
 fn run_to_end(args: &[&str], out: &Path) -> (i32, String, RunningRun) {
     let mut run = RunningRun::start(args, out);
@@ -63,7 +77,10 @@ fn wait_stepping(run: &RunningRun) {
 }
 
 /// A warm restart is no worse than a cold one: with the slot failsafe both can stay under the
-/// formation's own error in that phase (then their peaks are equal), so the comparison is `<=`.
+/// formation's own error in that phase, so the comparison is `<=`, and a warm restart whose peak
+/// stays under the worst error the formation has without the crash over the same span (the crash
+/// to the return and SETTLE_S after it) adds nothing to compare: the peak is then the mission's
+/// own error at the span's end, which a 0.5 s outage moves by tens of micrometres either way.
 #[test]
 fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_is_no_worse_than_a_cold_restart(
 ) {
@@ -118,10 +135,23 @@ fn a_timeline_crash_restarted_warm_is_byte_identical_to_sim_recovers_and_is_no_w
     assert!(out.status.success());
     let cold = &summary(&cold_dir)["events"][0];
     let peak = |e: &serde_json::Value| e["peak_error_m"].as_f64().unwrap();
+    // The same 24 s without the crash: its worst formation error over the event's span
+    // [20 s, 20.5 s + SETTLE_S], from the rows of trajectory.csv (every 10 ms, the span's ends
+    // included).
+    let quiet = scenario_with(&dir, "quiet", 24.0, "");
+    let quiet_dir = dir.join("quiet");
+    let out = formation(&[
+        "sim",
+        quiet.to_str().unwrap(),
+        "--out",
+        quiet_dir.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    let own = worst_error_between(&quiet_dir.join("trajectory.csv"), 20.0, 22.5);
     assert!(
         warm_recovery <= cold["recovered_after_s"].as_f64().unwrap_or(f64::INFINITY)
-            && peak(warm) <= peak(cold),
-        "warm {warm} vs cold {cold}"
+            && (peak(warm) <= peak(cold) || peak(warm) <= own),
+        "warm {warm} vs cold {cold}; without the crash {own} m"
     );
     assert!(residue_of(&run).is_empty());
 }

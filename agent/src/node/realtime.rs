@@ -71,6 +71,9 @@ pub fn run(
     let mut sampler = Sampler::new(&b.scenario, i);
     let dt_ns = (b.scenario.simulation.dt_s * 1e9).round() as u64;
     let tau_m_ns = (b.scenario.simulation.max_delay_s * 1e9).round() as u64;
+    // A successor's live re-entry: the first step it got live, and the steps it listens before it
+    // answers (tau_M and one step: every delayed input it then reads was received live).
+    let mut re_entry = LiveReEntry::new(tau_m_ns.div_ceil(dt_ns.max(1)) + 1);
     loop {
         while let Some(c) = ports.control.receive()? {
             if c.kind == CONTROL_STOP {
@@ -160,7 +163,20 @@ pub fn run(
                     true
                 }
             });
-            if k > 0 || agent.ready(0) {
+            let listening = local_mission.is_some()
+                && k > 0
+                && match re_entry.at(k) {
+                    ReEntry::Listen => true,
+                    ReEntry::Meet => {
+                        agent.set_up_again(i, k);
+                        agent.resync(&s);
+                        false
+                    }
+                    ReEntry::Answer => false,
+                };
+            if listening {
+                latest = None;
+            } else if k > 0 || agent.ready(0) {
                 // Outside the timed control: a warm restart restores the newest checkpoint.
                 checkpoints.before_step(&agent, k);
                 let t0 = now_ns();
@@ -193,6 +209,52 @@ pub fn run(
     }
 }
 
+/// What a successor does with a live step ([`LiveReEntry::at`]).
+#[derive(Debug, PartialEq, Eq)]
+enum ReEntry {
+    /// Stay silent: the plant flies the failsafe, the histories fill with live inputs.
+    Listen,
+    /// The first answer: the filters meet the vehicle where the failsafe left it.
+    Meet,
+    /// Control as usual.
+    Answer,
+}
+
+/// A successor rebuilt up to the step its predecessor was last recorded at answers the newest
+/// states, up to seconds later on the wall clock: its histories hold nothing between. For the
+/// first tau_M of live steps its delayed inputs would be the rebuilt, stale ones (measured: after
+/// a realtime SIGSTOP of 1.2 s a first command of -2 m/s² for a true error of 1 cm), so it listens
+/// `listen` steps (tau_M and one step) from its first live step before it answers. Its own down
+/// window (opened at the rebuild) ends at its first answer, where its reference generator re-arms
+/// from the vehicle's state (`runtime.rejoin_reference`) and its filters meet the vehicle.
+struct LiveReEntry {
+    listen: u64,
+    first: Option<u64>,
+    met: bool,
+}
+
+impl LiveReEntry {
+    fn new(listen: u64) -> LiveReEntry {
+        LiveReEntry {
+            listen,
+            first: None,
+            met: false,
+        }
+    }
+
+    /// What to do with live step k.
+    fn at(&mut self, k: u64) -> ReEntry {
+        let first = *self.first.get_or_insert(k);
+        if k - first < self.listen {
+            ReEntry::Listen
+        } else if !std::mem::replace(&mut self.met, true) {
+            ReEntry::Meet
+        } else {
+            ReEntry::Answer
+        }
+    }
+}
+
 /// Writes `<run dir>/timing/agent-<i>.json`.
 fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), NodeError> {
     let mut r = TimingReport::default();
@@ -208,4 +270,20 @@ fn report(b: &Boot, i: usize, m: &Meters) -> Result<(), NodeError> {
         .insert("effective_over_tau_m".into(), m.over_tau_m);
     r.counters.insert("skipped_states".into(), m.skipped);
     r.write(&b.args.run_dir, &format!("agent-{}", i + 1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A successor listens `listen` steps from its first live step, meets the vehicle at the next
+    /// one it gets (also when states were skipped), then answers.
+    #[test]
+    fn a_successor_listens_tau_m_then_meets_the_vehicle_once() {
+        let mut r = LiveReEntry::new(51);
+        assert_eq!(r.at(6340), ReEntry::Listen);
+        assert_eq!(r.at(6390), ReEntry::Listen);
+        assert_eq!(r.at(6395), ReEntry::Meet);
+        assert_eq!(r.at(6396), ReEntry::Answer);
+    }
 }

@@ -112,6 +112,12 @@ pub fn rebuild(b: &Boot, i: usize, agent: &mut Agent, r: u64) -> Result<(), Node
         |k, j| plan.state(k, j),
         |k| plan.flown_command(k),
     );
+    if b.args.realtime {
+        // Its own down window, open until its first live answer (`realtime::LiveReEntry`): there
+        // its controller re-arms its reference generator from where the failsafe left it, as a
+        // lockstep successor does at the return its timeline names.
+        agent.set_down(i, plan.down_from);
+    }
     // A realtime agent's commands depend on when its inputs arrived, which the replay from the
     // recorded states cannot reproduce: there the count is informative only.
     if replayed.mismatches > 0 && !b.args.realtime {

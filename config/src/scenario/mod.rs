@@ -457,11 +457,21 @@ pub struct RbfnnSpec {
     /// Spread mu_k of every Gaussian (in units of the normalised input), dimensionless.
     /// Paper: not given.
     pub spread: f64,
+    /// Squared norm c_P of the position factors of Psi_ik (D24), dimensionless: the n_p position
+    /// Gaussians g_a(P) of an axis are scaled by sqrt(c_P / sum_a g_a(P)²), so that the basis has the
+    /// same norm wherever the quadrotor is. Paper: absent (plain Gaussians). Ours: 1.0, the norm a
+    /// quadrotor at an outer position centre has: with two position centres over +-20 m the plain
+    /// norm falls from 1.0 there to 0.15 midway, and with it the network's integral gain
+    /// kappa ||Psi||² on the slowly varying uncertainty, by up to 6.6x between quadrotors of one
+    /// formation (docs/scaling.md). Absent: the plain Gaussians.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_norm_sq: Option<f64>,
     /// Projection bound W_M on the weight norm of each axis, ||W-hat_ik|| <= W_M (Remark 1's bound made
     /// explicit). Paper: not given. Ours: see docs/deviations.md (D15).
     pub max_weight_norm: f64,
-    /// Stop the update (15) while the acceleration limit of U_iP is active (conditional-integration
-    /// anti-windup). Paper: false (no limit). Ours: true (D15).
+    /// Stop the update (15) while the acceleration limit of U_iP is active or the attitude command
+    /// drives command filter 1 at its rate limit (conditional-integration anti-windup on both
+    /// limits of the position loop's actuator path). Paper: false (no limit). Ours: true (D15).
     pub freeze_when_saturated: bool,
     /// Initial weights are drawn uniformly from [-a, a]. Paper: "randomly". Ours: a = 0.05.
     pub initial_weight_amplitude: f64,

@@ -792,6 +792,9 @@ fn check_rbfnn(s: &Scenario, c: &mut Collector) {
         );
     }
     c.positive("controller.rbfnn.spread", ctl.rbfnn.spread, CTRL);
+    if let Some(c_p) = ctl.rbfnn.position_norm_sq {
+        c.positive("controller.rbfnn.position_norm_sq", c_p, CTRL);
+    }
     c.positive(
         "controller.rbfnn.max_weight_norm",
         ctl.rbfnn.max_weight_norm,

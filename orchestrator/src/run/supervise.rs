@@ -223,10 +223,12 @@ impl Supervisor {
     }
 
     /// Realtime: agent i died (its restart counted by [`Supervisor::on_death`]) with `recorded`
-    /// steps recorded. The plant already flies it on its fallback (its commands stopped coming),
-    /// so no take-down is asked: its successor starts at once, rebuilt from the recorded steps
-    /// before `recorded`, and answers the newest states it gets.
-    pub fn on_dead_realtime(&mut self, i: usize, recorded: u64) -> Option<Action> {
+    /// steps recorded, its last own command in the record of step `from - 1`. The plant already
+    /// flies it on its fallback (its commands stopped coming), so no take-down is asked: its
+    /// successor starts at once, replays its own steps before `from`, observes the fallback's from
+    /// `from` to `recorded` (as a lockstep successor does its down window: bumpless re-entry and
+    /// the re-seed of `runtime.rejoin_reseed`), and answers the newest states it gets.
+    pub fn on_dead_realtime(&mut self, i: usize, from: u64, recorded: u64) -> Option<Action> {
         if self.slots.get(i) != Some(&Slot::Dead) {
             return None;
         }
@@ -235,7 +237,7 @@ impl Supervisor {
         };
         Some(Action::Respawn(Plan {
             agent: i,
-            down_from: recorded,
+            down_from: from.min(recorded),
             rejoin_at: recorded,
             warm: self.runtime.restart_state == RestartState::Warm,
             scheduled: false,
@@ -419,14 +421,14 @@ mod tests {
             ..Runtime::default()
         };
         let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
-        assert_eq!(s.on_dead_realtime(1, 500), None, "not dead");
+        assert_eq!(s.on_dead_realtime(1, 380, 500), None, "not dead");
         assert_eq!(s.on_death(1, "agent 2 died"), Some(Action::TakeDown(1)));
-        let a = s.on_dead_realtime(1, 500);
+        let a = s.on_dead_realtime(1, 380, 500);
         assert_eq!(
             a,
             Some(Action::Respawn(Plan {
                 agent: 1,
-                down_from: 500,
+                down_from: 380,
                 rejoin_at: 500,
                 warm: true,
                 scheduled: false,

@@ -81,6 +81,9 @@ pub struct Takeover {
     /// every command in one is its agent's own until it is taken down; realtime: a command with
     /// its send stamp, not the plant's fallback).
     last_seen: Vec<Option<Instant>>,
+    /// Realtime: the step after the last one whose record holds each agent's own command (with
+    /// its send stamp): where its down window starts when it dies or falls silent.
+    flown_to: Vec<Option<u64>>,
     /// When the supervision last acted (a death handled, a take-down seen, a successor started or
     /// joined): a stall is counted from it or from the last step recorded, whichever is later.
     last_action: Instant,
@@ -138,6 +141,7 @@ impl Takeover {
             scenario_hash: restart::scenario_hash(scenario.to_toml_string().as_bytes()),
             checkpoints_refused: vec![0; n],
             last_seen: vec![None; n],
+            flown_to: vec![None; n],
             last_action: Instant::now(),
             startup: None,
             on_failure: scenario.runtime.restart == RestartPolicy::OnFailure,
@@ -193,6 +197,7 @@ impl Takeover {
         for (i, e) in entries.iter().enumerate() {
             if !self.realtime || e.command.sent_ns != 0 {
                 self.last_seen[i] = Some(now);
+                self.flown_to[i] = Some(k + 1);
             }
             self.history.set_state(k, i, e.truth.state);
             self.history
@@ -316,7 +321,10 @@ impl Takeover {
                         });
                         children[FIRST_AGENT + i].kill_and_reap();
                         node.try_cleanup_dead_nodes();
-                        match self.supervisor.on_dead_realtime(i, recorded) {
+                        let from = self.flown_to[i]
+                            .unwrap_or(recorded)
+                            .max(self.history.oldest());
+                        match self.supervisor.on_dead_realtime(i, from, recorded) {
                             Some(a) => a,
                             None => return Err(format!("{line}; stopping the run")),
                         }
@@ -614,8 +622,10 @@ impl Takeover {
             rejoin_at: plan.rejoin_at,
             recorded_from: self.history.oldest(),
         };
+        // The down window's states too: the re-seed observes the fallback over all of it.
         let first = window
             .first_needed(self.capacity as u64)
+            .min(plan.down_from)
             .max(self.history.oldest());
         let file = RejoinFile {
             agent: i,
