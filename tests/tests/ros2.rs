@@ -72,12 +72,21 @@ fn script(name: &str) -> PathBuf {
 
 /// A DDS domain for one test, so that tests running at once do not hear each other.
 fn random_domain() -> u16 {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
+    // Tests of this binary run side by side: two runs on one domain would hear each other (a
+    // realtime run's subscriber read the lockstep run's poses). A per-process base (time, process)
+    // plus a counter gives every test of this process its own domain.
+    static NEXT: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    static BASE: std::sync::OnceLock<u32> = std::sync::OnceLock::new();
+    let base = *BASE.get_or_init(|| {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.subsec_nanos())
+            .unwrap_or(0);
+        nanos ^ std::process::id().wrapping_mul(2_654_435_761)
+    });
+    let k = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     // 1..=200: inside ROS 2's usable range, never the default domain 0.
-    1 + ((nanos ^ std::process::id().wrapping_mul(2_654_435_761)) % 200) as u16
+    1 + ((base % 200 + k) % 200) as u16
 }
 
 /// Rows of `trajectory.csv`: (agent id 1-based, t, position) in file order.
