@@ -1,5 +1,6 @@
-//! The errors of `formation bench`: a bad argument (exit 2, [`ArgError`]) and what failed in a
-//! case or a peer process (exit 1 for the bench, [`CaseError`]).
+//! The errors of `formation bench`: a bad argument ([`ArgError`]), what failed in a case or a
+//! peer process ([`CaseError`]), and why the command ([`BenchError`]) or a peer process
+//! ([`PeerError`]) did not succeed, which the CLI maps to exit codes (docs/cli.md).
 
 use std::error::Error;
 
@@ -57,11 +58,64 @@ pub enum ArgError {
     ZenohNeedsMultihost,
 }
 
-impl ArgError {
-    /// The exit code of `formation bench` for a bad argument: 2 (docs/cli.md).
-    pub fn exit_code(&self) -> u8 {
-        formation_runtime::cli::EXIT_INVALID
-    }
+/// Why `formation bench` did not succeed; its `Display` is the message on stderr.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// A bad argument (bad input).
+    #[error("error: {0}")]
+    Arg(#[from] ArgError),
+    /// `--host` with `--seconds` outside (0, 3600] (bad input).
+    #[error("error: --seconds {0}: expected 0 < s <= 3600")]
+    HostSeconds(f64),
+    /// The bench's own iceoryx2 node could not be made.
+    #[error("error: {0}")]
+    Node(formation_config::node::ipc::IpcError),
+    /// Ctrl-C: the cases measured so far are not reported.
+    #[error("formation bench: interrupted")]
+    Interrupted,
+    /// Cases failed (each said on stderr as it failed); the others are reported.
+    #[error("formation bench: {0} case(s) failed")]
+    CasesFailed(usize),
+}
+
+/// Why a `formation bench-peer` process stopped; its `Display` is the message on stderr.
+#[derive(Debug, thiserror::Error)]
+pub enum PeerError {
+    /// `--transport` names no transport (bad input).
+    #[error("formation bench-peer: unknown transport '{0}'")]
+    Transport(String),
+    /// `--wait` names no waiting strategy (bad input).
+    #[error("formation bench-peer: unknown wait strategy '{0}'")]
+    Wait(String),
+    /// `--payload` outside its range, bytes (bad input).
+    #[error("formation bench-peer: payload {0} out of range")]
+    Payload(usize),
+    /// `--prefix` is no valid iceoryx2 prefix (bad input).
+    #[error("formation bench-peer: invalid prefix '{0}'")]
+    Prefix(String),
+    /// `--cpu` could not be applied (bad input).
+    #[error("formation bench-peer: cannot pin to cpu {cpu}: {source}")]
+    Pin {
+        /// The CPU of `--cpu`.
+        cpu: usize,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// `--batch` could not be applied (bad input).
+    #[error("formation bench-peer: {0}")]
+    Batch(formation_config::node::error::NodeError),
+    /// The case failed in this peer.
+    #[error("formation bench-peer {transport} #{index} (case {case}): {source}")]
+    Case {
+        /// The transport of `--transport`.
+        transport: String,
+        /// The agent index of `--index`.
+        index: u32,
+        /// The case number of `--case`.
+        case: usize,
+        /// What failed.
+        source: CaseError,
+    },
 }
 
 /// What failed in a case of `formation bench` or in a peer process.

@@ -37,13 +37,11 @@ mod zenoh;
 
 pub use peer::{main as peer_main, PeerArgs};
 
-use error::ArgError;
+use error::{ArgError, BenchError};
 use formation_config::node::ipc as fipc;
 use formation_config::protocol::services::run_prefix;
-use formation_runtime::cli::EXIT_INVALID;
 use link::{Budget, Sizes, MAX_PAYLOAD, MIN_PAYLOAD};
 use plan::{PlanInput, Transport};
-use std::process::ExitCode;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 /// Largest `--n` (agent processes).
@@ -125,11 +123,10 @@ pub struct BenchArgs {
 }
 
 /// `formation bench --host`: the bare timer loop, alternated normal / SCHED_FIFO per round.
-fn host_main(args: &BenchArgs) -> ExitCode {
+fn host_main(args: &BenchArgs) -> Result<(), BenchError> {
     use formation_runtime::run::{host_probe, rt};
     if !(args.seconds > 0.0 && args.seconds <= 3600.0) {
-        eprintln!("error: --seconds {}: expected 0 < s <= 3600", args.seconds);
-        return ExitCode::from(EXIT_INVALID);
+        return Err(BenchError::HostSeconds(args.seconds));
     }
     let fifo = rt::decide(rt::Requested::Auto, false, rt::Privilege::of_this_process())
         .map(|s| s.priority)
@@ -163,7 +160,7 @@ fn host_main(args: &BenchArgs) -> ExitCode {
     if args.json {
         println!("{}", serde_json::json!({ "host": rows }));
     }
-    ExitCode::SUCCESS
+    Ok(())
 }
 
 fn parse_transports(s: &str) -> Result<Vec<Transport>, ArgError> {
@@ -268,20 +265,14 @@ fn unique_prefix() -> String {
     run_prefix(&format!("b{}t{:x}", std::process::id(), t & 0xff_ffff))
 }
 
-/// Entry point of `formation bench`: 0 on success, 1 if a case failed, 2 on bad arguments, 130
-/// when interrupted.
-pub fn main(args: BenchArgs) -> ExitCode {
+/// Entry point of `formation bench`: measures every case and prints the table (or JSON); fails
+/// on a bad argument, a failed case or Ctrl-C.
+pub fn main(args: BenchArgs) -> Result<(), BenchError> {
     if args.host {
         return host_main(&args);
     }
     let allowed = procs::allowed_cpus();
-    let inputs = match validate(&args, &allowed) {
-        Ok(i) => i,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(e.exit_code());
-        }
-    };
+    let inputs = validate(&args, &allowed)?;
     let (cases, skipped) = plan_all(&inputs);
     let zenoh = inputs
         .first()
@@ -310,14 +301,10 @@ pub fn main(args: BenchArgs) -> ExitCode {
             ""
         }
     );
-    let node = match fipc::node(&prefix, "bench-plant") {
-        Ok(n) => n,
-        Err(e) => {
-            eprintln!("error: {e}");
-            let _ = fipc::remove_residue(&prefix);
-            return ExitCode::from(1);
-        }
-    };
+    let node = fipc::node(&prefix, "bench-plant").map_err(|e| {
+        let _ = fipc::remove_residue(&prefix);
+        BenchError::Node(e)
+    })?;
     let ctx = case::Ctx {
         node: &node,
         prefix: &prefix,
@@ -348,8 +335,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         Err(e) => eprintln!("warning: could not remove iceoryx2 files of {prefix}: {e}"),
     }
     if procs::aborted() {
-        eprintln!("formation bench: interrupted");
-        return ExitCode::from(130);
+        return Err(BenchError::Interrupted);
     }
     let rows = lockstep::median_rows(&rounds);
     let comparisons = lockstep::across_rounds_per_n(&versus::without_zenoh(&rounds));
@@ -366,10 +352,9 @@ pub fn main(args: BenchArgs) -> ExitCode {
         );
     }
     if failures > 0 {
-        eprintln!("formation bench: {failures} case(s) failed");
-        return ExitCode::from(1);
+        return Err(BenchError::CasesFailed(failures));
     }
-    ExitCode::SUCCESS
+    Ok(())
 }
 
 /// One round: for each N in turn, its cases, then its lockstep run if planned. Appends the rows to

@@ -5,10 +5,9 @@ use super::link::{self, Wait, MAX_PAYLOAD, MIN_PAYLOAD};
 use super::plan::Transport;
 use super::procs;
 use super::sock::{self, SockLink};
-use crate::error::{CaseError, ResultExt};
+use crate::error::{CaseError, PeerError, ResultExt};
 use formation_config::node::ipc as fipc;
 use std::net::SocketAddr;
-use std::process::ExitCode;
 use std::time::Duration;
 
 /// Arguments of the hidden `formation bench-peer` (started by `formation bench` only).
@@ -58,47 +57,35 @@ pub struct PeerArgs {
     pub pattern: Option<String>,
 }
 
-/// Entry point of `formation bench-peer`: exit 0 after STOP, 1 on failure, 2 on bad arguments.
-pub fn main(a: PeerArgs) -> ExitCode {
-    let bad = |msg: String| {
-        eprintln!("formation bench-peer: {msg}");
-        ExitCode::from(2)
-    };
-    let Some(transport) = Transport::parse(&a.transport) else {
-        return bad(format!("unknown transport '{}'", a.transport));
-    };
+/// Entry point of `formation bench-peer`: runs until STOP; fails on a bad argument or a failed
+/// case.
+pub fn main(a: PeerArgs) -> Result<(), PeerError> {
+    let transport =
+        Transport::parse(&a.transport).ok_or_else(|| PeerError::Transport(a.transport.clone()))?;
     let wait = match a.wait.as_str() {
         "block" => Wait::Block,
         "busy" => Wait::Busy,
         "spin-block" => Wait::SpinBlock(Duration::from_micros(a.spin_us)),
-        w => return bad(format!("unknown wait strategy '{w}'")),
+        w => return Err(PeerError::Wait(w.to_string())),
     };
     if !(MIN_PAYLOAD..=MAX_PAYLOAD).contains(&a.payload) {
-        return bad(format!("payload {} out of range", a.payload));
+        return Err(PeerError::Payload(a.payload));
     }
     if !fipc::is_valid_prefix(&a.prefix) {
-        return bad(format!("invalid prefix '{}'", a.prefix));
+        return Err(PeerError::Prefix(a.prefix.clone()));
     }
     if let Some(cpu) = a.cpu {
-        if let Err(e) = procs::set_affinity(&[cpu]) {
-            return bad(format!("cannot pin to cpu {cpu}: {e}"));
-        }
+        procs::set_affinity(&[cpu]).map_err(|source| PeerError::Pin { cpu, source })?;
     }
     if a.batch {
-        if let Err(e) = formation_config::node::sched::batch_policy() {
-            return bad(e.to_string());
-        }
+        formation_config::node::sched::batch_policy().map_err(PeerError::Batch)?;
     }
-    match run(&a, transport, wait) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!(
-                "formation bench-peer {} #{} (case {}): {e}",
-                a.transport, a.index, a.case
-            );
-            ExitCode::from(1)
-        }
-    }
+    run(&a, transport, wait).map_err(|source| PeerError::Case {
+        transport: a.transport.clone(),
+        index: a.index,
+        case: a.case,
+        source,
+    })
 }
 
 fn run(a: &PeerArgs, transport: Transport, wait: Wait) -> Result<(), CaseError> {

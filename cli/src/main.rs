@@ -13,12 +13,17 @@
 use clap::{CommandFactory, Parser, Subcommand};
 use std::process::ExitCode;
 
+use check::CheckError;
 use formation_analysis::{check, plot, scenario_gen, sweep};
 use formation_bench as bench;
+use formation_bench::error::{BenchError, PeerError};
 use formation_live::error::LiveError;
 use formation_live::{inject, inspect, ps, schema};
 use formation_runtime::error::CommandError;
 use formation_runtime::{cli, role, run, sim};
+use plot::PlotError;
+use scenario_gen::ScenarioError;
+use sweep::SweepError;
 
 /// Neural adaptive fault-tolerant formation control of quadrotors (enclosing and covering a target).
 #[derive(Parser, Debug)]
@@ -143,11 +148,11 @@ fn main() -> ExitCode {
     match cli.command {
         Some(Command::Sim(a)) => ended(sim::main(a)),
         Some(Command::Run(a)) => ended(run::main(a)),
-        Some(Command::Scenario(a)) => scenario_gen::main(a),
-        Some(Command::Sweep(a)) => sweep::main(a),
-        Some(Command::Plot(a)) => plot::main(a),
-        Some(Command::Check(a)) => check::main(a),
-        Some(Command::Bench(a)) => bench::main(a),
+        Some(Command::Scenario(a)) => ended(scenario_gen::main(a)),
+        Some(Command::Sweep(a)) => ended(sweep::main(a)),
+        Some(Command::Plot(a)) => ended(plot::main(a)),
+        Some(Command::Check(a)) => ended(check::main(a)),
+        Some(Command::Bench(a)) => ended(bench::main(a)),
         Some(Command::Ps(a)) => ended(ps::main(a)),
         Some(Command::Inspect(a)) => ended(inspect::main(a)),
         Some(Command::Inject(a)) => ended(inject::main(a)),
@@ -156,28 +161,27 @@ fn main() -> ExitCode {
             completions(a.shell, &mut std::io::stdout());
             ExitCode::SUCCESS
         }
-        Some(Command::BenchPeer(a)) => bench::peer_main(a),
+        Some(Command::BenchPeer(a)) => ended(bench::peer_main(a)),
         Some(Command::Node(a)) => ended(role::main(a)),
         #[cfg(feature = "multihost")]
-        Some(Command::Host(a)) => formation_host::host_main(a),
+        Some(Command::Host(a)) => ended(formation_host::host_main(a)),
         #[cfg(feature = "multihost")]
-        Some(Command::Hosts(a)) => formation_host::hosts_main(a),
+        Some(Command::Hosts(a)) => ended(formation_host::hosts_main(a)),
         #[cfg(feature = "multihost")]
-        Some(Command::Certs(a)) => formation_host::certs_main(a),
+        Some(Command::Certs(a)) => ended(formation_host::certs_main(a)),
         // Bare `formation` is `formation run` with every default, parsed by clap like the subcommand.
         None => ended(run::main(cli::defaults::<run::RunArgs>("run"))),
     }
 }
 
-/// The exit code of a command whose failure is typed (`sim`, `run`, `node`, `ps`, `inspect`,
-/// `inject`, `schema`), its error said on stderr: the one place that maps those errors to exit
-/// codes (docs/cli.md).
+/// The exit code of a command, its error said on stderr: the one place that maps the typed
+/// errors of every command to exit codes (docs/cli.md).
 fn ended<E: Failure>(result: Result<(), E>) -> ExitCode {
     let Err(e) = result else {
         return ExitCode::SUCCESS;
     };
     if !e.already_said() {
-        eprintln!("{e}");
+        eprintln!("{}{e}", e.prefix());
     }
     ExitCode::from(e.exit_code())
 }
@@ -190,6 +194,101 @@ trait Failure: std::fmt::Display {
     /// Whether the message is on stderr already.
     fn already_said(&self) -> bool {
         false
+    }
+    /// What goes before the message on stderr: `error: ` for an error whose `Display` only says
+    /// what failed (it is also part of other messages), nothing for one whose `Display` is the
+    /// whole message.
+    fn prefix(&self) -> &'static str {
+        ""
+    }
+}
+
+impl Failure for CheckError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            CheckError::Input(_) => cli::EXIT_INVALID,
+            CheckError::Failed => cli::EXIT_RESULT_FAILED,
+            CheckError::Json(_) => 1,
+        }
+    }
+
+    fn already_said(&self) -> bool {
+        // The report with its FAIL verdicts is printed.
+        matches!(self, CheckError::Failed)
+    }
+}
+
+impl Failure for ScenarioError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            ScenarioError::Options(_) | ScenarioError::Invalid(_) => cli::EXIT_INVALID,
+            ScenarioError::Json(_) | ScenarioError::Write { .. } => 1,
+        }
+    }
+}
+
+impl Failure for SweepError {
+    /// Every failure of a sweep is of its input: the base scenario, a `--vary`, the output
+    /// folder, or samples that are all invalid.
+    fn exit_code(&self) -> u8 {
+        cli::EXIT_INVALID
+    }
+
+    fn prefix(&self) -> &'static str {
+        "error: "
+    }
+}
+
+impl Failure for PlotError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            PlotError::Input(_) => cli::EXIT_INVALID,
+            PlotError::Render(_) => 1,
+        }
+    }
+
+    fn prefix(&self) -> &'static str {
+        "error: "
+    }
+}
+
+impl Failure for BenchError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            BenchError::Arg(_) | BenchError::HostSeconds(_) => cli::EXIT_INVALID,
+            BenchError::Interrupted => cli::EXIT_INTERRUPTED,
+            BenchError::Node(_) | BenchError::CasesFailed(_) => 1,
+        }
+    }
+}
+
+impl Failure for PeerError {
+    fn exit_code(&self) -> u8 {
+        match self {
+            PeerError::Transport(_)
+            | PeerError::Wait(_)
+            | PeerError::Payload(_)
+            | PeerError::Prefix(_)
+            | PeerError::Pin { .. }
+            | PeerError::Batch(_) => cli::EXIT_INVALID,
+            PeerError::Case { .. } => 1,
+        }
+    }
+}
+
+#[cfg(feature = "multihost")]
+impl Failure for formation_host::HostError {
+    fn exit_code(&self) -> u8 {
+        use formation_host::HostError;
+        match self {
+            HostError::Name(_)
+            | HostError::Link(_)
+            | HostError::MaxRtPriority(_)
+            | HostError::Serve(_)
+            | HostError::Unreachable(_)
+            | HostError::Certs(_) => cli::EXIT_INVALID,
+            HostError::Exe(_) => 1,
+        }
     }
 }
 
@@ -277,6 +376,148 @@ mod tests {
             LiveError::Confirm(ConfirmError::Ended("r".into())).exit_code(),
             1
         );
+    }
+
+    /// Exit code, whether already said, and the line on stderr of `e`.
+    fn said<E: Failure>(e: &E) -> (u8, bool, String) {
+        (
+            e.exit_code(),
+            e.already_said(),
+            format!("{}{e}", e.prefix()),
+        )
+    }
+
+    fn json_error() -> serde_json::Error {
+        serde_json::from_str::<u8>("x").expect_err("not a number")
+    }
+
+    #[test]
+    fn check_refuses_bad_input_with_2_fails_a_fail_verdict_with_3_and_a_report_it_cannot_write_with_1(
+    ) {
+        use formation_runtime::cli::InputError;
+        let (code, quiet, line) = said(&CheckError::Input(InputError::Variant("x".into())));
+        assert_eq!((code, quiet), (2, false));
+        assert!(line.starts_with("error: ") && line.contains('x'), "{line}");
+        assert_eq!(said(&CheckError::Failed).0, 3);
+        assert!(CheckError::Failed.already_said(), "the report said it");
+        let (code, _, line) = said(&CheckError::Json(json_error()));
+        assert_eq!(code, 1);
+        assert!(line.starts_with("error: cannot write the report as JSON: "));
+    }
+
+    #[test]
+    fn scenario_refuses_an_option_with_2_and_a_file_it_cannot_write_with_1() {
+        use formation_analysis::scenario_gen::GenError;
+        let (code, _, line) = said(&ScenarioError::Options(GenError::Graph("star".into())));
+        assert_eq!(code, 2);
+        assert_eq!(
+            line,
+            "error: --graph star: expected ring, path, k-nearest, complete or random-connected"
+        );
+        let write = ScenarioError::Write {
+            path: "x.toml".into(),
+            source: std::io::Error::other("disk full"),
+        };
+        assert_eq!(
+            said(&write),
+            (1, false, "error: cannot write x.toml: disk full".into())
+        );
+        assert_eq!(said(&ScenarioError::Json(json_error())).0, 1);
+    }
+
+    #[test]
+    fn sweep_refuses_every_failure_as_bad_input_naming_the_option() {
+        let twice = SweepError::Twice("delay.max".into());
+        assert_eq!(
+            said(&twice),
+            (2, false, "error: --vary delay.max: given twice".into())
+        );
+        assert_eq!(said(&SweepError::NoSamples).0, 2);
+    }
+
+    #[test]
+    fn plot_refuses_a_bad_run_folder_with_2_and_a_figure_it_cannot_draw_with_1() {
+        let missing = PlotError::Input("no trajectory.csv in out/x".into());
+        assert_eq!(
+            said(&missing),
+            (2, false, "error: no trajectory.csv in out/x".into())
+        );
+        assert_eq!(said(&PlotError::Render("font".into())).0, 1);
+    }
+
+    #[test]
+    fn bench_refuses_an_argument_with_2_fails_a_case_with_1_and_stops_on_ctrl_c_with_130() {
+        use formation_bench::error::ArgError;
+        assert_eq!(
+            said(&BenchError::Arg(ArgError::Seconds(-1.0))),
+            (
+                2,
+                false,
+                "error: --seconds must be in (0, 3600], got -1".into()
+            )
+        );
+        assert_eq!(
+            said(&BenchError::HostSeconds(0.0)),
+            (
+                2,
+                false,
+                "error: --seconds 0: expected 0 < s <= 3600".into()
+            )
+        );
+        assert_eq!(
+            said(&BenchError::CasesFailed(2)),
+            (1, false, "formation bench: 2 case(s) failed".into())
+        );
+        assert_eq!(
+            said(&BenchError::Interrupted),
+            (130, false, "formation bench: interrupted".into())
+        );
+    }
+
+    #[test]
+    fn a_bench_peer_refuses_an_argument_with_2_and_fails_its_case_with_1() {
+        use formation_bench::error::CaseError;
+        assert_eq!(
+            said(&PeerError::Transport("tcp".into())),
+            (
+                2,
+                false,
+                "formation bench-peer: unknown transport 'tcp'".into()
+            )
+        );
+        let case = PeerError::Case {
+            transport: "udp".into(),
+            index: 3,
+            case: 7,
+            source: CaseError::Idle,
+        };
+        assert_eq!(
+            said(&case),
+            (
+                1,
+                false,
+                "formation bench-peer udp #3 (case 7): no step arrived in time".into()
+            )
+        );
+    }
+
+    #[cfg(feature = "multihost")]
+    #[test]
+    fn host_refuses_a_bad_name_with_2_and_fails_without_its_executable_with_1() {
+        use formation_host::HostError;
+        assert_eq!(
+            said(&HostError::Name("a b".into())),
+            (
+                2,
+                false,
+                "error: --name 'a b': a host name is 1..=32 of [A-Za-z0-9_-]".into()
+            )
+        );
+        let exe = HostError::Exe(formation_runtime::run::SpawnError::Exe(
+            std::io::Error::other("gone"),
+        ));
+        assert_eq!(said(&exe).0, 1);
+        assert_eq!(said(&HostError::Unreachable(Vec::new())).0, 2);
     }
 
     #[test]

@@ -3,12 +3,11 @@
 //! `tls/` endpoints). The daemon itself is [`crate::daemon`]; this module is its command
 //! line. See docs/multi-host.md.
 
+use crate::error::HostError;
 use formation_net::session::{self, Mode};
 use formation_net::tls;
-use formation_runtime::cli;
 use formation_runtime::link::{ignore_sigpipe, LinkArgs};
 use std::path::PathBuf;
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -84,36 +83,20 @@ pub fn machine_name() -> String {
 }
 
 /// `formation host`.
-pub fn host_main(a: HostArgs) -> ExitCode {
+pub fn host_main(a: HostArgs) -> Result<(), HostError> {
     ignore_sigpipe();
     let name = a.name.clone().unwrap_or_else(machine_name);
     if !formation_net::proto::valid_name(&name) {
-        eprintln!("error: --name '{name}': a host name is 1..=32 of [A-Za-z0-9_-]");
-        return ExitCode::from(cli::EXIT_INVALID);
+        return Err(HostError::Name(name));
     }
     let listen = if a.listen.is_empty() {
-        match session::local_endpoint(&name) {
-            Ok(ep) => vec![ep],
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::from(cli::EXIT_INVALID);
-            }
-        }
+        vec![session::local_endpoint(&name)?]
     } else {
         a.listen.clone()
     };
     let opts = a.link.options(Mode::Daemon, listen, a.connect.clone());
-    if let Err(e) = opts.check() {
-        eprintln!("error: {e}");
-        return ExitCode::from(cli::EXIT_INVALID);
-    }
-    let exe = match formation_runtime::run::self_exe() {
-        Ok(e) => e,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(1);
-        }
-    };
+    opts.check()?;
+    let exe = formation_runtime::run::self_exe()?;
     let stop = Arc::new(AtomicBool::new(false));
     {
         let s = stop.clone();
@@ -135,17 +118,12 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         .clone()
         .unwrap_or_else(|| crate::daemon::default_root(&name));
     // A daemon's agents block on events like the run's plant: no busy loop under SCHED_FIFO.
-    let granted = match formation_runtime::run::rt::decide(
+    let granted = formation_runtime::run::rt::decide(
         a.max_rt_priority,
         false,
         formation_runtime::run::rt::Privilege::of_this_process(),
-    ) {
-        Ok(g) => g,
-        Err(e) => {
-            eprintln!("error: --max-rt-priority: {e}");
-            return ExitCode::from(cli::EXIT_INVALID);
-        }
-    };
+    )
+    .map_err(HostError::MaxRtPriority)?;
     eprintln!(
         "formation host: {name}: a realtime run's agents and message path get at most {granted}"
     );
@@ -156,27 +134,15 @@ pub fn host_main(a: HostArgs) -> ExitCode {
         root,
         max_rt_priority: granted.priority,
     };
-    match crate::daemon::serve(o, &stop) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(cli::EXIT_INVALID)
-        }
-    }
+    Ok(crate::daemon::serve(o, &stop)?)
 }
 
 /// `formation hosts`: one client session per `--connect` endpoint, all at once, merged by daemon
 /// identity (`formation_net::survey`). Exit 2 when no endpoint could be reached at all; an
 /// endpoint that cannot be reached while others can is named in a warning.
-pub fn hosts_main(a: HostsArgs) -> ExitCode {
+pub fn hosts_main(a: HostsArgs) -> Result<(), HostError> {
     let mut connect = if a.connect.is_empty() {
-        match session::local_endpoints() {
-            Ok(v) => v,
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::from(cli::EXIT_INVALID);
-            }
-        }
+        session::local_endpoints()?
     } else {
         a.connect.clone()
     };
@@ -185,17 +151,11 @@ pub fn hosts_main(a: HostsArgs) -> ExitCode {
     connect.retain(|ep| seen.insert(ep.clone()));
     // Malformed endpoints or credentials: exit 2 before anything is opened.
     let opts = a.link.options(Mode::Client, vec![], connect.clone());
-    if let Err(e) = opts.check() {
-        eprintln!("error: {e}");
-        return ExitCode::from(cli::EXIT_INVALID);
-    }
+    opts.check()?;
     let t = Duration::from_millis(a.timeout_ms);
     let survey = formation_net::survey::survey(&opts, t);
     if survey.failed.len() == connect.len() {
-        for (ep, e) in &survey.failed {
-            eprintln!("error: {ep}: {e}");
-        }
-        return ExitCode::from(cli::EXIT_INVALID);
+        return Err(HostError::Unreachable(survey.failed));
     }
     for (ep, e) in &survey.failed {
         eprintln!("warning: {ep}: {e}");
@@ -224,7 +184,7 @@ pub fn hosts_main(a: HostsArgs) -> ExitCode {
             eprintln!("no host answered within {t:?} (start one with `formation host`)");
         }
     }
-    ExitCode::SUCCESS
+    Ok(())
 }
 
 /// Arguments of `formation certs`.
@@ -267,7 +227,7 @@ pub enum CertsCommand {
 }
 
 /// `formation certs`.
-pub fn certs_main(a: CertsArgs) -> ExitCode {
+pub fn certs_main(a: CertsArgs) -> Result<(), HostError> {
     let r = match a.what {
         CertsCommand::Init { dir } => tls::init(&dir),
         CertsCommand::Issue {
@@ -289,16 +249,8 @@ pub fn certs_main(a: CertsArgs) -> ExitCode {
             )
         }
     };
-    match r {
-        Ok(files) => {
-            for f in files {
-                println!("{}", f.display());
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(cli::EXIT_INVALID)
-        }
+    for f in r? {
+        println!("{}", f.display());
     }
+    Ok(())
 }

@@ -437,7 +437,10 @@ impl Daemon {
         })
     }
 
-    fn prepare(&mut self, r: RunRequest) -> Result<(), Refusal> {
+    /// Checks a run request against this daemon before anything of the run is made: its build,
+    /// ids, scenario, placement and limits, and (co-located) this host's `/dev/shm`. Returns the
+    /// request with the real-time priority this daemon grants, its scenario and its variant.
+    fn admit(&self, r: RunRequest) -> Result<(RunRequest, Scenario, Variant), Refusal> {
         let diff = identity::differences(&r.identity, &self.me);
         if !diff.is_empty() {
             return Err(Refusal::Differ {
@@ -503,6 +506,14 @@ impl Daemon {
         if let Some(c) = &r.colocated {
             self.check_colocated(&r, c)?;
         }
+        Ok((r, scenario, variant))
+    }
+
+    /// Prepares a run ([`Daemon::admit`]ted): its private folder and scenario, and unless it is
+    /// co-located its membership, node and bridge.
+    fn prepare(&mut self, r: RunRequest) -> Result<(), Refusal> {
+        let (r, scenario, variant) = self.admit(r)?;
+        let n = scenario.n_agents();
         let dir = self.o.root.join(&r.run_id);
         // The daemon's own log names the folder; the refusal does not.
         private_dir(&dir).map_err(|e| {

@@ -5,9 +5,12 @@
 //!   `formation_net::daemon_link`.
 //! * [`commands`]: the command lines of `formation host`, `formation hosts` (the daemons an
 //!   orchestrator can reach) and `formation certs` (a CA and per-host certificates).
+//! * [`error`]: why one of them did not succeed ([`HostError`]).
 
 pub mod commands;
 pub mod daemon;
+pub mod error;
 pub mod refusal;
 
 pub use commands::{certs_main, host_main, hosts_main, CertsArgs, HostArgs, HostsArgs};
+pub use error::HostError;

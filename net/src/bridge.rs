@@ -1040,6 +1040,58 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
+/// Drains the run's events and topics into `frames` (one per destination host), pass after pass
+/// until one finds nothing (at most [`DRAIN_PASSES`]), into the same frames: what comes in while
+/// the bridge drains goes out with it. `fired` holds one flag per event. Returns whether the last
+/// pass still found something.
+fn drain_into(
+    frames: &mut [Vec<u8>],
+    events: &[OutEvent],
+    topics: &mut [OutTopic],
+    fired: &mut [bool],
+    stats: &Stats,
+) -> bool {
+    let mut more = false;
+    for _ in 0..DRAIN_PASSES {
+        more = false;
+        // Events first: any sample published before a notification we saw is in its queue now;
+        // each pass appends its samples, then its events.
+        for (k, e) in events.iter().enumerate() {
+            let mut got = false;
+            let _ = e.listener.try_wait(|_| got = true);
+            fired[k] = got;
+            more |= got;
+        }
+        for t in topics.iter_mut() {
+            let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
+            let r = (t.drain)(&mut |bytes| {
+                for &d in dests {
+                    put_sample(&mut frames[d], name, type_name, bytes);
+                }
+            });
+            match r {
+                Ok(n) => {
+                    more |= n > 0;
+                    stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
+                }
+                Err(e) => tracing::warn!("bridge: {name}: {e}"),
+            }
+        }
+        for (k, e) in events.iter().enumerate() {
+            if fired[k] {
+                for &d in &e.dests {
+                    put_event(&mut frames[d], &e.name);
+                }
+                stats.events_out.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if !more {
+            break;
+        }
+    }
+    more
+}
+
 fn run_out(
     session: zenoh::Session,
     mut cfg: BridgeConfig,
@@ -1117,46 +1169,7 @@ fn run_out(
             if let Ok(r) = replan.try_recv() {
                 break Some(r);
             }
-            // Pass after pass until one finds nothing (at most DRAIN_PASSES), into the same
-            // frames: what comes in while the bridge drains goes out with it.
-            let mut more = false;
-            for _ in 0..DRAIN_PASSES {
-                more = false;
-                // Events first: any sample published before a notification we saw is in its
-                // queue now; each pass appends its samples, then its events.
-                for (k, e) in events.iter().enumerate() {
-                    let mut got = false;
-                    let _ = e.listener.try_wait(|_| got = true);
-                    fired[k] = got;
-                    more |= got;
-                }
-                for t in topics.iter_mut() {
-                    let (dests, name, type_name) = (&t.dests, &t.name, t.type_name);
-                    let r = (t.drain)(&mut |bytes| {
-                        for &d in dests {
-                            put_sample(&mut frames[d], name, type_name, bytes);
-                        }
-                    });
-                    match r {
-                        Ok(n) => {
-                            more |= n > 0;
-                            stats.samples_out.fetch_add(n as u64, Ordering::Relaxed);
-                        }
-                        Err(e) => tracing::warn!("bridge: {name}: {e}"),
-                    }
-                }
-                for (k, e) in events.iter().enumerate() {
-                    if fired[k] {
-                        for &d in &e.dests {
-                            put_event(&mut frames[d], &e.name);
-                        }
-                        stats.events_out.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
-                if !more {
-                    break;
-                }
-            }
+            let more = drain_into(&mut frames, &events, &mut topics, &mut fired, &stats);
             for (d, f) in frames.iter_mut().enumerate() {
                 if f.len() > header {
                     let mut f = std::mem::replace(f, from.clone());

@@ -62,7 +62,6 @@ use formation_config::scenario::graph::Topology;
 use formation_config::Scenario;
 use formation_runtime::cli::load_with_overrides;
 use serde::Serialize;
-use std::process::ExitCode;
 pub use verdict::{Level, Verdict};
 
 /// Arguments of `formation check`.
@@ -345,38 +344,40 @@ fn inner_reports(
     (filters, inner)
 }
 
-/// Entry point of `formation check`.
-pub fn main(args: CheckArgs) -> ExitCode {
-    let loaded = load_with_overrides(args.scenario.as_deref(), &args.sets)
-        .and_then(|s| Ok((s, formation_runtime::cli::parse_variant(&args.variant)?)));
-    let (s, variant) = match loaded {
-        Ok(v) => v,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(formation_runtime::cli::EXIT_INVALID);
-        }
-    };
+/// Why `formation check` did not succeed; its `Display` is the message on stderr.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    /// The scenario, an override or the variant is refused (bad input).
+    #[error("error: {0}")]
+    Input(#[from] formation_runtime::cli::InputError),
+    /// The report could not be written as JSON.
+    #[error("error: cannot write the report as JSON: {0}")]
+    Json(serde_json::Error),
+    /// The report is printed and a verdict is FAIL (a result that is a failure; WARN verdicts do
+    /// not fail the command). Nothing more is said.
+    #[error("a verdict is FAIL")]
+    Failed,
+}
+
+/// Entry point of `formation check`: prints the report; fails when a verdict is FAIL.
+pub fn main(args: CheckArgs) -> Result<(), CheckError> {
+    let s = load_with_overrides(args.scenario.as_deref(), &args.sets)?;
+    let variant = formation_runtime::cli::parse_variant(&args.variant)?;
     let r = report_for(&s, variant);
     if args.json {
-        match serde_json::to_string_pretty(&r) {
-            Ok(text) => println!("{text}"),
-            Err(e) => {
-                eprintln!("error: cannot write the report as JSON: {e}");
-                return ExitCode::from(1);
-            }
-        }
+        let text = serde_json::to_string_pretty(&r).map_err(CheckError::Json)?;
+        println!("{text}");
     } else {
         print!("{}", render::text(&r));
     }
-    exit_code(r.worst)
+    verdict_of(r.worst)
 }
 
-/// Exit code of a report that was printed: 0 unless a verdict is FAIL, then
-/// [`formation_runtime::cli::EXIT_RESULT_FAILED`] (3). WARN verdicts do not fail the command.
-pub fn exit_code(worst: Level) -> ExitCode {
+/// The outcome of a report that was printed: [`CheckError::Failed`] when a verdict is FAIL.
+pub fn verdict_of(worst: Level) -> Result<(), CheckError> {
     match worst {
-        Level::Fail => ExitCode::from(formation_runtime::cli::EXIT_RESULT_FAILED),
-        Level::Ok | Level::Info | Level::Warn => ExitCode::SUCCESS,
+        Level::Fail => Err(CheckError::Failed),
+        Level::Ok | Level::Info | Level::Warn => Ok(()),
     }
 }
 

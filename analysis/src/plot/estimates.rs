@@ -72,7 +72,6 @@ pub fn delta<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     )
 }
 
-#[allow(clippy::too_many_arguments)]
 fn per_channel<DB: Backend>(
     fig: &Figure,
     root: &Area<DB>,

@@ -7,7 +7,6 @@
 
 use plotters::prelude::IntoDrawingArea;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 mod attitude;
 mod data;
@@ -91,17 +90,6 @@ impl std::fmt::Display for PlotError {
 
 impl std::error::Error for PlotError {}
 
-impl PlotError {
-    /// The exit code of `formation plot` for this error: 2 for bad input, 1 for a figure that
-    /// could not be drawn or written (docs/cli.md).
-    pub fn exit_code(&self) -> u8 {
-        match self {
-            PlotError::Input(_) => formation_runtime::cli::EXIT_INVALID,
-            PlotError::Render(_) => 1,
-        }
-    }
-}
-
 /// One figure written: its path and size, px.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Rendered {
@@ -113,21 +101,14 @@ pub struct Rendered {
     pub height: u32,
 }
 
-/// Entry point of `formation plot`.
-pub fn main(args: PlotArgs) -> ExitCode {
-    match run(&args) {
-        Ok(files) => {
-            println!("wrote {} figures:", files.len());
-            for f in &files {
-                println!("  {}", f.path.display());
-            }
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(e.exit_code())
-        }
+/// Entry point of `formation plot`: renders every figure and lists the files written.
+pub fn main(args: PlotArgs) -> Result<(), PlotError> {
+    let files = run(&args)?;
+    println!("wrote {} figures:", files.len());
+    for f in &files {
+        println!("  {}", f.path.display());
     }
+    Ok(())
 }
 
 /// Loads the run(s) and renders every figure; returns the files written.

@@ -12,12 +12,11 @@ pub mod graphs;
 pub mod radii;
 pub mod rings;
 
-use formation_config::scenario::validate::validate;
+use formation_config::scenario::validate::{validate, ValidationErrors};
 use formation_config::scenario::Scenario;
-use formation_runtime::cli::EXIT_INVALID;
+
 use graphs::GraphKind;
 use std::path::PathBuf;
-use std::process::ExitCode;
 
 /// Arguments of `formation scenario`.
 #[derive(clap::Args, Debug)]
@@ -182,13 +181,6 @@ pub enum GenError {
     },
 }
 
-impl GenError {
-    /// The exit code of `formation scenario` for this error: 2, bad input (docs/cli.md).
-    pub fn exit_code(&self) -> u8 {
-        EXIT_INVALID
-    }
-}
-
 /// The paper scenario scaled to `opts`.
 pub fn generate(opts: &GenOptions) -> Result<Scenario, GenError> {
     generate_from(&Scenario::paper(), opts)
@@ -306,49 +298,55 @@ fn options(args: &ScenarioArgs) -> Result<GenOptions, GenError> {
     })
 }
 
-/// Entry point of `formation scenario`.
-pub fn main(args: ScenarioArgs) -> ExitCode {
-    let s = match options(&args).and_then(|o| generate(&o)) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return ExitCode::from(e.exit_code());
-        }
-    };
-    if let Err(errs) = validate(&s) {
-        eprintln!("error: the generated scenario is invalid:");
-        for e in &errs.0 {
-            eprintln!("  {e}");
-        }
-        return ExitCode::from(EXIT_INVALID);
-    }
+/// Why `formation scenario` did not write its scenario; its `Display` is the message on stderr.
+#[derive(Debug, thiserror::Error)]
+pub enum ScenarioError {
+    /// An option is refused (bad input).
+    #[error("error: {0}")]
+    Options(#[from] GenError),
+    /// The generated scenario breaks an assumption of the paper (bad input: the options ask for
+    /// it): every error, one per line.
+    #[error("error: the generated scenario is invalid:\n{}", indented(.0))]
+    Invalid(ValidationErrors),
+    /// The scenario could not be written as JSON.
+    #[error("error: cannot write the scenario as JSON: {0}")]
+    Json(serde_json::Error),
+    /// `--out` could not be written.
+    #[error("error: cannot write {}: {source}", path.display())]
+    Write {
+        /// The file of `--out`.
+        path: std::path::PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+}
+
+/// Each error on its own line, indented by two spaces.
+fn indented(errors: &ValidationErrors) -> String {
+    let lines: Vec<String> = errors.0.iter().map(|e| format!("  {e}")).collect();
+    lines.join("\n")
+}
+
+/// Entry point of `formation scenario`: writes the generated scenario to `--out` or stdout.
+pub fn main(args: ScenarioArgs) -> Result<(), ScenarioError> {
+    let s = generate(&options(&args)?)?;
+    validate(&s).map_err(ScenarioError::Invalid)?;
     let text = if args.json {
-        match serde_json::to_string_pretty(&s) {
-            Ok(j) => j + "\n",
-            Err(e) => {
-                eprintln!("error: cannot write the scenario as JSON: {e}");
-                return ExitCode::from(1);
-            }
-        }
+        serde_json::to_string_pretty(&s).map_err(ScenarioError::Json)? + "\n"
     } else {
         s.to_toml_string()
     };
     match &args.out {
-        Some(path) => match std::fs::write(path, text) {
-            Ok(()) => {
-                eprintln!("wrote {}", path.display());
-                ExitCode::SUCCESS
-            }
-            Err(e) => {
-                eprintln!("error: cannot write {}: {e}", path.display());
-                ExitCode::from(1)
-            }
-        },
-        None => {
-            print!("{text}");
-            ExitCode::SUCCESS
+        Some(path) => {
+            std::fs::write(path, text).map_err(|source| ScenarioError::Write {
+                path: path.clone(),
+                source,
+            })?;
+            eprintln!("wrote {}", path.display());
         }
+        None => print!("{text}"),
     }
+    Ok(())
 }
 
 #[cfg(test)]

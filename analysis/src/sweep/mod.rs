@@ -15,7 +15,6 @@ pub mod spec;
 use formation_runtime::cli;
 use report::{Outcome, Progress, SampleError};
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::Instant;
@@ -86,25 +85,12 @@ pub enum SweepError {
     },
 }
 
-impl SweepError {
-    /// The exit code of `formation sweep` for this error: 2 for every one (docs/cli.md).
-    pub fn exit_code(&self) -> u8 {
-        cli::EXIT_INVALID
-    }
+/// Entry point of `formation sweep`: runs the samples and writes `sweep.csv` and `sweep.json`.
+pub fn main(args: SweepArgs) -> Result<(), SweepError> {
+    run(&args)
 }
 
-/// Entry point of `formation sweep`.
-pub fn main(args: SweepArgs) -> ExitCode {
-    match run(&args) {
-        Ok(code) => code,
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::from(e.exit_code())
-        }
-    }
-}
-
-fn run(args: &SweepArgs) -> Result<ExitCode, SweepError> {
+fn run(args: &SweepArgs) -> Result<(), SweepError> {
     let (base, variant) = args.common.load().map_err(SweepError::Base)?;
     let vary = args
         .vary
@@ -181,7 +167,7 @@ fn run(args: &SweepArgs) -> Result<ExitCode, SweepError> {
             first: summary.first_error.as_deref().unwrap_or("-").to_string(),
         });
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// Runs every sample on `jobs` threads; outcomes in sample order.

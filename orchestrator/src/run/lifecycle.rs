@@ -143,15 +143,18 @@ impl<'p> Run<'p> {
             injections: injections::Injections::open(&node, scenario, &run_dir)?,
             registration,
         };
+        let respawn = takeover::Respawn {
+            exe,
+            args: base,
+            pins: site.pins.clone(),
+            remote: remote.clone(),
+        };
         let mut takeover = takeover::Takeover::open(
             &node,
             scenario,
             plan.variant,
-            exe,
-            base,
-            site.pins.clone(),
+            respawn,
             formation_config::protocol::pacing::PLANT_LEAD + injections::SLACK,
-            remote.clone(),
         )
         .map_err(RunError::Takeover)?;
         takeover.set_realtime(mode.realtime);
@@ -179,37 +182,30 @@ impl<'p> Run<'p> {
     /// failure.
     pub fn drive(mut self, interrupted: &AtomicBool) -> Run<'p> {
         let scenario = &self.plan.scenario;
-        let n = scenario.n_agents();
+        let mut crew = driver::Crew {
+            ports: &self.ports,
+            node: &self.node,
+            children: &mut self.children.0,
+            takeover: &mut self.takeover,
+            interrupted,
+        };
         // The wall time of the run is that of its steps: from every role process ready (after
         // any start-up) to the last step recorded.
         let mut wall = Duration::ZERO;
-        let (outcome, recorded) = match driver::wait_for_hellos(
-            &self.ports,
-            n,
-            &mut self.children.0,
-            interrupted,
-            &mut self.takeover,
-            &self.node,
-        ) {
+        let (outcome, recorded) = match driver::wait_for_hellos(&mut crew, scenario.n_agents()) {
             Ok(startup) => {
-                self.takeover.set_startup(startup);
+                crew.takeover.set_startup(startup);
                 // An agent started afresh meanwhile: `formation ps` lists its new process.
                 self.live
                     .registration
-                    .follow_processes(self.children.0.iter().map(|c| (c.pid(), c.host())));
+                    .follow_processes(crew.children.iter().map(|c| (c.pid(), c.host())));
                 let start = Instant::now();
-                let result = driver::drive(
-                    &self.ports,
-                    &mut self.live,
-                    &formation_leader::Mission::from_scenario(scenario),
-                    &mut self.recorder,
-                    scenario,
-                    &mut self.children.0,
-                    interrupted,
-                    &mut self.step_timing,
-                    &mut self.takeover,
-                    &self.node,
-                );
+                let outputs = driver::Outputs {
+                    recorder: &mut self.recorder,
+                    live: &mut self.live,
+                    step_timing: &mut self.step_timing,
+                };
+                let result = driver::drive(crew, outputs, scenario);
                 wall = start.elapsed();
                 result
             }

@@ -101,7 +101,7 @@ pub struct RunArgs {
     pub export: export::ExportArgs,
 }
 
-pub use spawn::self_exe;
+pub use spawn::{self_exe, SpawnError};
 
 /// How a run is paced.
 #[derive(Debug, Clone, Copy)]

@@ -49,6 +49,32 @@ pub struct Incident {
     started: Instant,
 }
 
+/// A child found dead, stopped or silent, for [`Takeover::on_death`].
+pub struct Death {
+    /// Its index among the children (plant, leader, then the agents from [`FIRST_AGENT`]).
+    pub idx: usize,
+    /// The line naming it and what happened.
+    pub line: String,
+    /// Killed by the supervision (stopped or silent), not found dead.
+    pub hung: bool,
+    /// Wall time since it was last seen working.
+    pub since_seen: Duration,
+}
+
+/// How a successor agent process is started: the executable, an agent's command line (its
+/// index and rejoin step are set per process), the run's placement, and the other hosts of a
+/// multi-host run (agents there are respawned there, their checkpoints fetched first).
+pub struct Respawn {
+    /// The `formation` executable.
+    pub exe: PathBuf,
+    /// An agent's command line.
+    pub args: ChildArgs,
+    /// The run's placement (where a successor starts).
+    pub pins: super::governor::Pins,
+    /// The other hosts, if any.
+    pub remote: Option<std::rc::Rc<super::remote::RemoteRun>>,
+}
+
 /// Everything the takeover of agents needs.
 pub struct Takeover {
     supervisor: Supervisor,
@@ -94,20 +120,22 @@ pub struct Takeover {
 }
 
 impl Takeover {
-    /// Opens the ports; `args` is an agent's command line (its index and rejoin step are set per
-    /// process), `pins` the run's placement (where a successor starts).
-    #[allow(clippy::too_many_arguments)] // the run's parts, each its own kind
-                                         // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
+    /// Opens the ports; `respawn` says how a successor starts, `lead`: steps ahead of the recorder
+    /// that an announcement must be (the plant's lead plus slack).
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn open(
         node: &RunNode,
         scenario: &Scenario,
         variant: formation_config::Variant,
-        exe: PathBuf,
-        args: ChildArgs,
-        pins: super::governor::Pins,
+        respawn: Respawn,
         lead: u64,
-        remote: Option<std::rc::Rc<super::remote::RemoteRun>>,
     ) -> Result<Takeover, String> {
+        let Respawn {
+            exe,
+            args,
+            pins,
+            remote,
+        } = respawn;
         let n = scenario.n_agents();
         let timeline = scenario.timeline();
         let dt = scenario.simulation.dt_s;
@@ -258,20 +286,22 @@ impl Takeover {
         Ok(())
     }
 
-    /// A child exited or died (`idx` among the children, `line` naming it): `Ok` when the run goes
+    /// A child exited, died or was killed as hung ([`Death`]): `Ok` when the run goes
     /// on (the timeline killed it, or it is being replaced), `Err` with the line to print.
-    #[allow(clippy::too_many_arguments)] // what was seen, and the run's parts
-                                         // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
+    // String: the supervision stops a run with the line it prints (`Outcome::Died`, `Failed`).
     pub fn on_death(
         &mut self,
-        idx: usize,
-        line: String,
-        hung: bool,
-        since_seen: Duration,
+        death: Death,
         recorded: u64,
         node: &RunNode,
         children: &mut [RoleProcess],
     ) -> Result<(), String> {
+        let Death {
+            idx,
+            line,
+            hung,
+            since_seen,
+        } = death;
         let Some(i) = idx.checked_sub(FIRST_AGENT) else {
             return Err(format!(
                 "{line}; stopping the run (plant and leader are not restarted)"
