@@ -38,6 +38,17 @@ fn run_with_scenario(s: &Scenario, file: &str, args: &[&str]) -> std::process::O
 }
 
 #[test]
+fn a_host_daemon_named_like_the_launcher_exits_2_with_one_line_before_it_opens_anything() {
+    let dir = temp_dir("host-name-local");
+    let o = formation(&dir, &["host", "--name", "local"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert_eq!(
+        stderr(&o).trim_end(),
+        "error: --name 'local': use 1..=32 characters of [A-Za-z0-9_-] (and not 'local')"
+    );
+}
+
+#[test]
 fn check_with_a_delay_above_tau_m_exits_2_naming_the_field_and_assumption_2() {
     let mut s = Scenario::paper();
     s.agents[2].delay.base_s = 0.045; // 0.045 + 0.015 > tau_M = 0.05
