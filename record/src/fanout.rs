@@ -84,3 +84,82 @@ impl Fanout {
         live.into_iter().collect::<std::io::Result<()>>().and(files)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+    use std::sync::{Arc, Mutex};
+
+    /// What a test sink saw: steps, events, whether it finished.
+    #[derive(Default)]
+    struct Seen {
+        steps: Vec<u64>,
+        events: usize,
+        finished: bool,
+    }
+
+    struct Probe(Cadence, Arc<Mutex<Seen>>);
+
+    impl Sink for Probe {
+        fn cadence(&self) -> Cadence {
+            self.0
+        }
+        fn step(&mut self, s: &Step<'_>) -> std::io::Result<()> {
+            self.1.lock().unwrap().steps.push(s.step);
+            Ok(())
+        }
+        fn event(&mut self, _: &serde_json::Value) -> std::io::Result<()> {
+            self.1.lock().unwrap().events += 1;
+            Ok(())
+        }
+        fn finish(self: Box<Self>) -> std::io::Result<()> {
+            self.1.lock().unwrap().finished = true;
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn live_sinks_get_every_step_files_the_output_steps_and_both_every_event() {
+        let (live, file, late) = (Arc::default(), Arc::default(), Arc::default());
+        let mut out = Fanout::new(vec![
+            Box::new(Probe(Cadence::Every, Arc::clone(&live))),
+            Box::new(Probe(Cadence::Output, Arc::clone(&file))),
+        ])
+        .unwrap();
+        assert!(out.takes_every_step());
+        let (reference, truths, commands, errors) = (
+            ReferenceFrame::default(),
+            [PlantTruth::default()],
+            [ControlCommand::default()],
+            [0.0],
+        );
+        for k in 0..25 {
+            if k == 12 {
+                out.add(Box::new(Probe(Cadence::Every, Arc::clone(&late))))
+                    .unwrap();
+                out.event(&serde_json::json!({"event": "fault"})).unwrap();
+            }
+            let s = Step {
+                step: k,
+                reference: &reference,
+                truths: &truths,
+                commands: &commands,
+                errors: &errors,
+            };
+            // Output steps: every 10th and a divergence at 23.
+            out.step(&s, k % 10 == 0 || k == 23).unwrap();
+        }
+        out.finish().unwrap();
+        let (live, file, late) = (
+            live.lock().unwrap(),
+            file.lock().unwrap(),
+            late.lock().unwrap(),
+        );
+        assert_eq!(live.steps, (0..25).collect::<Vec<_>>());
+        assert_eq!(file.steps, vec![0, 10, 20, 23]);
+        assert_eq!(late.steps, (12..25).collect::<Vec<_>>());
+        assert_eq!((live.events, file.events, late.events), (1, 1, 1));
+        assert!(live.finished && file.finished && late.finished);
+    }
+}

@@ -274,7 +274,6 @@ impl LiveRos2 {
             decimation: s.output_decimation(),
         })
     }
-
 }
 
 /// The live topics take the steps `trajectory.csv` records at its decimation (not the step of a
