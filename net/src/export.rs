@@ -29,9 +29,9 @@
 //! or sample of a full queue is replaced, without a lock; the recorder and the publishers never
 //! wait for this reader), the thread runs at background priority, and the Zenoh publishers use
 //! `CongestionControl::Drop`: a reader that is slow or far away loses samples, it never holds the
-//! lockstep back. Each sample carries its step, so a
-//! reader sees what it lost. A key no reader subscribes to (Zenoh's matching status) is not put
-//! at all: without readers the export only drains its queues.
+//! lockstep back. Each sample carries its step, so a reader sees what it lost. A key no reader
+//! subscribes to (Zenoh's matching status) is not put at all: without readers the export only
+//! drains its queues.
 //!
 //! The end of a run ([`Export::finish`], before the role processes are stopped, bounded by
 //! [`END_BOUND`]): the export catches up with the last step recorded (it may lag behind a run

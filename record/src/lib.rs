@@ -1,6 +1,9 @@
 //! The recorder: turns the per-step messages of a run (reference frame, plant truths, control
-//! commands) into `trajectory.csv` (decimated), `summary.json` (metrics computed on every step)
-//! and, with `--record mcap`, `run.mcap` (the decimated steps and the injections, for Foxglove).
+//! commands) into `summary.json` (metrics computed on every step) and hands every step to the
+//! run's outputs, each a [`Sink`]: `trajectory.csv` (decimated), `run.mcap` and the rosbag2 (the
+//! decimated steps and the injections) on the writer thread; the live Foxglove view, the live
+//! ROS 2 topics and the Zenoh export (added by the runtime, [`Recorder::add_sink`]) at every step,
+//! without waiting.
 //!
 //! Both runners feed it the same messages, so the files of an in-process run and of a lockstep run
 //! over iceoryx2 are byte-identical when the trajectories are.
