@@ -2,17 +2,20 @@
 //! ENDPOINT`): any Zenoh program (the PyPI binding `eclipse-zenoh`, Zenoh's own tools) on another
 //! machine reads the run without iceoryx2 and without a `formation` build.
 //!
-//! One thread with its own iceoryx2 node under the run's prefix reads the run as an outside
-//! observer (one of the `--observers` slots): it sleeps on the orchestrator's wake-up event (the
-//! plant raises it every `ACK_EVERY` steps) and then drains the step records, the reference, the
-//! runtime events and every agent's telemetry, and puts each sample on Zenoh:
+//! One thread puts the run on Zenoh. The steps come from the recorder, as to every other output
+//! of the run: the recorder hands each step it records (the step record, its reference) to a
+//! [`StepFeed`], a bounded queue that never waits. What the recorder does not see, the runtime
+//! events and every agent's telemetry, the thread reads from the run's iceoryx2 services as an
+//! outside observer (one of the `--observers` slots, its own node under the run's prefix). It
+//! sleeps on the orchestrator's wake-up event (the plant raises it every `ACK_EVERY` steps), then
+//! drains the feed and the services and puts each sample on Zenoh:
 //!
 //! | key | payload | encoding schema |
 //! |---|---|---|
 //! | `formation/<run>/info` | queryable: JSON ([`info_json`]) | `application/json` |
 //! | `formation/<run>/state/<agent>` | `VehicleState` of quadrotor `<agent>` (1-based), every step | `formation.v2.VehicleState` |
 //! | `formation/<run>/steps` | the step record: N `StepEntry` back to back, every step | `formation.v2.StepEntry` |
-//! | `formation/<run>/reference` | `ReferenceFrame` of every step | `formation.v1.ReferenceFrame` |
+//! | `formation/<run>/reference` | `ReferenceFrame` of every step recorded | `formation.v1.ReferenceFrame` |
 //! | `formation/<run>/events` | `RuntimeEvent` (crash, hang, link, loss, takeover, ...) | `formation.v1.RuntimeEvent` |
 //! | `formation/<run>/telemetry/<agent>` | `AgentTelemetry` of agent `<agent>` (1-based), latest | `formation.v1.AgentTelemetry` |
 //! | `formation/<run>/end` | JSON [`EndReport`], once, after the run's last step | `application/json` |
@@ -22,32 +25,36 @@
 //! state of quadrotor i is the `state` part of its step record's plant truth: the very value the
 //! plant publishes on `formation/agent/{i}/state` (with its send stamp `sent_ns` 0).
 //!
-//! Nothing here can slow the run: the iceoryx2 subscribers overflow (the oldest sample of a full
-//! queue is replaced; the publishers never wait for this reader), the thread runs at background
-//! priority, and the Zenoh publishers use `CongestionControl::Drop`: a reader that is slow or far
-//! away loses samples, it never holds the lockstep back. Each sample carries its step, so a
-//! reader sees what it lost. A key no reader subscribes to (Zenoh's matching status) is not put
-//! at all: without readers the export only drains its queues.
+//! Nothing here can slow the run: the feed and the iceoryx2 subscribers overflow (the oldest step
+//! or sample of a full queue is replaced, without a lock; the recorder and the publishers never
+//! wait for this reader), the thread runs at background priority, and the Zenoh publishers use
+//! `CongestionControl::Drop`: a reader that is slow or far away loses samples, it never holds the
+//! lockstep back. Each sample carries its step, so a reader sees what it lost. A key no reader
+//! subscribes to (Zenoh's matching status) is not put at all: without readers the export only
+//! drains its queues.
 //!
 //! The end of a run ([`Export::finish`], before the role processes are stopped, bounded by
 //! [`END_BOUND`]): the export catches up with the last step recorded (it may lag behind a run
 //! that ends while it is starved), puts `formation/<run>/end` (JSON, [`EndReport`]) and keeps its
 //! session open until no reader subscribes any more (a reader that has its last step leaves) or
 //! the bound is over; then it undeclares its publishers and closes. What it could not read
-//! (steps overwritten in its iceoryx2 queue while it was starved) is counted in
+//! (steps overwritten in its feed while it was starved) is counted in
 //! [`EndReport::steps_missed`]; what Zenoh dropped on the way to a slow reader only the reader
 //! sees (each payload carries its step).
 
 use crate::bridge::{wire_bytes, wire_slice_bytes};
 use crate::error::ZenohError;
 use crate::session::{Mode, OptionError, Options};
+use crossbeam_queue::ArrayQueue;
 use formation_config::node::error::PortError;
 use formation_config::node::ipc;
-use formation_config::node::ports::{self, Input, Sub, Wake};
+use formation_config::node::ports::{self, Input, Wake};
 use formation_config::protocol::layout::{every_type, TypeLayout, WireLayout};
 use formation_config::protocol::messages::{RuntimeEvent, StepEntry};
 use formation_config::protocol::services::{self, wire_type_name, Message};
-use formation_config::protocol::wire::{AgentTelemetry, ReferenceFrame, VehicleState};
+use formation_config::protocol::wire::{
+    AgentTelemetry, ControlCommand, PlantTruth, ReferenceFrame, VehicleState,
+};
 use serde_json::{json, Value};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -68,6 +75,13 @@ pub const IDLE_WAKE: Duration = Duration::from_millis(100);
 /// subscribed (a dashboard) holds the run's exit by this bound, not more.
 pub const END_BOUND: Duration = Duration::from_millis(2000);
 
+/// Steps the [`StepFeed`] holds for the export thread: 1024, one second of the paper's 1 kHz
+/// steps, far more than the thread lags behind between two wake-ups (`ACK_EVERY` steps) when it
+/// gets the CPU; a thread starved for longer loses the oldest steps, counted in
+/// [`EndReport::steps_missed`]. Memory: at most twice this many steps of one reference and N step
+/// entries each (about 12 KiB a step for the paper's five agents).
+pub const FEED_CAPACITY: usize = 1024;
+
 /// How often [`Export::finish`] looks whether the export caught up and whether readers are left:
 /// 1 ms, small against [`END_BOUND`] and against a reader's own latency.
 const END_POLL: Duration = Duration::from_millis(1);
@@ -86,7 +100,10 @@ pub const INFO_FORMAT: &str = "formation-zenoh-info/1";
 pub struct Exported {
     /// Topic: the key is `formation/<run>/<topic>` or `formation/<run>/<topic>/<agent>`.
     pub topic: &'static str,
-    /// The iceoryx2 service the samples are read from (`{i}`: 0-based agent index).
+    /// The iceoryx2 service whose samples the payloads are (`{i}`: 0-based agent index): read
+    /// from it (events, telemetry), or handed over by the recorder, which records them from it
+    /// (the step record and the state in it; the reference, computed with the leader's code bit
+    /// for bit).
     pub service: &'static str,
     /// One key per agent.
     pub per_agent: bool,
@@ -288,8 +305,8 @@ pub struct Stats {
     pub steps_read: AtomicU64,
     /// One past the highest step read (0: none yet).
     pub next_step: AtomicU64,
-    /// Steps the export never read: overwritten in its iceoryx2 queue while it was starved (gaps
-    /// in the steps it read).
+    /// Steps the export never read: overwritten in its feed while it was starved (gaps in the
+    /// steps it read).
     pub steps_missed: AtomicU64,
 }
 
@@ -313,8 +330,8 @@ pub struct EndReport {
     pub recorded: u64,
     /// Step records the export read and put (to every reader subscribed then).
     pub steps_exported: u64,
-    /// Steps the export never read (its iceoryx2 queue overflowed while it was starved): no reader
-    /// got them.
+    /// Steps the export never read (its feed overflowed while it was starved): no reader got
+    /// them.
     pub steps_missed: u64,
     /// One past the last step exported (`recorded` when it caught up).
     pub next_step: u64,
@@ -359,9 +376,15 @@ pub struct Export {
     queryable: Option<zenoh::query::Queryable<()>>,
     session: zenoh::Session,
     run_id: String,
+    feed: Arc<Feed>,
 }
 
 impl Export {
+    /// The queue the recorder hands the run's steps to.
+    pub fn feed(&self) -> StepFeed {
+        StepFeed(self.feed.clone())
+    }
+
     /// Ends the export with a run that recorded `recorded` steps (call it before the role
     /// processes stop: their queued samples go with them): waits until the export has read step
     /// `recorded - 1` (or the bound), stops its thread after a last drain, puts the end marker and
@@ -448,14 +471,6 @@ pub enum ExportError {
     /// A service of the run cannot be opened or read.
     #[error("export: {0}")]
     Port(#[from] PortError),
-    /// The step records cannot be received.
-    #[error("export: {pattern}: {why}")]
-    Steps {
-        /// The service pattern.
-        pattern: &'static str,
-        /// iceoryx2's error.
-        why: String,
-    },
     /// The export thread cannot be started.
     #[error("export: cannot start a thread: {0}")]
     Thread(std::io::Error),
@@ -464,11 +479,65 @@ pub enum ExportError {
     Ended,
 }
 
+/// One step as the recorder recorded it.
+struct Fed {
+    reference: ReferenceFrame,
+    entries: Vec<StepEntry>,
+}
+
+/// The queue between the recorder and the export thread, and the spent steps it hands back (so a
+/// step costs the recorder two copies, no allocation).
+struct Feed {
+    queue: ArrayQueue<Box<Fed>>,
+    spare: ArrayQueue<Box<Fed>>,
+}
+
+impl Feed {
+    fn new() -> Feed {
+        Feed {
+            queue: ArrayQueue::new(FEED_CAPACITY),
+            spare: ArrayQueue::new(FEED_CAPACITY),
+        }
+    }
+}
+
+/// The recorder's end of the export: [`StepFeed::offer`] hands a recorded step to the export
+/// thread and never waits.
+pub struct StepFeed(Arc<Feed>);
+
+impl StepFeed {
+    /// Step `reference.step` as recorded: its reference, the plant's truths and the commands of
+    /// the N agents (the step record). A full feed drops its oldest step (counted by the export
+    /// as missed); no lock is taken.
+    pub fn offer(
+        &self,
+        reference: &ReferenceFrame,
+        truths: &[PlantTruth],
+        commands: &[ControlCommand],
+    ) {
+        let mut fed = self.0.spare.pop().unwrap_or_else(|| {
+            Box::new(Fed {
+                reference: ReferenceFrame::default(),
+                entries: Vec::with_capacity(truths.len()),
+            })
+        });
+        fed.reference = *reference;
+        fed.entries.clear();
+        fed.entries.extend(
+            truths
+                .iter()
+                .zip(commands)
+                .map(|(&truth, &command)| StepEntry { truth, command }),
+        );
+        if let Some(oldest) = self.0.queue.force_push(fed) {
+            let _ = self.0.spare.push(oldest);
+        }
+    }
+}
+
 /// The export thread's ports.
 struct Readers {
     wake: Wake,
-    steps: Sub<[StepEntry]>,
-    reference: Input<ReferenceFrame>,
     events: Input<RuntimeEvent>,
     telemetry: Vec<Input<AgentTelemetry>>,
 }
@@ -477,8 +546,6 @@ impl Readers {
     fn open(node: &ports::RunNode, n: usize) -> Result<Readers, ExportError> {
         Ok(Readers {
             wake: Wake::open(node, &services::WAKE_ORCHESTRATOR.named())?,
-            steps: ports::slice_subscriber(node, &services::STEPS.named())?,
-            reference: ports::subscriber(node, &services::REFERENCE.named())?,
             events: ports::subscriber(node, &services::RUNTIME_EVENTS.named())?,
             telemetry: (0..n)
                 .map(|i| ports::subscriber(node, &services::TELEMETRY.at(i)))
@@ -569,14 +636,11 @@ impl Writers {
     }
 }
 
-/// Drains every reader and puts what it held; the number of samples read.
-fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, ExportError> {
+/// Drains the feed and every reader and puts what they held; the number of samples read.
+fn drain(feed: &Feed, r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, ExportError> {
     let mut n = 0;
-    while let Some(s) = r.steps.receive().map_err(|e| ExportError::Steps {
-        pattern: services::STEPS.pattern,
-        why: format!("{e:?}"),
-    })? {
-        let entries: &[StepEntry] = s.payload();
+    while let Some(fed) = feed.queue.pop() {
+        let entries: &[StepEntry] = &fed.entries;
         if let Some(first) = entries.first() {
             let step = first.truth.state.step;
             let next = stats.next_step.load(Ordering::Relaxed);
@@ -590,10 +654,8 @@ fn drain(r: &Readers, w: &Writers, stats: &Stats) -> Result<usize, ExportError> 
             p.put(wire_bytes(&entry.truth.state), stats);
         }
         w.steps.put(wire_slice_bytes(entries), stats);
-        n += 1;
-    }
-    while let Some(s) = r.reference.receive()? {
-        w.reference.put(wire_bytes(s.payload()), stats);
+        w.reference.put(wire_bytes(&fed.reference), stats);
+        let _ = feed.spare.push(fed);
         n += 1;
     }
     while let Some(s) = r.events.receive()? {
@@ -663,15 +725,16 @@ impl Listening {
         let finishing = Arc::new(AtomicBool::new(false));
         let run_id = cfg.facts.run_id.clone();
         let (ready_tx, ready_rx) = mpsc::channel::<Result<(), ExportError>>();
+        let feed = Arc::new(Feed::new());
         let thread = {
             let flags = Flags {
                 stop: stop.clone(),
                 finishing: finishing.clone(),
             };
-            let stats = stats.clone();
+            let (stats, feed) = (stats.clone(), feed.clone());
             std::thread::Builder::new()
                 .name("export".into())
-                .spawn(move || run(cfg, writers, flags, stats, ready_tx))
+                .spawn(move || run(cfg, writers, feed, flags, stats, ready_tx))
                 .map_err(ExportError::Thread)?
         };
         let mut export = Export {
@@ -682,6 +745,7 @@ impl Listening {
             queryable: Some(queryable),
             session,
             run_id,
+            feed,
         };
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(export),
@@ -701,11 +765,12 @@ struct Flags {
     finishing: Arc<AtomicBool>,
 }
 
-/// The export thread: drains the run's services into `writers` until told to stop; returns the
-/// writers, so the end of the export still knows its readers.
+/// The export thread: drains the feed and the run's services into `writers` until told to stop;
+/// returns the writers, so the end of the export still knows its readers.
 fn run(
     cfg: ExportConfig,
     writers: Writers,
+    feed: Arc<Feed>,
     flags: Flags,
     stats: Arc<Stats>,
     ready: mpsc::Sender<Result<(), ExportError>>,
@@ -731,7 +796,7 @@ fn run(
     loop {
         // Read before draining: samples published up to the stop are still put.
         let stopping = flags.stop.load(Ordering::SeqCst);
-        if let Err(e) = drain(&readers, &writers, &stats) {
+        if let Err(e) = drain(&feed, &readers, &writers, &stats) {
             tracing::warn!("{e}");
         }
         if stopping {
@@ -800,6 +865,33 @@ mod tests {
             r.line(),
             "export: 9990 of 10000 steps put, 10 missed by the export (its queue overflowed); drained in 3 ms, no reader left after 41 ms (bound 2000 ms)"
         );
+    }
+
+    #[test]
+    fn a_full_feed_drops_its_oldest_steps_and_the_gap_counts_them() {
+        let feed = StepFeed(Arc::new(Feed::new()));
+        let (truths, commands) = ([PlantTruth::default(); 5], [ControlCommand::default(); 5]);
+        let extra = 7;
+        for k in 0..(FEED_CAPACITY + extra) as u64 {
+            let reference = ReferenceFrame {
+                step: k,
+                ..ReferenceFrame::default()
+            };
+            let mut truths = truths;
+            truths.iter_mut().for_each(|t| t.state.step = k);
+            feed.offer(&reference, &truths, &commands);
+        }
+        let first = feed.0.queue.pop().expect("a step");
+        assert_eq!(first.entries.len(), 5);
+        let step = first.entries[0].truth.state.step;
+        assert_eq!((step, first.reference.step), (extra as u64, extra as u64));
+        assert_eq!(steps_skipped(0, step), extra as u64);
+        // The newest step is kept: a starved export still ends on the run's last step.
+        let mut last = step;
+        while let Some(f) = feed.0.queue.pop() {
+            last = f.entries[0].truth.state.step;
+        }
+        assert_eq!(last, (FEED_CAPACITY + extra - 1) as u64);
     }
 
     #[test]

@@ -1,38 +1,21 @@
 //! `trajectory.csv` (columns documented in docs/formats.md). Floats are written in their shortest
 //! round-trip form, so equal trajectories give byte-equal files.
 
-use super::metrics::Metrics;
-use super::sink::{Sink, StepRows};
-use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use super::sink::{Cadence, Sink, Step};
 use formation_config::Scenario;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
-use std::sync::mpsc::RecvTimeoutError;
-use std::time::{Duration, Instant};
 
-/// Longest time written rows stay in the writer's buffer.
-pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
-
-/// Output steps handed to the writer thread in one message. Every message wakes the sleeping
-/// writer thread: a futex wake-up on the simulation thread, 6 % of `formation sim`'s samples when
-/// each step was a message of its own (`perf record`, paper scenario, 2-vCPU VM, 2026-12-03).
-pub const STEPS_PER_BATCH: usize = 64;
-
-/// Longest time an output step waits in a batch before the batch is handed over anyway, so a
-/// run on the wall clock (100 output steps a second at the paper's decimation) still reaches its
-/// file within `BATCH_LATENCY + FLUSH_EVERY`.
-pub const BATCH_LATENCY: Duration = Duration::from_millis(100);
-
-/// The columns of `trajectory.csv`, in file order (meanings and units: docs/formats.md). The
-/// writer's header and every reader take their names from here.
+/// The columns of `trajectory.csv`, in file order, each with its unit and meaning: the one list the
+/// writer's header, docs/formats.md (checked by a test) and every reader take their names from.
 macro_rules! columns {
-    ($($variant:ident = $name:literal,)*) => {
+    ($($variant:ident = $name:literal, $unit:literal, $meaning:literal;)*) => {
         /// One column of `trajectory.csv`; its position in the file is its index in [`Column::ALL`].
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
         pub enum Column {
             $(
-                #[doc = concat!("`", $name, "` (docs/formats.md)")]
+                #[doc = concat!("`", $name, "`: ", $meaning, " (", $unit, ")")]
                 $variant,
             )*
         }
@@ -47,6 +30,25 @@ macro_rules! columns {
                     $(Column::$variant => $name,)*
                 }
             }
+
+            /// Its unit (SI; `-` for a count or a number without unit).
+            pub const fn unit(self) -> &'static str {
+                match self {
+                    $(Column::$variant => $unit,)*
+                }
+            }
+
+            /// What it holds ("true": from the plant; a command or estimate: from the controller).
+            pub const fn meaning(self) -> &'static str {
+                match self {
+                    $(Column::$variant => $meaning,)*
+                }
+            }
+
+            /// The column named `name` in a header.
+            pub fn named(name: &str) -> Option<Column> {
+                Column::ALL.iter().copied().find(|c| c.name() == name)
+            }
         }
 
         /// Column names, in file order (the header line).
@@ -55,269 +57,78 @@ macro_rules! columns {
 }
 
 columns! {
-    Step = "step",
-    T = "t",
-    Agent = "agent",
-    Px = "px",
-    Py = "py",
-    Pz = "pz",
-    Vx = "vx",
-    Vy = "vy",
-    Vz = "vz",
-    Phi = "phi",
-    Theta = "theta",
-    Psi = "psi",
-    P = "p",
-    Q = "q",
-    R = "r",
-    Pdx = "pdx",
-    Pdy = "pdy",
-    Pdz = "pdz",
-    Ex = "ex",
-    Ey = "ey",
-    Ez = "ez",
-    ENorm = "e_norm",
-    Tx = "tx",
-    Ty = "ty",
-    Upx = "upx",
-    Upy = "upy",
-    Upz = "upz",
-    Thrust = "thrust",
-    PhiC = "phi_c",
-    ThetaC = "theta_c",
-    PsiC = "psi_c",
-    PhiCRaw = "phi_c_raw",
-    ThetaCRaw = "theta_c_raw",
-    AlphaX = "alpha_x",
-    AlphaY = "alpha_y",
-    AlphaZ = "alpha_z",
-    AttNorm = "att_norm",
-    AttCmdNorm = "att_cmd_norm",
-    C1Bar = "c1_bar",
-    RateNorm = "rate_norm",
-    AlphaNorm = "alpha_norm",
-    C2Bar = "c2_bar",
-    Blf1 = "blf1",
-    Blf2 = "blf2",
-    UAcX = "u_ac_x",
-    UAcY = "u_ac_y",
-    UAcZ = "u_ac_z",
-    UAX = "u_a_x",
-    UAY = "u_a_y",
-    UAZ = "u_a_z",
-    GammaX = "gamma_x",
-    GammaY = "gamma_y",
-    GammaZ = "gamma_z",
-    GammaHatX = "gamma_hat_x",
-    GammaHatY = "gamma_hat_y",
-    GammaHatZ = "gamma_hat_z",
-    DeltaX = "delta_x",
-    DeltaY = "delta_y",
-    DeltaZ = "delta_z",
-    DeltaHatX = "delta_hat_x",
-    DeltaHatY = "delta_hat_y",
-    DeltaHatZ = "delta_hat_z",
-    DNorm = "d_norm",
-    DHat = "d_hat",
-    FX = "f_x",
-    FY = "f_y",
-    FZ = "f_z",
-    FHatX = "f_hat_x",
-    FHatY = "f_hat_y",
-    FHatZ = "f_hat_z",
-    NnNorm = "nn_norm",
-    Tau = "tau",
-}
-
-enum Msg {
-    /// Consecutive output steps, in order.
-    Steps(Vec<StepRows>),
-    /// An injection (a line of `events.jsonl`) for `run.mcap`.
-    Event(serde_json::Value),
-    Flush(std::sync::mpsc::SyncSender<std::io::Result<()>>),
-}
-
-/// The sinks the writer thread owns, in the order they are written.
-struct Sinks(Vec<Box<dyn Sink>>);
-
-impl Sinks {
-    fn step(&mut self, r: &StepRows) -> std::io::Result<()> {
-        self.0.iter_mut().try_for_each(|s| s.step(r))
-    }
-
-    fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
-        self.0.iter_mut().try_for_each(|s| s.event(line))
-    }
-
-    fn flush(&mut self) -> std::io::Result<()> {
-        self.0.iter_mut().try_for_each(|s| s.flush())
-    }
-
-    /// Flushes and completes every sink; the first failure is returned, the others still close.
-    fn close(mut self) -> std::io::Result<()> {
-        let flushed = self.flush();
-        // Every sink is finished before the first failure is picked.
-        let finished: Vec<std::io::Result<()>> = self.0.into_iter().map(|s| s.finish()).collect();
-        flushed.and(finished.into_iter().collect())
-    }
-}
-
-/// The recorder's writer of its file outputs (`trajectory.csv`, `run.mcap`, the rosbag2: the
-/// [`Sink`]s of the run): formatting and writing run on a thread of their own, off the simulation
-/// loop (the formatting code is the same, so the bytes are too).
-pub struct TrajectoryWriter {
-    tx: Option<std::sync::mpsc::SyncSender<Msg>>,
-    handle: Option<std::thread::JoinHandle<std::io::Result<()>>>,
-    /// Output steps not handed over yet (at most `STEPS_PER_BATCH`).
-    batch: Vec<StepRows>,
-    /// When the oldest step of `batch` was queued.
-    batch_since: Instant,
-}
-
-impl TrajectoryWriter {
-    /// Starts the writer thread over `sinks` (their files created).
-    pub(crate) fn create(sinks: Vec<Box<dyn Sink>>) -> std::io::Result<TrajectoryWriter> {
-        let mut rows = Sinks(sinks);
-        let (tx, rx) = std::sync::mpsc::sync_channel::<Msg>(1024);
-        let handle = std::thread::Builder::new()
-            .name("csv-writer".into())
-            .spawn(move || -> std::io::Result<()> {
-                formation_config::node::sched::background_thread();
-                // Rows reach the file at least every FLUSH_EVERY, so a killed run leaves a
-                // readable prefix (whole lines: the buffer is written out between rows).
-                let mut flushed = Instant::now();
-                let mut pending = false;
-                loop {
-                    let wait = if pending {
-                        FLUSH_EVERY.saturating_sub(flushed.elapsed())
-                    } else {
-                        Duration::from_secs(3600)
-                    };
-                    match rx.recv_timeout(wait) {
-                        Ok(Msg::Steps(batch)) => {
-                            for r in &batch {
-                                rows.step(r)?;
-                            }
-                            pending = true;
-                        }
-                        Ok(Msg::Event(line)) => rows.event(&line)?,
-                        Ok(Msg::Flush(reply)) => {
-                            let _ = reply.send(rows.flush());
-                            (flushed, pending) = (Instant::now(), false);
-                        }
-                        Err(RecvTimeoutError::Timeout) => {}
-                        Err(RecvTimeoutError::Disconnected) => break,
-                    }
-                    if pending && flushed.elapsed() >= FLUSH_EVERY {
-                        rows.flush()?;
-                        (flushed, pending) = (Instant::now(), false);
-                    }
-                }
-                rows.close()
-            })?;
-        Ok(TrajectoryWriter {
-            tx: Some(tx),
-            handle: Some(handle),
-            batch: Vec::with_capacity(STEPS_PER_BATCH),
-            batch_since: Instant::now(),
-        })
-    }
-
-    /// Queues one row per agent for this step.
-    pub fn write_step(
-        &mut self,
-        r: &ReferenceFrame,
-        truths: &[PlantTruth],
-        commands: &[ControlCommand],
-        metrics: &Metrics,
-    ) -> std::io::Result<()> {
-        let n = truths.len();
-        let rows = StepRows {
-            p_d: r.p_d,
-            target: r.target,
-            offsets: r.offset[..n].to_vec(),
-            truths: truths.to_vec(),
-            commands: commands.to_vec(),
-            errors: metrics.agents.iter().map(|a| a.last_error).collect(),
-        };
-        if self.batch.is_empty() {
-            self.batch_since = Instant::now();
-        }
-        self.batch.push(rows);
-        if self.batch.len() >= STEPS_PER_BATCH || self.batch_since.elapsed() >= BATCH_LATENCY {
-            self.hand_over()?;
-        }
-        Ok(())
-    }
-
-    /// Sends the batch of output steps to the writer thread.
-    fn hand_over(&mut self) -> std::io::Result<()> {
-        if self.batch.is_empty() {
-            return Ok(());
-        }
-        let batch = std::mem::replace(&mut self.batch, Vec::with_capacity(STEPS_PER_BATCH));
-        self.send(Msg::Steps(batch))
-    }
-
-    /// Queues an injection (a line of `events.jsonl`) for `run.mcap` (ignored without it), after
-    /// the steps queued before it.
-    pub fn write_event(&mut self, line: serde_json::Value) -> std::io::Result<()> {
-        self.hand_over()?;
-        self.send(Msg::Event(line))
-    }
-
-    /// Waits until everything queued so far is written and flushed to the file.
-    pub fn flush(&mut self) -> std::io::Result<()> {
-        self.hand_over()?;
-        let (reply_tx, reply_rx) = std::sync::mpsc::sync_channel(1);
-        self.send(Msg::Flush(reply_tx))?;
-        reply_rx.recv().map_err(|_| self.stopped())?
-    }
-
-    /// Writes everything queued and stops the thread.
-    pub fn close(mut self) -> std::io::Result<()> {
-        self.hand_over()?;
-        self.tx.take();
-        match self.handle.take().map(|h| h.join()) {
-            Some(Ok(result)) => result,
-            Some(Err(_)) => Err(std::io::Error::other(
-                "the trajectory writer thread panicked",
-            )),
-            None => Ok(()),
-        }
-    }
-
-    fn send(&mut self, msg: Msg) -> std::io::Result<()> {
-        let sent = self
-            .tx
-            .as_ref()
-            .map(|tx| tx.send(msg).is_ok())
-            .unwrap_or(false);
-        if sent {
-            Ok(())
-        } else {
-            Err(self.stopped())
-        }
-    }
-
-    /// The error of a writer thread that stopped (it failed to write).
-    fn stopped(&mut self) -> std::io::Error {
-        self.tx.take();
-        match self.handle.take().map(|h| h.join()) {
-            Some(Ok(Err(e))) => e,
-            _ => std::io::Error::other("the trajectory writer stopped"),
-        }
-    }
-}
-
-impl Drop for TrajectoryWriter {
-    fn drop(&mut self) {
-        let _ = self.hand_over();
-        self.tx.take();
-        if let Some(h) = self.handle.take() {
-            let _ = h.join();
-        }
-    }
+    Step = "step", "-", "simulation step k";
+    T = "t", "s", "simulation time t_k = k dt";
+    Agent = "agent", "-", "agent index i, 1-based";
+    Px = "px", "m", "true position P_i, x";
+    Py = "py", "m", "true position P_i, y";
+    Pz = "pz", "m", "true position P_i, z";
+    Vx = "vx", "m/s", "true velocity V_i, x";
+    Vy = "vy", "m/s", "true velocity V_i, y";
+    Vz = "vz", "m/s", "true velocity V_i, z";
+    Phi = "phi", "rad", "true roll phi (attitude A_i)";
+    Theta = "theta", "rad", "true pitch theta (attitude A_i)";
+    Psi = "psi", "rad", "true yaw psi (attitude A_i)";
+    P = "p", "rad/s", "true body rate Omega_i, p";
+    Q = "q", "rad/s", "true body rate Omega_i, q";
+    R = "r", "rad/s", "true body rate Omega_i, r";
+    Pdx = "pdx", "m", "desired position P_d + Delta_i0 (undelayed), x";
+    Pdy = "pdy", "m", "desired position P_d + Delta_i0 (undelayed), y";
+    Pdz = "pdz", "m", "desired position P_d + Delta_i0 (undelayed), z";
+    Ex = "ex", "m", "formation error P_i - P_d - Delta_i0, x";
+    Ey = "ey", "m", "formation error P_i - P_d - Delta_i0, y";
+    Ez = "ez", "m", "formation error P_i - P_d - Delta_i0, z";
+    ENorm = "e_norm", "m", "norm of the formation error";
+    Tx = "tx", "m", "ground target T_g, x";
+    Ty = "ty", "m", "ground target T_g, y";
+    Upx = "upx", "m/s^2", "position control U_iP after the limits, eq. (14), x";
+    Upy = "upy", "m/s^2", "position control U_iP after the limits, eq. (14), y";
+    Upz = "upz", "m/s^2", "position control U_iP after the limits, eq. (14), z";
+    Thrust = "thrust", "N", "total thrust applied";
+    PhiC = "phi_c", "rad", "filtered attitude command A_iC (command filter 1), roll";
+    ThetaC = "theta_c", "rad", "filtered attitude command A_iC, pitch";
+    PsiC = "psi_c", "rad", "filtered attitude command A_iC, yaw";
+    PhiCRaw = "phi_c_raw", "rad", "raw attitude command of eq. (28), roll";
+    ThetaCRaw = "theta_c_raw", "rad", "raw attitude command of eq. (28), pitch";
+    AlphaX = "alpha_x", "rad/s", "filtered virtual control alpha_i, x";
+    AlphaY = "alpha_y", "rad/s", "filtered virtual control alpha_i, y";
+    AlphaZ = "alpha_z", "rad/s", "filtered virtual control alpha_i, z";
+    AttNorm = "att_norm", "rad", "norm of the attitude A_i";
+    AttCmdNorm = "att_cmd_norm", "rad", "norm of the attitude command A_iC";
+    C1Bar = "c1_bar", "rad", "attitude constraint C1-bar_i = |A_iC| + margin";
+    RateNorm = "rate_norm", "rad/s", "norm of the body rate Omega_i";
+    AlphaNorm = "alpha_norm", "rad/s", "norm of the virtual control alpha_i";
+    C2Bar = "c2_bar", "rad/s", "rate constraint C2-bar_i";
+    Blf1 = "blf1", "-", "barrier value V_i1B, eq. (31)";
+    Blf2 = "blf2", "-", "barrier value V_i2B, eq. (40)";
+    UAcX = "u_ac_x", "N m", "torque command U_iAC, x";
+    UAcY = "u_ac_y", "N m", "torque command U_iAC, y";
+    UAcZ = "u_ac_z", "N m", "torque command U_iAC, z";
+    UAX = "u_a_x", "N m", "torque applied U_iA after faults (4) and saturation (3), x";
+    UAY = "u_a_y", "N m", "torque applied U_iA, y";
+    UAZ = "u_a_z", "N m", "torque applied U_iA, z";
+    GammaX = "gamma_x", "-", "true actuator effectiveness Gamma_i, x";
+    GammaY = "gamma_y", "-", "true actuator effectiveness Gamma_i, y";
+    GammaZ = "gamma_z", "-", "true actuator effectiveness Gamma_i, z";
+    GammaHatX = "gamma_hat_x", "-", "estimate Gamma-hat_i, x";
+    GammaHatY = "gamma_hat_y", "-", "estimate Gamma-hat_i, y";
+    GammaHatZ = "gamma_hat_z", "-", "estimate Gamma-hat_i, z";
+    DeltaX = "delta_x", "N m", "true actuator bias delta_i, x";
+    DeltaY = "delta_y", "N m", "true actuator bias delta_i, y";
+    DeltaZ = "delta_z", "N m", "true actuator bias delta_i, z";
+    DeltaHatX = "delta_hat_x", "N m", "estimate delta-hat_i, x";
+    DeltaHatY = "delta_hat_y", "N m", "estimate delta-hat_i, y";
+    DeltaHatZ = "delta_hat_z", "N m", "estimate delta-hat_i, z";
+    DNorm = "d_norm", "rad/s^2", "norm of the true attitude disturbance D_iA";
+    DHat = "d_hat", "rad/s^2", "estimate D-hat_iA, eq. (49)";
+    FX = "f_x", "m/s^2", "true lumped uncertainty F_iP, x";
+    FY = "f_y", "m/s^2", "true lumped uncertainty F_iP, y";
+    FZ = "f_z", "m/s^2", "true lumped uncertainty F_iP, z";
+    FHatX = "f_hat_x", "m/s^2", "RBFNN output F-hat_iP, x";
+    FHatY = "f_hat_y", "m/s^2", "RBFNN output F-hat_iP, y";
+    FHatZ = "f_hat_z", "m/s^2", "RBFNN output F-hat_iP, z";
+    NnNorm = "nn_norm", "-", "Frobenius norm of the RBFNN weights W-hat_i";
+    Tau = "tau", "s", "delay tau_i(t) the agent applied";
 }
 
 /// Buffered, synchronous writer of `trajectory.csv` rows (runs on the writer thread).
@@ -345,10 +156,10 @@ impl RowWriter {
     }
 
     /// Writes one row per agent for this step.
-    fn write_rows(&mut self, rows: &StepRows) -> std::io::Result<()> {
+    fn write_rows(&mut self, rows: &Step<'_>) -> std::io::Result<()> {
         let mut fmt = ryu::Buffer::new();
-        let r = rows;
-        for (i, (tr, cmd)) in rows.truths.iter().zip(&rows.commands).enumerate() {
+        let (p_d, offsets, target) = (rows.p_d(), rows.offsets(), rows.target());
+        for (i, (tr, cmd)) in rows.truths.iter().zip(rows.commands).enumerate() {
             let st = &tr.state;
             let tm = &cmd.telemetry;
             let line = &mut self.line;
@@ -359,9 +170,9 @@ impl RowWriter {
             line.push(',');
             line.push_str(itoa::Buffer::new().format(i + 1));
             let pd = [
-                r.p_d[0] + r.offsets[i][0],
-                r.p_d[1] + r.offsets[i][1],
-                r.p_d[2] + r.offsets[i][2],
+                p_d[0] + offsets[i][0],
+                p_d[1] + offsets[i][1],
+                p_d[2] + offsets[i][2],
             ];
             let e = [
                 st.position[0] - pd[0],
@@ -378,7 +189,7 @@ impl RowWriter {
                 &pd,
                 &e,
                 &[rows.errors[i]],
-                &r.target[..2],
+                &target[..2],
                 &tm.u_p,
                 &[tr.thrust_n],
                 &tm.attitude_cmd,
@@ -412,7 +223,11 @@ impl RowWriter {
 }
 
 impl Sink for RowWriter {
-    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+    fn cadence(&self) -> Cadence {
+        Cadence::Output
+    }
+
+    fn step(&mut self, rows: &Step<'_>) -> std::io::Result<()> {
         self.write_rows(rows)
     }
 
@@ -461,50 +276,5 @@ mod tests {
                 "column {c} is not documented"
             );
         }
-    }
-
-    /// Writes `steps` output steps of the paper's five agents, stamped 0, 1, ..., and returns the
-    /// step column of the file after a flush.
-    fn steps_in_file(w: &mut TrajectoryWriter, path: &Path, from: u64, to: u64) -> Vec<u64> {
-        let s = Scenario::paper();
-        let metrics = Metrics::new(&s);
-        let n = s.n_agents();
-        for k in from..to {
-            let mut truths = vec![PlantTruth::default(); n];
-            for t in &mut truths {
-                t.state.step = k;
-            }
-            let commands = vec![ControlCommand::default(); n];
-            w.write_step(&ReferenceFrame::default(), &truths, &commands, &metrics)
-                .unwrap();
-        }
-        w.flush().unwrap();
-        std::fs::read_to_string(path)
-            .unwrap()
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').next().unwrap().parse().unwrap())
-            .collect()
-    }
-
-    #[test]
-    fn batched_steps_reach_the_file_in_order_and_whole_at_every_flush() {
-        let dir = std::env::temp_dir().join(format!("formation-csv-batch-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("trajectory.csv");
-        let s = Scenario::paper();
-        let mut w = TrajectoryWriter::create(vec![Box::new(RowWriter::create(&path, &s).unwrap())])
-            .unwrap();
-        // Two and a half batches, then a few steps fewer than a batch: a flush hands over the
-        // partial batch, so the file holds every step queued, five rows each, in order.
-        let total = (5 * STEPS_PER_BATCH / 2) as u64;
-        let first = steps_in_file(&mut w, &path, 0, total);
-        let expected: Vec<u64> = (0..total).flat_map(|k| [k; 5]).collect();
-        assert_eq!(first, expected);
-        let second = steps_in_file(&mut w, &path, total, total + 3);
-        let expected: Vec<u64> = (0..total + 3).flat_map(|k| [k; 5]).collect();
-        assert_eq!(second, expected);
-        w.close().unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

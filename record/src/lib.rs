@@ -1,6 +1,9 @@
 //! The recorder: turns the per-step messages of a run (reference frame, plant truths, control
-//! commands) into `trajectory.csv` (decimated), `summary.json` (metrics computed on every step)
-//! and, with `--record mcap`, `run.mcap` (the decimated steps and the injections, for Foxglove).
+//! commands) into `summary.json` (metrics computed on every step) and hands every step to the
+//! run's outputs, each a [`Sink`]: `trajectory.csv` (decimated), `run.mcap` and the rosbag2 (the
+//! decimated steps and the injections) on the writer thread; the live Foxglove view, the live
+//! ROS 2 topics and the Zenoh export (added by the runtime, [`Recorder::add_sink`]) at every step,
+//! without waiting.
 //!
 //! Both runners feed it the same messages, so the files of an in-process run and of a lockstep run
 //! over iceoryx2 are byte-identical when the trajectories are.
@@ -12,6 +15,7 @@
 
 pub mod coverage;
 pub mod csv;
+mod fanout;
 #[cfg(feature = "foxglove")]
 pub mod live;
 pub mod mcap;
@@ -23,9 +27,10 @@ pub mod rng;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 pub mod separation;
-pub(crate) mod sink;
+pub mod sink;
 pub mod summary;
 pub mod table;
+mod writer;
 
 /// What `--foxglove` says in a build without the cargo feature `foxglove`.
 pub const NO_FOXGLOVE: &str =
@@ -36,6 +41,7 @@ pub const NO_ROS2: &str =
     "--ros2, --record rosbag2: this build has no ROS 2 view (build the orchestrator with its default feature `ros2`)";
 
 pub use metrics::Divergence;
+pub use sink::{Cadence, Sink, Step};
 pub use summary::Summary;
 
 use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
@@ -100,7 +106,10 @@ impl Outputs {
 
 /// Writes the outputs of one run.
 pub struct Recorder {
-    csv: Option<csv::TrajectoryWriter>,
+    /// Every output of the run ([`Sink`]s).
+    out: fanout::Fanout,
+    /// Formation error of each agent at the step recorded last, m (the steps' view).
+    errors: Vec<f64>,
     metrics: metrics::Metrics,
     decimation: u64,
     out_dir: PathBuf,
@@ -120,12 +129,6 @@ pub struct Recorder {
     runtime_events: Vec<formation_config::protocol::messages::RuntimeEvent>,
     incidents: Vec<recovery::Mark>,
     restarts: Vec<u32>,
-    /// The live Foxglove view (`--foxglove`).
-    #[cfg(feature = "foxglove")]
-    live: Option<live::LiveFeed>,
-    /// The live ROS 2 topics (`--ros2`).
-    #[cfg(feature = "ros2")]
-    live_ros2: Option<ros2::LiveRos2>,
     checkpoints_refused: Vec<u32>,
     /// Multi-host runs: each agent's host at the end (empty: one machine).
     agent_hosts: Vec<String>,
@@ -160,36 +163,30 @@ impl Recorder {
                 _ => {}
             }
         }
+        // Every output, in the order the fan-out hands a step to them: the live views on the
+        // run loop's thread, the files on the writer thread.
+        let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
         #[cfg(feature = "foxglove")]
-        let live = outputs
-            .foxglove
-            .map(|o| live::LiveFeed::start(o, s))
-            .transpose()?;
+        if let Some(o) = outputs.foxglove {
+            sinks.push(Box::new(live::LiveFeed::start(o, s)?));
+        }
         #[cfg(not(feature = "foxglove"))]
         if outputs.foxglove.is_some() {
             return Err(std::io::Error::other(NO_FOXGLOVE));
         }
         #[cfg(feature = "ros2")]
-        let (live_ros2, rosbag2) = {
+        {
             if !outputs.rosbag2 {
                 ros2::remove_stale(out_dir)?;
             }
-            let live = outputs
-                .ros2
-                .map(|o| ros2::LiveRos2::start(o, s))
-                .transpose()?;
-            let bag = outputs
-                .rosbag2
-                .then(|| ros2::BagSink::create(out_dir, s))
-                .transpose()?;
-            (live, bag)
-        };
+            if let Some(o) = outputs.ros2 {
+                sinks.push(Box::new(ros2::LiveRos2::start(o, s)?));
+            }
+        }
         #[cfg(not(feature = "ros2"))]
         if outputs.ros2.is_some() || outputs.rosbag2 {
             return Err(std::io::Error::other(NO_ROS2));
         }
-        // The file outputs, in the order the writer thread writes them.
-        let mut sinks: Vec<Box<dyn sink::Sink>> = Vec::new();
         if outputs.trajectory {
             sinks.push(Box::new(csv::RowWriter::create(&csv_path, s)?));
         }
@@ -197,16 +194,12 @@ impl Recorder {
             sinks.push(Box::new(mcap::McapSink::create(&mcap_path, s, variant)?));
         }
         #[cfg(feature = "ros2")]
-        if let Some(bag) = rosbag2 {
-            sinks.push(Box::new(bag));
+        if outputs.rosbag2 {
+            sinks.push(Box::new(ros2::BagSink::create(out_dir, s)?));
         }
-        let csv = if sinks.is_empty() {
-            None
-        } else {
-            Some(csv::TrajectoryWriter::create(sinks)?)
-        };
         Ok(Recorder {
-            csv,
+            out: fanout::Fanout::new(sinks)?,
+            errors: Vec::with_capacity(s.n_agents()),
             metrics: metrics::Metrics::new(s),
             decimation: s.output_decimation(),
             out_dir: out_dir.to_path_buf(),
@@ -226,10 +219,6 @@ impl Recorder {
             runtime_events: Vec::new(),
             incidents: Vec::new(),
             restarts: vec![0; s.n_agents()],
-            #[cfg(feature = "foxglove")]
-            live,
-            #[cfg(feature = "ros2")]
-            live_ros2,
             checkpoints_refused: vec![0; s.n_agents()],
             agent_hosts: Vec::new(),
         })
@@ -258,38 +247,33 @@ impl Recorder {
         if let Some(d) = self.metrics.separation.last {
             self.series.push_separation(d);
         }
-        #[cfg(feature = "foxglove")]
-        if let Some(live) = &mut self.live {
-            let errors = self.metrics.agents.iter().map(|a| a.last_error);
-            live.step(step, reference, truths, commands, errors);
-        }
-        #[cfg(feature = "ros2")]
-        if let Some(live) = &mut self.live_ros2 {
-            live.step(step, reference, truths);
-        }
-        if let Some(csv) = &mut self.csv {
-            if step.is_multiple_of(self.decimation) || div.is_some() {
-                csv.write_step(reference, truths, commands, &self.metrics)?;
-            }
+        let output = step.is_multiple_of(self.decimation) || div.is_some();
+        if output || self.out.takes_every_step() {
+            self.errors.clear();
+            self.errors
+                .extend(self.metrics.agents.iter().map(|a| a.last_error));
+            let s = Step {
+                step,
+                reference,
+                truths,
+                commands,
+                errors: &self.errors,
+            };
+            self.out.step(&s, output)?;
         }
         Ok(div)
     }
 
-    /// Records an injection (a line of `events.jsonl`) in `run.mcap` at the step it applies;
-    /// nothing without `--record mcap` or for a rejected request.
+    /// Hands an injection (a line of `events.jsonl`) to every output at the step it applies
+    /// (`run.mcap`, the rosbag2 and the live views show the accepted ones).
     pub fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
-        #[cfg(feature = "foxglove")]
-        if let Some(live) = &mut self.live {
-            live.injection(line);
-        }
-        #[cfg(feature = "ros2")]
-        if let Some(live) = &mut self.live_ros2 {
-            live.injection(line);
-        }
-        match &mut self.csv {
-            Some(csv) => csv.write_event(line.clone()),
-            None => Ok(()),
-        }
+        self.out.event(line)
+    }
+
+    /// Adds an output: it gets the steps from the next one on (the Zenoh export of
+    /// `formation run --zenoh-listen`, started once the run's services exist).
+    pub fn add_sink(&mut self, sink: Box<dyn Sink>) -> std::io::Result<()> {
+        self.out.add(sink)
     }
 
     /// Sets the `timing` object of `summary.json` (realtime runs).
@@ -334,27 +318,14 @@ impl Recorder {
         self.restarts = restarts;
     }
 
-    /// Flushes the CSV written so far (used when a run is interrupted).
+    /// Flushes the files written so far (used when a run is interrupted).
     pub fn flush(&mut self) -> std::io::Result<()> {
-        match &mut self.csv {
-            Some(csv) => csv.flush(),
-            None => Ok(()),
-        }
+        self.out.flush()
     }
 
-    /// Flushes the CSV and writes `summary.json`; returns the summary.
+    /// Finishes every output and writes `summary.json`; returns the summary.
     pub fn finish(mut self, steps: u64, wall_time_s: f64) -> std::io::Result<Summary> {
-        #[cfg(feature = "foxglove")]
-        if let Some(live) = self.live.take() {
-            live.finish();
-        }
-        #[cfg(feature = "ros2")]
-        if let Some(live) = self.live_ros2.take() {
-            live.finish();
-        }
-        if let Some(csv) = self.csv.take() {
-            csv.close()?;
-        }
+        self.out.finish()?;
         let mut summary = summary::Summary::build(
             &self.metrics,
             &self.scenario,

@@ -5,7 +5,7 @@
 //! never blocks (a full queue drops the frame); scene building, encoding and the WebSocket server
 //! run on the view's own threads at lowered priority.
 
-use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
+use super::sink::{Cadence, Sink, Step};
 use formation_config::scenario::events::Event;
 use formation_config::Scenario;
 use formation_viz::{Frame, Limits, LiveView, SceneConfig};
@@ -51,43 +51,41 @@ impl LiveFeed {
             limits: Limits::of(s),
         })
     }
+}
 
-    /// Offers step k to the view if it is a scene frame.
-    pub fn step(
-        &mut self,
-        k: u64,
-        r: &ReferenceFrame,
-        truths: &[PlantTruth],
-        commands: &[ControlCommand],
-        errors: impl Iterator<Item = f64>,
-    ) {
-        if !self.view.wants(k) {
-            return;
-        }
-        let n = truths.len();
-        let errors: Vec<f64> = errors.collect();
-        self.view.offer(Frame::from_records(
-            k,
-            r.t,
-            r.p_d,
-            r.target,
-            &r.offset[..n],
-            truths,
-            commands,
-            &errors,
-            self.limits,
-        ));
+/// The view takes the scene frames (every step is offered, the view keeps those of its rate) and
+/// the accepted injections, without waiting.
+impl Sink for LiveFeed {
+    fn cadence(&self) -> Cadence {
+        Cadence::Every
     }
 
-    /// An accepted injection (a line of `events.jsonl` with its `scenario_event`).
-    pub fn injection(&mut self, line: &serde_json::Value) {
+    fn step(&mut self, s: &Step<'_>) -> std::io::Result<()> {
+        if self.view.wants(s.step) {
+            self.view.offer(Frame::from_records(
+                s.step,
+                s.reference.t,
+                s.p_d(),
+                s.target(),
+                s.offsets(),
+                s.truths,
+                s.commands,
+                s.errors,
+                self.limits,
+            ));
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
         if let Some(e) = scenario_event(line) {
             self.view.event(e);
         }
+        Ok(())
     }
 
-    /// Stops the view; says on standard error what it sent.
-    pub fn finish(self) {
+    /// Stops the view; logs what it sent.
+    fn finish(self: Box<Self>) -> std::io::Result<()> {
         let s = self.view.finish();
         tracing::info!(
             offered = s.offered,
@@ -95,6 +93,7 @@ impl LiveFeed {
             published = s.published,
             "foxglove live view stopped"
         );
+        Ok(())
     }
 }
 

@@ -19,7 +19,7 @@
 //! that is not finite (only at a divergence step, and the barrier widths `c1`, `c2` of the
 //! `unconstrained` variant) is `null`.
 
-use super::sink::{event_message, Sink, StepRows};
+use super::sink::{event_message, Cadence, Sink, Step};
 use formation_config::protocol::wire::{ControlCommand, PlantTruth};
 use formation_config::{Scenario, Variant};
 use serde::Serialize;
@@ -358,26 +358,27 @@ impl McapSink {
 
     /// Writes the messages of one output step: the reference, then per agent state, command,
     /// telemetry and truth.
-    pub(crate) fn write_step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+    pub(crate) fn write_step(&mut self, rows: &Step<'_>) -> std::io::Result<()> {
         let Some(first) = rows.truths.first() else {
             return Ok(());
         };
         let (step, t) = (first.state.step, first.state.t);
+        let p_d = rows.p_d();
         let desired = rows
-            .offsets
+            .offsets()
             .iter()
-            .map(|o| [rows.p_d[0] + o[0], rows.p_d[1] + o[1], rows.p_d[2] + o[2]])
+            .map(|o| [p_d[0] + o[0], p_d[1] + o[1], p_d[2] + o[2]])
             .collect();
         let reference = ReferenceMsg {
             step,
             t,
-            target: rows.target,
-            p_d: rows.p_d,
-            offset: rows.offsets.clone(),
+            target: rows.target(),
+            p_d,
+            offset: rows.offsets().to_vec(),
             desired,
         };
         self.write(self.reference, step, &reference)?;
-        for (i, (truth, cmd)) in rows.truths.iter().zip(&rows.commands).enumerate() {
+        for (i, (truth, cmd)) in rows.truths.iter().zip(rows.commands).enumerate() {
             let ch = &self.agents[i];
             let (state, command, telemetry, truth_ch) =
                 (ch.state, ch.command, ch.telemetry, ch.truth);
@@ -421,7 +422,11 @@ impl McapSink {
 }
 
 impl Sink for McapSink {
-    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+    fn cadence(&self) -> Cadence {
+        Cadence::Output
+    }
+
+    fn step(&mut self, rows: &Step<'_>) -> std::io::Result<()> {
         self.write_step(rows)
     }
 

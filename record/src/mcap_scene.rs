@@ -3,7 +3,7 @@
 //! `/scene/events`, `/log`, `/agent/{i}/plot`), built from the recorded output steps at every
 //! scene frame and from the run's events, so that Foxglove's 3D panel shows the swarm.
 
-use super::sink::StepRows;
+use super::sink::Step;
 use formation_config::Scenario;
 use formation_viz::channels::{channels, encode, Encoded};
 use formation_viz::{Frame, Limits, SceneBuilder};
@@ -51,7 +51,7 @@ impl McapScene {
     /// `write(channel id, log time, bytes)`.
     pub(crate) fn step(
         &mut self,
-        rows: &StepRows,
+        rows: &Step<'_>,
         mut write: impl FnMut(u16, u64, &[u8]) -> std::io::Result<()>,
     ) -> std::io::Result<()> {
         let Some(first) = rows.truths.first() else {
@@ -64,12 +64,12 @@ impl McapScene {
         let frame = Frame::from_records(
             step,
             t,
-            rows.p_d,
-            rows.target,
-            &rows.offsets,
-            &rows.truths,
-            &rows.commands,
-            &rows.errors,
+            rows.p_d(),
+            rows.target(),
+            rows.offsets(),
+            rows.truths,
+            rows.commands,
+            rows.errors,
             self.limits,
         );
         let scene = self.builder.build(&frame);

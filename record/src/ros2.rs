@@ -4,7 +4,7 @@
 //! `--ros2` publishes the same messages live on DDS from those steps, through a bounded queue that
 //! never holds the run back (a full queue drops the step, counted).
 
-use super::sink::{Sink, StepRows};
+use super::sink::{Cadence, Sink, Step};
 use formation_config::protocol::wire::PlantTruth;
 use formation_config::scenario::events::{Event, Timeline};
 use formation_config::Scenario;
@@ -148,14 +148,14 @@ impl BagSink {
     }
 
     /// Records the messages of one output step.
-    pub(crate) fn write_step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+    pub(crate) fn write_step(&mut self, rows: &Step<'_>) -> std::io::Result<()> {
         let Some(first) = rows.truths.first() else {
             return Ok(());
         };
         let step = first.state.step;
         let f = self
             .frames
-            .frame(step, rows.p_d, rows.target, &rows.offsets, &rows.truths);
+            .frame(step, rows.p_d(), rows.target(), rows.offsets(), rows.truths);
         let (bag, time_ns) = (&mut self.bag, f.time_ns);
         let mut result = Ok(());
         self.encoder.frame(&f, |topic, bytes| {
@@ -193,7 +193,11 @@ impl BagSink {
 }
 
 impl Sink for BagSink {
-    fn step(&mut self, rows: &StepRows) -> std::io::Result<()> {
+    fn cadence(&self) -> Cadence {
+        Cadence::Output
+    }
+
+    fn step(&mut self, rows: &Step<'_>) -> std::io::Result<()> {
         self.write_step(rows)
     }
 
@@ -270,39 +274,42 @@ impl LiveRos2 {
             decimation: s.output_decimation(),
         })
     }
+}
 
-    /// Offers step k if `trajectory.csv` records it (never blocks).
-    pub fn step(
-        &mut self,
-        k: u64,
-        r: &formation_config::protocol::wire::ReferenceFrame,
-        truths: &[PlantTruth],
-    ) {
-        if !k.is_multiple_of(self.decimation) {
-            return;
-        }
-        let n = truths.len();
-        let f = self
-            .frames
-            .frame(k, r.p_d, r.target, &r.offset[..n], truths);
-        self.publisher.offer(&f);
+/// The live topics take the steps `trajectory.csv` records at its decimation (not the step of a
+/// divergence), offered without waiting; an accepted injection joins the timeline and goes out
+/// on `/formation/events`.
+impl Sink for LiveRos2 {
+    fn cadence(&self) -> Cadence {
+        Cadence::Every
     }
 
-    /// An injection line: joins the timeline and, if accepted, goes out on `/formation/events`.
-    pub fn injection(&mut self, line: &serde_json::Value) {
+    fn step(&mut self, s: &Step<'_>) -> std::io::Result<()> {
+        if s.step.is_multiple_of(self.decimation) {
+            let f = self
+                .frames
+                .frame(s.step, s.p_d(), s.target(), s.offsets(), s.truths);
+            self.publisher.offer(&f);
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, line: &serde_json::Value) -> std::io::Result<()> {
         self.frames.injection(line);
         if let Some((_, text)) = event_text(line) {
             self.publisher.event(text);
         }
+        Ok(())
     }
 
     /// Publishes what is queued, leaves the domain and says what was sent.
-    pub fn finish(self) {
+    fn finish(self: Box<Self>) -> std::io::Result<()> {
         let s = self.publisher.finish();
         eprintln!(
             "ros2: published {} of {} output steps ({} while nobody read any topic, {} dropped by the full queue, {} DDS writes refused)",
             s.published, s.offered, s.unheard, s.dropped, s.writes_refused
         );
+        Ok(())
     }
 }
 

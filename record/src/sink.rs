@@ -1,33 +1,65 @@
-//! The one interface of the recorder's file outputs: `trajectory.csv`, `run.mcap` and the rosbag2
-//! each implement [`Sink`], and the writer thread (`csv::TrajectoryWriter`) fans every output step
-//! and every injection out to the sinks of the run, in order, off the simulation loop.
+//! The one interface of a run's outputs. `trajectory.csv`, `run.mcap`, the rosbag2, the live
+//! Foxglove view, the live ROS 2 topics and the Zenoh export each implement [`Sink`]; the
+//! recorder's fan-out (`fanout::Fanout`) hands every step to each sink at its [`Cadence`]: the
+//! file sinks get the output steps on the recorder's writer thread, the live sinks every step on
+//! the run loop's thread (each hands it on through a bounded queue of its own and never waits).
 
-use formation_config::protocol::wire::{ControlCommand, PlantTruth};
+use formation_config::protocol::wire::{ControlCommand, PlantTruth, ReferenceFrame};
 use serde_json::Value;
 
-/// The rows of one output step, handed to the writer thread.
-pub(crate) struct StepRows {
-    /// Virtual leader P_d, m.
-    pub(crate) p_d: [f64; 3],
-    /// Ground target T_g, m.
-    pub(crate) target: [f64; 3],
-    /// Formation offsets Delta_i0 of the N agents, m.
-    pub(crate) offsets: Vec<[f64; 3]>,
+/// One step as every sink sees it.
+#[derive(Debug, Clone, Copy)]
+pub struct Step<'a> {
+    /// Simulation step k.
+    pub step: u64,
+    /// The reference of step k (virtual leader P_d, ground target T_g, offsets Delta_i0).
+    pub reference: &'a ReferenceFrame,
     /// The plant's truths of the N agents.
-    pub(crate) truths: Vec<PlantTruth>,
+    pub truths: &'a [PlantTruth],
     /// The N commands.
-    pub(crate) commands: Vec<ControlCommand>,
-    /// Formation error of each agent, m.
-    pub(crate) errors: Vec<f64>,
+    pub commands: &'a [ControlCommand],
+    /// Formation error |P_i - P_d - Delta_i0| of each agent, m.
+    pub errors: &'a [f64],
 }
 
-/// A file output of a run, written on the recorder's writer thread.
-pub(crate) trait Sink: Send {
-    /// Writes one output step.
-    fn step(&mut self, rows: &StepRows) -> std::io::Result<()>;
+impl Step<'_> {
+    /// Virtual leader P_d, m.
+    pub fn p_d(&self) -> [f64; 3] {
+        self.reference.p_d
+    }
 
-    /// Writes an injection (a line of `events.jsonl`), after the steps before it; a sink that
-    /// records no events ignores it.
+    /// Ground target T_g, m.
+    pub fn target(&self) -> [f64; 3] {
+        self.reference.target
+    }
+
+    /// Formation offsets Delta_i0 of the N agents, m.
+    pub fn offsets(&self) -> &[[f64; 3]] {
+        &self.reference.offset[..self.truths.len()]
+    }
+}
+
+/// Which steps a sink gets, and on which thread.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cadence {
+    /// The output steps (every `output_decimation` steps and a divergence step), on the
+    /// recorder's writer thread, in order: a file, which must hold every one of them.
+    Output,
+    /// Every step, on the run loop's thread: the sink takes what it publishes (a scene frame, an
+    /// output step) and hands it on without waiting (a full queue drops it, counted).
+    Every,
+}
+
+/// An output of a run.
+pub trait Sink: Send {
+    /// Which steps it gets.
+    fn cadence(&self) -> Cadence;
+
+    /// Takes one step.
+    fn step(&mut self, step: &Step<'_>) -> std::io::Result<()>;
+
+    /// Takes an injection (a line of `events.jsonl`), after the steps before it; a sink that
+    /// shows no injections ignores it.
     fn event(&mut self, _line: &Value) -> std::io::Result<()> {
         Ok(())
     }
@@ -37,7 +69,8 @@ pub(crate) trait Sink: Send {
         Ok(())
     }
 
-    /// Completes the file (indexes, summaries, metadata).
+    /// Completes the output (a file's indexes and metadata; a live view stops and says what it
+    /// sent).
     fn finish(self: Box<Self>) -> std::io::Result<()>;
 }
 

@@ -2,6 +2,7 @@
 //! `inf` included, as a diverged step writes them). Used by the tests and by scripts built on the
 //! library; the figures have their own column-oriented loader (`plot::data`).
 
+use crate::csv::Column;
 use std::path::Path;
 
 /// Why a `trajectory.csv` cannot be read back.
@@ -102,9 +103,9 @@ impl Trajectory {
         Ok(Trajectory { header, rows })
     }
 
-    /// The index of column `name`, if the file has it.
-    pub fn column(&self, name: &str) -> Option<usize> {
-        self.header.iter().position(|h| h == name)
+    /// The index of column `c`, if the file has it.
+    pub fn column(&self, c: Column) -> Option<usize> {
+        self.header.iter().position(|h| h == c.name())
     }
 
     /// Every row, in file order.
@@ -114,16 +115,16 @@ impl Trajectory {
 
     /// The rows of agent `id` (1-based, as in the `agent` column), in step order.
     pub fn agent(&self, id: u32) -> impl Iterator<Item = &[f64]> + '_ {
-        let c = self.column("agent").unwrap_or(usize::MAX);
+        let c = self.column(Column::Agent).unwrap_or(usize::MAX);
         self.rows
             .iter()
             .filter(move |r| r.get(c) == Some(&f64::from(id)))
             .map(Vec::as_slice)
     }
 
-    /// Value of column `name` in `row` (NaN when the file has no such column).
-    pub fn value(&self, row: &[f64], name: &str) -> f64 {
-        self.column(name).map_or(f64::NAN, |c| row[c])
+    /// Value of column `c` in `row` (NaN when the file has no such column).
+    pub fn value(&self, row: &[f64], c: Column) -> f64 {
+        self.column(c).map_or(f64::NAN, |i| row[i])
     }
 }
 
@@ -133,13 +134,14 @@ mod tests {
 
     #[test]
     fn rows_of_an_agent_and_their_values_are_found_by_column_name() {
-        let t = Trajectory::parse("step,t,agent,x\n0,0,1,0.5\n0,0,2,NaN\n1,0.001,1,inf\n").unwrap();
+        let t =
+            Trajectory::parse("step,t,agent,px\n0,0,1,0.5\n0,0,2,NaN\n1,0.001,1,inf\n").unwrap();
         let a1: Vec<&[f64]> = t.agent(1).collect();
         assert_eq!(a1.len(), 2);
-        assert_eq!(t.value(a1[0], "x"), 0.5);
-        assert!(t.value(a1[1], "x").is_infinite());
-        assert!(t.value(t.agent(2).next().unwrap(), "x").is_nan());
-        assert!(t.value(a1[0], "missing").is_nan());
+        assert_eq!(t.value(a1[0], Column::Px), 0.5);
+        assert!(t.value(a1[1], Column::Px).is_infinite());
+        assert!(t.value(t.agent(2).next().unwrap(), Column::Px).is_nan());
+        assert!(t.value(a1[0], Column::Py).is_nan());
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! Wire values a client printed, read back and checked against a run's outputs.
 
 use formation_config::protocol::wire::VehicleState;
+use formation_runtime::record::csv::Column;
 use formation_runtime::record::table::Trajectory;
 use std::collections::HashMap;
 
@@ -28,7 +29,10 @@ pub fn rows_by_agent_and_step(tr: &Trajectory) -> HashMap<(usize, u64), &[f64]> 
         .iter()
         .map(|r| {
             (
-                (tr.value(r, "agent") as usize, tr.value(r, "step") as u64),
+                (
+                    tr.value(r, Column::Agent) as usize,
+                    tr.value(r, Column::Step) as u64,
+                ),
                 r.as_slice(),
             )
         })
@@ -39,16 +43,17 @@ pub fn rows_by_agent_and_step(tr: &Trajectory) -> HashMap<(usize, u64), &[f64]> 
 /// attitude, rate).
 pub fn assert_state_is_row(tr: &Trajectory, row: &[f64], s: &VehicleState) {
     for (values, cols) in [
-        (s.position, ["px", "py", "pz"]),
-        (s.velocity, ["vx", "vy", "vz"]),
-        (s.attitude, ["phi", "theta", "psi"]),
-        (s.rate, ["p", "q", "r"]),
+        (s.position, [Column::Px, Column::Py, Column::Pz]),
+        (s.velocity, [Column::Vx, Column::Vy, Column::Vz]),
+        (s.attitude, [Column::Phi, Column::Theta, Column::Psi]),
+        (s.rate, [Column::P, Column::Q, Column::R]),
     ] {
         for (k, col) in cols.iter().enumerate() {
             assert_eq!(
                 values[k],
-                tr.value(row, col),
-                "{col} of agent {} at {}",
+                tr.value(row, *col),
+                "{} of agent {} at {}",
+                col.name(),
                 s.agent + 1,
                 s.step
             );

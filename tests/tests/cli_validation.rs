@@ -4,6 +4,7 @@
 //! `formation` is `formation run` with its defaults.
 
 use formation_config::Scenario;
+use formation_runtime::record::csv::Column;
 use formation_runtime::record::table::Trajectory;
 use formation_tests::{bin, stderr_of as stderr, summary, temp_dir};
 use std::io::{BufRead, BufReader};
@@ -359,7 +360,7 @@ fn non_finite_rows(csv: &Path) -> Vec<f64> {
     tr.rows()
         .iter()
         .filter(|r| r.iter().any(|v| !v.is_finite()))
-        .map(|r| tr.value(r, "t"))
+        .map(|r| tr.value(r, Column::T))
         .collect()
 }
 

@@ -4,6 +4,7 @@
 //! the timeline are detected, named and replaced under `--restart on-failure`; a dead plant or
 //! leader ends the run, named; nothing is left in /dev/shm.
 
+use formation_runtime::record::csv::Column;
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, formation, sim, summary, temp_dir, workspace_root};
 use std::path::{Path, PathBuf};
@@ -44,15 +45,11 @@ fn residue_of(run: &RunningRun) -> Vec<PathBuf> {
 
 /// The worst `e_norm` of the rows of `csv` (a `trajectory.csv`) with t in [from, to] s.
 fn worst_error_between(csv: &Path, from: f64, to: f64) -> f64 {
-    let text = std::fs::read_to_string(csv).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let (t, e) = (col("t"), col("e_norm"));
-    lines
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|f| (from..=to + 1e-9).contains(&f[t].parse::<f64>().unwrap()))
-        .map(|f| f[e].parse::<f64>().unwrap())
+    let tr = formation_runtime::record::table::Trajectory::read(csv).unwrap();
+    tr.rows()
+        .iter()
+        .filter(|r| (from..=to + 1e-9).contains(&tr.value(r, Column::T)))
+        .map(|r| tr.value(r, Column::ENorm))
         .fold(0.0, f64::max)
 }
 

@@ -15,6 +15,7 @@
 //! them a test is skipped with the reason on stderr, unless `FORMATION_REQUIRE_NODE=1` /
 //! `FORMATION_REQUIRE_PYTHON=1` (set by `.ci/run`): then it fails.
 
+use formation_runtime::record::csv::Column;
 use formation_tests::run::RunningRun;
 use formation_tests::{sim, temp_dir, workspace_root};
 use serde_json::Value;
@@ -76,18 +77,23 @@ fn python(test: &str) -> Option<PathBuf> {
 }
 
 /// `trajectory.csv` as (step, agent) -> column -> value.
-fn trajectory(dir: &Path) -> HashMap<(u64, u64), HashMap<String, f64>> {
+fn trajectory(dir: &Path) -> HashMap<(u64, u64), HashMap<Column, f64>> {
     let text = std::fs::read_to_string(dir.join("trajectory.csv")).expect("trajectory.csv");
     let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let header: Vec<Column> = lines
+        .next()
+        .expect("a header")
+        .split(',')
+        .map(|name| Column::named(name).expect("a column of trajectory.csv"))
+        .collect();
     let mut rows = HashMap::new();
     for line in lines {
-        let row: HashMap<String, f64> = header
+        let row: HashMap<Column, f64> = header
             .iter()
             .zip(line.split(','))
-            .map(|(k, v)| (k.to_string(), v.parse::<f64>().unwrap_or(f64::NAN)))
+            .map(|(&c, v)| (c, v.parse::<f64>().unwrap_or(f64::NAN)))
             .collect();
-        rows.insert((row["step"] as u64, row["agent"] as u64), row);
+        rows.insert((row[&Column::Step] as u64, row[&Column::Agent] as u64), row);
     }
     rows
 }
@@ -223,7 +229,7 @@ fn check_live_report(report: &Value, out: &Path) {
         let got: Vec<f64> = serde_json::from_value(tf["translation"].clone()).unwrap();
         assert_eq!(
             got,
-            vec![row["px"], row["py"], row["pz"]],
+            vec![row[&Column::Px], row[&Column::Py], row[&Column::Pz]],
             "step {step} agent {agent}"
         );
         compared += 1;
@@ -233,9 +239,15 @@ fn check_live_report(report: &Value, out: &Path) {
         let (step, agent) = (p["step"].as_u64().unwrap(), p["agent"].as_u64().unwrap());
         let row = &rows[&(step, agent)];
         let pos: Vec<f64> = serde_json::from_value(p["position"].clone()).unwrap();
-        assert_eq!(pos, vec![row["px"], row["py"], row["pz"]]);
-        assert_eq!(p["formation_error_m"].as_f64().unwrap(), row["e_norm"]);
-        assert_eq!(p["gamma_hat"][0].as_f64().unwrap(), row["gamma_hat_x"]);
+        assert_eq!(
+            pos,
+            vec![row[&Column::Px], row[&Column::Py], row[&Column::Pz]]
+        );
+        assert_eq!(
+            p["formation_error_m"].as_f64().unwrap(),
+            row[&Column::ENorm]
+        );
+        assert_eq!(p["gamma_hat"][0].as_f64().unwrap(), row[&Column::GammaHatX]);
         assert_eq!(p["log_time_ns"].as_u64().unwrap(), step * dt_ns);
     }
 }

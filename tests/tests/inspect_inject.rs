@@ -6,6 +6,7 @@
 //! Every test uses its own runs directory (`FORMATION_RUNS_DIR`), so runs of other tests or other
 //! users never interfere; `RunningRun` kills the whole run on drop, even when an assertion fails.
 
+use formation_runtime::record::csv::Column;
 use formation_runtime::record::table::Trajectory;
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, stderr_of as stderr, temp_dir};
@@ -213,8 +214,8 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
         let tr = Trajectory::read(csv).unwrap();
         let vals: Vec<f64> = tr
             .agent(2)
-            .filter(|r| tr.value(r, "t") >= 30.0)
-            .map(|r| tr.value(r, "gamma_hat_y"))
+            .filter(|r| tr.value(r, Column::T) >= 30.0)
+            .map(|r| tr.value(r, Column::GammaHatY))
             .collect();
         vals.iter().sum::<f64>() / vals.len() as f64
     };
@@ -223,14 +224,15 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     let tr = Trajectory::read(&out.join("trajectory.csv")).unwrap();
     let rows: Vec<&[f64]> = tr
         .agent(2)
-        .filter(|r| tr.value(r, "step") >= (fault_step + 15_000) as f64)
+        .filter(|r| tr.value(r, Column::Step) >= (fault_step + 15_000) as f64)
         .collect();
     assert!(!rows.is_empty(), "the run lasts 15 s past the injection");
+    let gamma_hat = [Column::GammaHatX, Column::GammaHatY, Column::GammaHatZ];
+    let delta_hat = [Column::DeltaHatX, Column::DeltaHatY, Column::DeltaHatZ];
     for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-        let mean =
-            |name: &str| rows.iter().map(|r| tr.value(r, name)).sum::<f64>() / rows.len() as f64;
-        let g = mean(&format!("gamma_hat_{axis}"));
-        let d = mean(&format!("delta_hat_{axis}"));
+        let mean = |c: Column| rows.iter().map(|r| tr.value(r, c)).sum::<f64>() / rows.len() as f64;
+        let g = mean(gamma_hat[k]);
+        let d = mean(delta_hat[k]);
         let injected_delta = [0.15, 0.1, 0.5][k];
         assert!(
             (g - 0.5).abs() < 0.05,
@@ -267,10 +269,10 @@ fn ps_inspect_and_fault_injection_work_on_a_live_run() {
     // announced steps.
     let (mut after_fault, mut after_delay) = (0, 0);
     for r in tr.rows() {
-        let step = tr.value(r, "step") as u64;
-        let agent = tr.value(r, "agent") as usize;
-        let gx = tr.value(r, "gamma_x");
-        let tau = tr.value(r, "tau");
+        let step = tr.value(r, Column::Step) as u64;
+        let agent = tr.value(r, Column::Agent) as usize;
+        let gx = tr.value(r, Column::GammaX);
+        let tau = tr.value(r, Column::Tau);
         if agent == 2 {
             if step >= fault_step {
                 assert_eq!(gx, 0.5, "gamma_x of agent 2 at step {step}");

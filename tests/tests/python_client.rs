@@ -12,6 +12,7 @@
 //! the test is skipped with the reason, unless `FORMATION_REQUIRE_PYTHON=1` (CI).
 
 use formation_config::protocol::wire::{AgentTelemetry, VehicleState};
+use formation_runtime::record::csv::Column;
 use formation_runtime::record::table::Trajectory;
 use formation_tests::run::RunningRun;
 use formation_tests::wire::{assert_state_is_row, from_raw, rows_by_agent_and_step};
@@ -146,14 +147,17 @@ fn a_python_observer_reads_exactly_the_recorded_values_and_the_run_stays_byte_id
             assert_eq!(s.agent, 1, "agent 2's telemetry");
             let r = row(2, s.step);
             let c = &s.controller;
-            for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-                assert_eq!(c.gamma_hat[k], tr.value(r, &format!("gamma_hat_{axis}")));
-                assert_eq!(c.delta_hat[k], tr.value(r, &format!("delta_hat_{axis}")));
-                assert_eq!(c.f_hat[k], tr.value(r, &format!("f_hat_{axis}")));
+            let gamma_hat = [Column::GammaHatX, Column::GammaHatY, Column::GammaHatZ];
+            let delta_hat = [Column::DeltaHatX, Column::DeltaHatY, Column::DeltaHatZ];
+            let f_hat = [Column::FHatX, Column::FHatY, Column::FHatZ];
+            for k in 0..3 {
+                assert_eq!(c.gamma_hat[k], tr.value(r, gamma_hat[k]));
+                assert_eq!(c.delta_hat[k], tr.value(r, delta_hat[k]));
+                assert_eq!(c.f_hat[k], tr.value(r, f_hat[k]));
             }
-            assert_eq!(c.tau_s, tr.value(r, "tau"));
-            assert_eq!(c.d_hat, tr.value(r, "d_hat"));
-            assert_eq!(s.attitude[0], tr.value(r, "phi"));
+            assert_eq!(c.tau_s, tr.value(r, Column::Tau));
+            assert_eq!(c.d_hat, tr.value(r, Column::DHat));
+            assert_eq!(s.attitude[0], tr.value(r, Column::Phi));
             samples += 1;
         }
     }

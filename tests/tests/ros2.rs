@@ -11,6 +11,8 @@
 //! (`.ci/run` installs them into `target/pyenv`). Without them the Python part is skipped with a
 //! message, unless `FORMATION_REQUIRE_ROS2=1` (set by `.ci/run`): then it fails.
 
+use formation_runtime::record::csv::Column;
+use formation_runtime::record::table::Trajectory;
 use formation_tests::ip;
 use formation_tests::run::RunningRun;
 use formation_tests::{bin, sim, temp_dir, workspace_root};
@@ -91,19 +93,15 @@ fn random_domain() -> u16 {
 
 /// Rows of `trajectory.csv`: (agent id 1-based, t, position) in file order.
 fn trajectory(dir: &Path) -> Vec<(usize, f64, [f64; 3])> {
-    let text = std::fs::read_to_string(dir.join("trajectory.csv")).expect("trajectory.csv");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
-    let col = |n: &str| header.iter().position(|h| *h == n).expect(n);
-    let (t, agent, px, py, pz) = (col("t"), col("agent"), col("px"), col("py"), col("pz"));
-    lines
-        .map(|l| {
-            let f: Vec<&str> = l.split(',').collect();
-            let num = |i: usize| f[i].parse::<f64>().expect("a number");
+    let tr = Trajectory::read(&dir.join("trajectory.csv")).expect("trajectory.csv");
+    let v = |r: &[f64], c: Column| tr.value(r, c);
+    tr.rows()
+        .iter()
+        .map(|r| {
             (
-                f[agent].parse().expect("an agent id"),
-                num(t),
-                [num(px), num(py), num(pz)],
+                v(r, Column::Agent) as usize,
+                v(r, Column::T),
+                [v(r, Column::Px), v(r, Column::Py), v(r, Column::Pz)],
             )
         })
         .collect()

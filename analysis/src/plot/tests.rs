@@ -1,6 +1,7 @@
 //! Tests of `formation plot` on synthetic run directories.
 
 use super::{run, Format, PlotArgs, PlotError, Rendered};
+use formation_runtime::record::csv::Column;
 use std::path::{Path, PathBuf};
 
 /// Every column of docs/formats.md, in the documented order: the recorder's own list.
@@ -442,15 +443,17 @@ fn a_run_with_its_scenario_gets_the_scene_figure_at_the_chosen_frames() {
     let row = tr
         .rows()
         .iter()
-        .find(|r| tr.value(r, "step") as u64 == 1520 && tr.value(r, "agent") as u64 == 3)
+        .find(|r| {
+            tr.value(r, Column::Step) as u64 == 1520 && tr.value(r, Column::Agent) as u64 == 3
+        })
         .expect("row of step 1520, agent 3");
     let p = scenes.at[1].1.agent_translation(3).expect("agent 3's /tf");
     assert_eq!(
         p,
         [
-            tr.value(row, "px"),
-            tr.value(row, "py"),
-            tr.value(row, "pz")
+            tr.value(row, Column::Px),
+            tr.value(row, Column::Py),
+            tr.value(row, Column::Pz)
         ]
     );
     let _ = std::fs::remove_dir_all(&dir);

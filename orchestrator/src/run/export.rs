@@ -1,6 +1,10 @@
 //! `formation run --zenoh-listen ENDPOINT`: the run's telemetry for readers on other machines over
 //! Zenoh (crate `formation-net`, [`formation_net::export`]; docs/multi-host.md, "Outside clients
 //! over the network"). Without the `multihost` feature the flag is refused with exit 2.
+//!
+//! The export is one of the recorder's sinks ([`Running::sink`]): it takes every step the recorder
+//! records; the runtime events and the agents' telemetry, which the recorder does not see, its
+//! thread reads from the run's services (docs/multi-host.md, "Outside clients over the network").
 
 /// Options of `formation run` for outside readers over the network.
 #[derive(clap::Args, Debug, Clone)]
@@ -52,7 +56,8 @@ pub enum ExportError {
 #[cfg(feature = "multihost")]
 mod on {
     use super::{ExportArgs, ExportError, Facts};
-    use formation_net::export::{Export, ExportConfig, Listening, RunFacts};
+    use crate::record::{Cadence, Sink, Step};
+    use formation_net::export::{Export, ExportConfig, Listening, RunFacts, StepFeed};
     use std::path::Path;
 
     /// The export with its endpoints bound, before the run's services exist.
@@ -62,7 +67,31 @@ mod on {
     /// on an error), stopped after a last drain of the run's services.
     pub struct Running(Export);
 
+    /// The export as an output of the recorder: every step, handed over without waiting.
+    struct ExportSink(StepFeed);
+
+    impl Sink for ExportSink {
+        fn cadence(&self) -> Cadence {
+            Cadence::Every
+        }
+
+        fn step(&mut self, s: &Step<'_>) -> std::io::Result<()> {
+            self.0.offer(s.reference, s.truths, s.commands);
+            Ok(())
+        }
+
+        /// The export ends with [`Running::finish`], before the recorder does.
+        fn finish(self: Box<Self>) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
     impl Running {
+        /// The recorder's sink that hands every step it records to the export.
+        pub fn sink(&self) -> Box<dyn Sink> {
+            Box::new(ExportSink(self.0.feed()))
+        }
+
         /// Ends the export with a run that recorded `recorded` steps, before its role processes
         /// stop (bounded by `formation_net::export::END_BOUND`); prints how it went on stderr and
         /// returns it for `summary.json` `export`.
@@ -143,6 +172,11 @@ mod on {
     }
 
     impl Running {
+        /// Unreachable.
+        pub fn sink(&self) -> Box<dyn crate::record::Sink> {
+            match *self {}
+        }
+
         /// Unreachable.
         pub fn finish(self, _: u64) -> serde_json::Value {
             match self {}

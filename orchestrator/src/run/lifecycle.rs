@@ -85,16 +85,24 @@ impl<'p> Run<'p> {
         }
         let n = scenario.n_agents();
         let exe = spawn::self_exe()?;
-        let (recorder, run_dir) = open_outputs(plan, ids.prefix)?;
+        let (mut recorder, run_dir) = open_outputs(plan, ids.prefix)?;
         let node = ipc::node(ids.prefix, "fm-orchestrator")?;
         let sizing = names::Sizing::for_scenario(scenario, mode.realtime, mode.observers);
         let services = services::RunServices::create(&node, sizing)?;
         if let Some(r) = &remote {
             r.attach(ids.prefix, sizing, &run_dir)?;
         }
-        // Reads the services as an outside observer from the first step on; stopped after the
-        // role processes, once it has put their last samples.
+        // One of the recorder's sinks, and an outside observer of the services from the first
+        // step on; ended before the role processes, once it has put the last step recorded.
         let export = site.export.take().map(export::Opened::start).transpose()?;
+        if let Some(e) = &export {
+            recorder
+                .add_sink(e.sink())
+                .map_err(|source| RunError::Outputs {
+                    out: plan.out.clone(),
+                    source,
+                })?;
+        }
         let ports = driver::Ports::open(&node, n, !mode.realtime)?;
         if mode.realtime {
             // Stale files of an earlier run in the same directory must not be merged.
