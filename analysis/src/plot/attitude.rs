@@ -4,6 +4,7 @@ use super::style::{
     agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel, REFERENCE,
 };
 use super::Figure;
+use formation_runtime::record::csv::Column;
 use plotters::prelude::*;
 
 /// Colour of constraint bounds (black: distinct from every agent colour).
@@ -26,7 +27,13 @@ pub fn attitude<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let cells = area.split_evenly((n, 2));
     for (i, a) in fig.run.agents.iter().enumerate() {
         let color = agent_color(a.id);
-        for (c, (name, sym)) in [("phi", "φ"), ("theta", "θ")].iter().enumerate() {
+        for (c, (name, commanded, sym)) in [
+            (Column::Phi, Column::PhiC, "φ"),
+            (Column::Theta, Column::ThetaC, "θ"),
+        ]
+        .iter()
+        .enumerate()
+        {
             draw_panel(
                 &cells[2 * i + c],
                 Panel {
@@ -34,14 +41,10 @@ pub fn attitude<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
                     x_desc: "t (s)",
                     y_desc: format!("{sym} (rad)"),
                     lines: vec![
-                        Line::new(format!("{sym}_{}", a.id), color, a.series(name)),
-                        Line::new(
-                            format!("{sym}_{}C", a.id),
-                            REFERENCE,
-                            a.series(&format!("{name}_c")),
-                        )
-                        .dashed()
-                        .width(1),
+                        Line::new(format!("{sym}_{}", a.id), color, a.series(*name)),
+                        Line::new(format!("{sym}_{}C", a.id), REFERENCE, a.series(*commanded))
+                            .dashed()
+                            .width(1),
                     ],
                     markers: &fig.geometry.phases,
                     legend: Legend::Side,
@@ -62,9 +65,9 @@ pub fn attitude_constraint<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawRe
         root,
         Constraint {
             title: "Fig. 9 — attitude norm ‖A_i‖ and constraint C1_bar",
-            state: ("att_norm", "‖A_i‖"),
-            command: ("att_cmd_norm", "‖A_iC‖"),
-            bound: ("c1_bar", "C1_bar"),
+            state: (Column::AttNorm, "‖A_i‖"),
+            command: (Column::AttCmdNorm, "‖A_iC‖"),
+            bound: (Column::C1Bar, "C1_bar"),
             unit: "rad",
             with_compare: true,
         },
@@ -78,9 +81,9 @@ pub fn rate_constraint<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult
         root,
         Constraint {
             title: "Fig. 10 — angular-rate norm ‖Ω_i‖, virtual control ‖α_i‖ and constraint C2_bar",
-            state: ("rate_norm", "‖Ω_i‖"),
-            command: ("alpha_norm", "‖α_i‖"),
-            bound: ("c2_bar", "C2_bar"),
+            state: (Column::RateNorm, "‖Ω_i‖"),
+            command: (Column::AlphaNorm, "‖α_i‖"),
+            bound: (Column::C2Bar, "C2_bar"),
             unit: "rad/s",
             with_compare: false,
         },
@@ -92,11 +95,11 @@ struct Constraint<'a> {
     /// The figure's title (the run's title follows it).
     title: &'a str,
     /// The constrained norm.
-    state: (&'a str, &'a str),
+    state: (Column, &'a str),
     /// Its command (dashed).
-    command: (&'a str, &'a str),
+    command: (Column, &'a str),
     /// The constraint.
-    bound: (&'a str, &'a str),
+    bound: (Column, &'a str),
     /// The unit of the norms.
     unit: &'a str,
     /// Whether the `--compare` run's norm is drawn as well.

@@ -76,37 +76,37 @@ pub struct Run {
     pub events: Vec<(f64, String)>,
 }
 
-fn column_index(name: &str) -> usize {
+fn column_index(c: Column) -> usize {
     REQUIRED_COLUMNS
         .iter()
-        .position(|c| c.name() == name)
-        .unwrap_or_else(|| panic!("internal: column '{name}' is not in REQUIRED_COLUMNS"))
+        .position(|r| *r == c)
+        .unwrap_or_else(|| panic!("internal: column '{}' is not in REQUIRED_COLUMNS", c.name()))
 }
 
 impl AgentTrace {
-    /// The values of a required column (panics only on a programming error: a name missing from
+    /// The values of a required column (panics only on a programming error: a column missing from
     /// [`REQUIRED_COLUMNS`], never on user input, which is validated at load time).
-    pub fn col(&self, name: &str) -> &[f64] {
-        &self.columns[column_index(name)]
+    pub fn col(&self, c: Column) -> &[f64] {
+        &self.columns[column_index(c)]
     }
 
     /// Time stamps, s.
     pub fn t(&self) -> &[f64] {
-        self.col("t")
+        self.col(Column::T)
     }
 
     /// (t, column) pairs.
-    pub fn series(&self, name: &str) -> Vec<(f64, f64)> {
+    pub fn series(&self, c: Column) -> Vec<(f64, f64)> {
         self.t()
             .iter()
             .copied()
-            .zip(self.col(name).iter().copied())
+            .zip(self.col(c).iter().copied())
             .collect()
     }
 
     /// (t, f(row)) pairs for a function of several columns.
-    pub fn derived(&self, names: &[&str], f: impl Fn(&[f64]) -> f64) -> Vec<(f64, f64)> {
-        let cols: Vec<&[f64]> = names.iter().map(|n| self.col(n)).collect();
+    pub fn derived(&self, columns: &[Column], f: impl Fn(&[f64]) -> f64) -> Vec<(f64, f64)> {
+        let cols: Vec<&[f64]> = columns.iter().map(|c| self.col(*c)).collect();
         let mut row = vec![0.0; cols.len()];
         (0..self.t().len())
             .map(|k| {
@@ -246,7 +246,7 @@ fn parse_csv(text: &str) -> Result<Vec<AgentTrace>, CsvError> {
         return Err(CsvError::Missing(missing));
     }
     let wanted: Vec<usize> = REQUIRED_COLUMNS.iter().map(|c| index[c.name()]).collect();
-    let agent_col = column_index(Column::Agent.name());
+    let agent_col = column_index(Column::Agent);
 
     let mut by_agent: Vec<AgentTrace> = Vec::new();
     let mut values = vec![0.0; REQUIRED_COLUMNS.len()];

@@ -4,8 +4,15 @@ use super::style::{
     agent_color, draw_panel, lines_y_range, titled, Area, Backend, DrawResult, Legend, Line, Panel,
 };
 use super::{Figure, Run};
+use formation_runtime::record::csv::Column;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
+/// The formation error e per axis of [`AXES`].
+const ERRORS: [Column; 3] = [Column::Ex, Column::Ey, Column::Ez];
+/// F per axis of [`AXES`].
+const F: [Column; 3] = [Column::FX, Column::FY, Column::FZ];
+/// F-hat per axis of [`AXES`].
+const F_HAT: [Column; 3] = [Column::FHatX, Column::FHatY, Column::FHatZ];
 
 /// Lines of one column of one run, one per agent.
 fn per_agent(run: &Run, f: impl Fn(&super::data::AgentTrace) -> Vec<(f64, f64)>) -> Vec<Line> {
@@ -34,10 +41,10 @@ pub fn position_errors<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult
     let area = titled(root, &title)?;
     let cells = area.split_evenly((3, runs.len()));
     for (row, axis) in AXES.iter().enumerate() {
-        let col = format!("e{axis}");
+        let col = ERRORS[row];
         let lines: Vec<Vec<Line>> = runs
             .iter()
-            .map(|r| per_agent(r, |a| a.series(&col)))
+            .map(|r| per_agent(r, |a| a.series(col)))
             .collect();
         let y_range = lines_y_range(&lines.iter().flatten().collect::<Vec<_>>());
         for (c, (run, lines)) in runs.iter().zip(lines).enumerate() {
@@ -77,8 +84,9 @@ pub fn rbfnn_error<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     )?;
     let cells = area.split_evenly((3, 1));
     for (row, axis) in AXES.iter().enumerate() {
-        let (f, fh) = (format!("f_{axis}"), format!("f_hat_{axis}"));
-        let lines = per_agent(fig.run, |a| a.derived(&[&f, &fh], |r| r[0] - r[1]));
+        let lines = per_agent(fig.run, |a| {
+            a.derived(&[F[row], F_HAT[row]], |r| r[0] - r[1])
+        });
         draw_panel(
             &cells[row],
             Panel {
@@ -137,7 +145,7 @@ fn events_subtitle(run: &Run) -> String {
 
 /// The formation error norm ||e_i|| of one agent at each time row.
 fn error_norm(a: &super::data::AgentTrace) -> Vec<(f64, f64)> {
-    a.derived(&["ex", "ey", "ez"], |r| {
+    a.derived(&ERRORS, |r| {
         (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt()
     })
 }

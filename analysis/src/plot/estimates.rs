@@ -5,6 +5,7 @@ use super::style::{
     agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel,
 };
 use super::Figure;
+use formation_runtime::record::csv::Column;
 use plotters::prelude::*;
 
 /// Fig. 12: D̂_iA against ‖D_iA‖ (solid: estimate, dashed: true), all agents.
@@ -22,10 +23,10 @@ pub fn disturbance<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         lines.push(Line::new(
             format!("quadrotor {}", a.id),
             c,
-            a.series("d_hat"),
+            a.series(Column::DHat),
         ));
         lines.push(
-            Line::new("", c, a.series("d_norm"))
+            Line::new("", c, a.series(Column::DNorm))
                 .dashed()
                 .width(1)
                 .unlabelled(),
@@ -54,7 +55,8 @@ pub fn gamma<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         fig,
         root,
         "Fig. 13 — multiplicative fault Γ: estimate (solid) vs true (dashed)",
-        "gamma",
+        [Column::GammaX, Column::GammaY, Column::GammaZ],
+        [Column::GammaHatX, Column::GammaHatY, Column::GammaHatZ],
         "Γ",
         "",
     )
@@ -66,7 +68,8 @@ pub fn delta<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         fig,
         root,
         "Fig. 14 — additive fault δ: estimate (solid) vs true (dashed)",
-        "delta",
+        [Column::DeltaX, Column::DeltaY, Column::DeltaZ],
+        [Column::DeltaHatX, Column::DeltaHatY, Column::DeltaHatZ],
         "δ",
         " (N m)",
     )
@@ -76,7 +79,8 @@ fn per_channel<DB: Backend>(
     fig: &Figure,
     root: &Area<DB>,
     title: &str,
-    col: &str,
+    truth: [Column; 3],
+    estimate: [Column; 3],
     sym: &str,
     unit: &str,
 ) -> DrawResult {
@@ -89,10 +93,10 @@ fn per_channel<DB: Backend>(
             lines.push(Line::new(
                 format!("quadrotor {}", a.id),
                 c,
-                a.series(&format!("{col}_hat_{axis}")),
+                a.series(estimate[row]),
             ));
             lines.push(
-                Line::new("", c, a.series(&format!("{col}_{axis}")))
+                Line::new("", c, a.series(truth[row]))
                     .dashed()
                     .width(1)
                     .unlabelled(),

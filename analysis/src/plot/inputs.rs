@@ -4,6 +4,7 @@ use super::style::{
     agent_color, draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel,
 };
 use super::Figure;
+use formation_runtime::record::csv::Column;
 
 /// Fig. 11: applied torques U_iA (x, y, z) and total thrust, all agents.
 pub fn inputs<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
@@ -15,10 +16,10 @@ pub fn inputs<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         ),
     )?;
     let rows = [
-        ("u_a_x", "roll torque U_A,x", "U_A,x (N m)"),
-        ("u_a_y", "pitch torque U_A,y", "U_A,y (N m)"),
-        ("u_a_z", "yaw torque U_A,z", "U_A,z (N m)"),
-        ("thrust", "total thrust T", "T (N)"),
+        (Column::UAX, "roll torque U_A,x", "U_A,x (N m)"),
+        (Column::UAY, "pitch torque U_A,y", "U_A,y (N m)"),
+        (Column::UAZ, "yaw torque U_A,z", "U_A,z (N m)"),
+        (Column::Thrust, "total thrust T", "T (N)"),
     ];
     let cells = area.split_evenly((rows.len(), 1));
     for (row, (cell, (col, title, y))) in cells.iter().zip(rows).enumerate() {

@@ -3,6 +3,7 @@
 
 use super::style::{draw_panel, titled, Area, Backend, DrawResult, Legend, Line, Panel};
 use super::{Figure, Run};
+use formation_runtime::record::csv::Column;
 use formation_runtime::record::separation::closest_pair;
 use plotters::prelude::*;
 
@@ -15,7 +16,7 @@ pub fn min_distance_series(run: &Run) -> Vec<(f64, f64)> {
     let cols: Vec<[&[f64]; 3]> = run
         .agents
         .iter()
-        .map(|a| [a.col("px"), a.col("py"), a.col("pz")])
+        .map(|a| [a.col(Column::Px), a.col(Column::Py), a.col(Column::Pz)])
         .collect();
     let mut pos = Vec::with_capacity(cols.len());
     (0..len)

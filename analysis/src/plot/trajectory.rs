@@ -6,6 +6,7 @@ use super::style::{
     thin, titled, Area, Backend, DrawResult, FONT, REFERENCE,
 };
 use super::Figure;
+use formation_runtime::record::csv::Column;
 use plotters::prelude::*;
 
 /// Colour of the target disk (outline; the fill is a light tint). Distinct from every agent colour.
@@ -27,18 +28,20 @@ pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let xs = run
         .agents
         .iter()
-        .flat_map(|a| a.col("px").iter().chain(a.col("tx")));
+        .flat_map(|a| a.col(Column::Px).iter().chain(a.col(Column::Tx)));
     let ys = run
         .agents
         .iter()
-        .flat_map(|a| a.col("py").iter().chain(a.col("ty")));
+        .flat_map(|a| a.col(Column::Py).iter().chain(a.col(Column::Ty)));
     let (x0, x1) = fit_range(xs.copied(), 0.05);
     let (y0, y1) = fit_range(ys.copied(), 0.05);
     // Equal horizontal scales: both horizontal axes get the larger span.
     let half = (x1 - x0).max(y1 - y0) / 2.0;
     let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
     let (z0, z1) = fit_range(
-        run.agents.iter().flat_map(|a| a.col("pz").iter().copied()),
+        run.agents
+            .iter()
+            .flat_map(|a| a.col(Column::Pz).iter().copied()),
         0.05,
     );
     let (z0, z1) = (z0.min(0.0), z1.max(1.0));
@@ -69,7 +72,7 @@ pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     // Paths are stroked segment by segment in pixels (no mitre spurs on the thick target path);
     // the legend entries come from empty series.
     let target = &run.agents[0];
-    let target_pts: Vec<(f64, f64, f64)> = thin3(target, "tx", "ty", None);
+    let target_pts: Vec<(f64, f64, f64)> = thin3(target, Column::Tx, Column::Ty, None);
     let pixels: Vec<(i32, i32)> = target_pts
         .iter()
         .map(|p| chart.as_coord_spec().translate(p))
@@ -84,7 +87,7 @@ pub fn trajectory_3d<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], REFERENCE.stroke_width(3)));
     for a in &run.agents {
         let color = agent_color(a.id);
-        let pts = thin3(a, "px", "py", Some("pz"));
+        let pts = thin3(a, Column::Px, Column::Py, Some(Column::Pz));
         let pixels: Vec<(i32, i32)> = pts
             .iter()
             .map(|p| chart.as_coord_spec().translate(p))
@@ -162,7 +165,7 @@ fn draw_3d_axis_names<DB: Backend>(
 }
 
 /// (x, height, y) points of one agent for the 3D chart, thinned; `z = None` draws at ground level.
-fn thin3(a: &AgentTrace, x: &str, y: &str, z: Option<&str>) -> Vec<(f64, f64, f64)> {
+fn thin3(a: &AgentTrace, x: Column, y: Column, z: Option<Column>) -> Vec<(f64, f64, f64)> {
     let xs = a.col(x);
     let ys = a.col(y);
     let zs = z.map(|z| a.col(z));
@@ -196,15 +199,15 @@ impl Snapshot {
     fn at(fig: &Figure, t: f64) -> Option<Snapshot> {
         let first = fig.run.agents.first()?;
         let k = index_at(first, t)?;
-        let target = (first.col("tx")[k], first.col("ty")[k]);
+        let target = (first.col(Column::Tx)[k], first.col(Column::Ty)[k]);
         let agents = fig
             .run
             .agents
             .iter()
             .filter_map(|a| {
                 let k = index_at(a, t)?;
-                let r = fig.geometry.footprint_radius(a.col("pz")[k]);
-                Some((a.id, a.col("px")[k], a.col("py")[k], r))
+                let r = fig.geometry.footprint_radius(a.col(Column::Pz)[k]);
+                Some((a.id, a.col(Column::Px)[k], a.col(Column::Py)[k], r))
             })
             .collect();
         Some(Snapshot {
@@ -302,11 +305,11 @@ pub fn top_view<DB: Backend>(fig: &Figure, root: &Area<DB>) -> DrawResult {
     let xs = run
         .agents
         .iter()
-        .flat_map(|a| a.col("px").iter().chain(a.col("tx")).copied());
+        .flat_map(|a| a.col(Column::Px).iter().chain(a.col(Column::Tx)).copied());
     let ys = run
         .agents
         .iter()
-        .flat_map(|a| a.col("py").iter().chain(a.col("ty")).copied());
+        .flat_map(|a| a.col(Column::Py).iter().chain(a.col(Column::Ty)).copied());
     let xs = xs.chain(extent.iter().flat_map(|e| [e.0 - e.2, e.0 + e.2]));
     let ys = ys.chain(extent.iter().flat_map(|e| [e.1 - e.2, e.1 + e.2]));
     let (x0, x1) = fit_range(xs, 0.03);
@@ -409,10 +412,10 @@ fn top_panel<DB: Backend>(fig: &Figure, area: &Area<DB>, v: TopView) -> DrawResu
         (centre.1 - hy, centre.1 + hy),
     );
     let target_path: Vec<(f64, f64)> = target
-        .col("tx")
+        .col(Column::Tx)
         .iter()
         .copied()
-        .zip(target.col("ty").iter().copied())
+        .zip(target.col(Column::Ty).iter().copied())
         .collect();
     for (k, part) in clip_runs(&thin(&target_path), window.0, window.1)
         .into_iter()
@@ -432,7 +435,7 @@ fn top_panel<DB: Backend>(fig: &Figure, area: &Area<DB>, v: TopView) -> DrawResu
         let pts: Vec<(f64, f64)> = a
             .t()
             .iter()
-            .zip(a.col("px").iter().zip(a.col("py")))
+            .zip(a.col(Column::Px).iter().zip(a.col(Column::Py)))
             .filter(|(t, _)| trail_until.is_none_or(|te| **t <= te && **t >= te - TRAIL_S))
             .map(|(_, (x, y))| (*x, *y))
             .collect();
@@ -534,7 +537,12 @@ fn draw_top_legend<'a, DB: Backend + 'a>(
     let size = (200.0 / pw.max(1) as f64, 150.0 / ph.max(1) as f64);
     let mut data: Vec<(f64, f64)> = target_path.to_vec();
     for a in &run.agents {
-        data.extend(a.col("px").iter().copied().zip(a.col("py").iter().copied()));
+        data.extend(
+            a.col(Column::Px)
+                .iter()
+                .copied()
+                .zip(a.col(Column::Py).iter().copied()),
+        );
     }
     for s in snaps {
         data.extend(circle(s.target, fig.geometry.target_radius_m));
