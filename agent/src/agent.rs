@@ -439,185 +439,22 @@ impl Agent {
     }
 
     /// Computes the command of step k from the current attitude and rate in `own` and the delayed
-    /// information, then advances the controller's internal states by dt.
+    /// information, then advances the controller's internal states by dt: the reference generators
+    /// (D19), the consensus errors (8)-(9), the position law with the RBFNN (11) and its update
+    /// (15), the command conversion (28), and the attitude loop on command filter 1.
     pub fn step(&mut self, own: &VehicleState) -> ControlCommand {
         let k = own.step;
         let tau = self.delay_at(k);
         let kd = self.delayed_step_by(k, tau);
-        let g = &self.p.gains;
-        let (p_d, v_d) = self
+        let delayed = self
             .own
             .at_or_before(kd)
             .unwrap_or((own.position, own.velocity));
-        let zero: Offsets = [[0.0; 3]; 3];
-        let off = self.offsets[0].at_or_before(kd).unwrap_or(zero);
         let leader = self.leader.at_or_before(kd).unwrap_or_default();
-        let t_kd = kd as f64 * self.p.dt;
-        // Start-up reference generators (D19): every member's from its first shared state, the same
-        // on all agents, advanced on the delayed time axis with the member's delayed slot. A member
-        // that came back from a down window gets a fresh one from its state then (re-entry,
-        // `runtime.rejoin_reference`, in the controllers `rejoin_reference_for` names): itself at
-        // its first step back, a neighbour at its first usable share from then on; and a
-        // controller that comes back resumes the generators still running (its neighbours', and
-        // its own when it does not re-arm it; cold, all it knows of) from their states then: it
-        // did not advance them while it was down. One that re-arms its own reference re-arms every
-        // neighbour's too, from its newest usable share, over or not (a cold one resumes them): its
-        // own offset starts at zero, so its consensus errors (8)-(9) must start at zero on the
-        // neighbours' side as well, or they charge it with its neighbours' tracking errors and
-        // the RBFNN integrates them (docs/failures.md, bumpless re-entry).
-        let mut self_back = false;
-        let mut self_rearmed = false;
-        for m in 0..self.startup.len() {
-            let mut rejoin = None;
-            if let Some(gains) = self.p.rejoin_reference {
-                let (j, seen) = match m {
-                    0 => (self.p.id, Some(k)),
-                    _ => (self.p.neighbours[m - 1].0, self.usable_step(m - 1, kd)),
-                };
-                let back = seen.and_then(|s| self.timeline.latest_return(j, self.rearmed[m], s));
-                if let (Some(back), Some(seen)) = (back, seen) {
-                    self.rearmed[m] = back;
-                    self_back |= m == 0;
-                    let members = self.p.rejoin_members;
-                    let rearm = if m == 0 {
-                        members.itself()
-                    } else {
-                        members.neighbours()
-                    };
-                    rejoin = rearm.then_some((gains, seen));
-                    self_rearmed |= m == 0 && rejoin.is_some();
-                } else if let (true, Some(seen)) = (m > 0 && self_rearmed, seen) {
-                    rejoin = Some((gains, seen));
-                }
-            }
-            let resume = self_back && (!self.startup_set || self.startup[m].is_some());
-            if rejoin.is_none() && !resume && self.startup_set && self.startup[m].is_none() {
-                continue; // off, or over: nothing to look up
-            }
-            let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
-            let s = std::array::from_fn(|d| {
-                std::array::from_fn(|k| [leader.p, leader.v, leader.a][d][k] + o[d][k])
-            });
-            let state_at = |m: usize, step: u64| match m {
-                0 => (p_d, v_d),
-                _ => self.neighbours[m - 1]
-                    .at_or_before(step)
-                    .unwrap_or((p_d, v_d)),
-            };
-            let startup = g.position.startup_blend_accel_m_s2.map(|a_s| BlendGains {
-                accel: a_s,
-                jerk: g.position.startup_blend_jerk_m_s3,
-                rate: g.position.startup_blend_rate_1_s,
-            });
-            if let Some((gains, seen)) = rejoin {
-                let (p, v) = state_at(m, seen);
-                self.startup[m] = Blend::resumed(p, v, t_kd, &s, gains);
-            } else if resume {
-                let (p, v) = state_at(m, kd);
-                self.startup[m] = startup.and_then(|g| Blend::resumed(p, v, t_kd, &s, g));
-            } else if !self.startup_set {
-                let (p, v) = state_at(m, kd);
-                self.startup[m] = startup.and_then(|g| Blend::new(p, v, t_kd, &s, g));
-            } else if let Some(b) = &mut self.startup[m] {
-                if b.advance(t_kd, &s).is_none() {
-                    self.startup[m] = None;
-                }
-            }
-        }
-        self.startup_set = true;
-        let blend = |m: usize, o: Offsets| -> Offsets {
-            match self.startup[m].and_then(|b| b.offset()) {
-                Some(e) => std::array::from_fn(|d| std::array::from_fn(|k| o[d][k] + e[d][k])),
-                None => o,
-            }
-        };
-        let off = blend(0, off);
-        let me = Member {
-            p: p_d,
-            v: v_d,
-            off: off[0],
-            off_v: off[1],
-            off_a: off[2],
-        };
-        let neighbours = self
-            .p
-            .neighbours
-            .iter()
-            .enumerate()
-            .filter_map(|(idx, (_, a))| {
-                // A neighbour without a usable share (stale beyond stale_after) is dropped.
-                let m = self.usable_step(idx, kd)?;
-                let (p, v) = self.neighbours[idx].at_or_before(m).unwrap_or((p_d, v_d));
-                let o = blend(
-                    idx + 1,
-                    self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero),
-                );
-                Some((
-                    *a,
-                    Member {
-                        p,
-                        v,
-                        off: o[0],
-                        off_v: o[1],
-                        off_a: o[2],
-                    },
-                ))
-            });
-        let (ep, ev) = consensus_errors(&me, neighbours, self.p.leader_weight, &leader);
-
-        // RBFNN (11) and its update (15).
-        let use_nn = self.p.variant != Variant::NoRbfnn;
-        let f_hat = if use_nn {
-            self.nn.evaluate(p_d, v_d)
-        } else {
-            [0.0; 3]
-        };
-        let u_raw = raw_law(&g.position, ep, ev, f_hat, &me, &leader, self.p.leader_data);
-        let u_p = limit(&g.position, self.p.gravity, u_raw);
-        // Command conversion (28) with psi_iC = 0, tilt-limited.
-        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
-        let tilt = g.position.max_tilt_rad;
-        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
-        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
-        // D15: the position loop's command is not what the vehicle gets while U_iP sits on the
-        // acceleration limit of D5 or the attitude command it asks for moves command filter 1 at
-        // its rate limit (D14); the error then measures the limits, not what F-hat misses, and
-        // the network does not learn from it (conditional integration).
-        let saturated = u_p != u_raw || self.attitude_filter.rate_limited(att_raw);
-        if use_nn && !(saturated && g.rbfnn.freeze_when_saturated) {
-            let pg = &g.position;
-            // The network learns from the same (shaped, D18) position error the law acts on.
-            let shaped = pg.position_error_limit_m.unwrap_or(f64::INFINITY);
-            let ep_nn = clip_norm(ep, shaped);
-            let mut drive: [f64; 3] =
-                std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
-            // D23: the leader-relative errors of D11 drive the network too, once this agent's own
-            // start-up reference generator (D19) has brought its reference to the slot, or within
-            // nn_leader_gate_m of it: the network does not integrate the shaped approach of the
-            // start-up.
-            // A controller that has come back (rearmed[0] > 0) gates with the re-entry gate if one
-            // is set, else with the start-up gate.
-            let gate = if self.rearmed[0] > 0 {
-                self.p.rejoin_drive_gate.or(pg.nn_leader_gate_m)
-            } else {
-                pg.nn_leader_gate_m
-            };
-            let started = drive_gate_open(self.startup[0].and_then(|b| b.offset()), gate);
-            if self.p.leader_data && started && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0)
-            {
-                let lp = clip_norm(
-                    std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
-                    shaped,
-                );
-                let lv = std::array::from_fn(|k| me.v[k] - leader.v[k] - me.off_v[k]);
-                let lead = leader_drive(lp, lv, pg);
-                for (d, l) in drive.iter_mut().zip(lead) {
-                    *d += l;
-                }
-            }
-            self.nn
-                .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
-        }
+        self.advance_references(k, kd, delayed, &leader);
+        let (me, ep, ev) = self.formation_errors(kd, delayed, &leader);
+        let law = self.position_law(&me, ep, ev, &leader);
+        self.learn(&law, &me, &leader, ep, ev);
 
         // Attitude loop on the filtered command (command filter 1).
         let a_c = Vector3::from(self.attitude_filter.value());
@@ -625,7 +462,7 @@ impl Agent {
         let a = Vector3::from(own.attitude);
         let w = Vector3::from(own.rate);
         let out = self.attitude.step(&self.p, k, &a, &w, &a_c, &a_c_dot);
-        self.attitude_filter.advance(att_raw, self.p.dt);
+        self.attitude_filter.advance(law.attitude_raw, self.p.dt);
 
         let at = &self.attitude;
         ControlCommand {
@@ -634,16 +471,20 @@ impl Agent {
             agent: self.p.id as u32,
             _pad: 0,
             sent_ns: 0,
-            thrust_n: thrust,
+            thrust_n: law.thrust,
             torque_nm: out.torque.into(),
             telemetry: ControllerTelemetry {
                 tau_s: tau,
                 e_p: ep,
                 e_v: ev,
-                u_p,
-                f_hat,
-                nn_weight_norm: if use_nn { self.nn.weight_norm() } else { 0.0 },
-                attitude_cmd_raw: att_raw,
+                u_p: law.u_p,
+                f_hat: law.f_hat,
+                nn_weight_norm: if law.use_nn {
+                    self.nn.weight_norm()
+                } else {
+                    0.0
+                },
+                attitude_cmd_raw: law.attitude_raw,
                 attitude_cmd: a_c.into(),
                 alpha: out.alpha.into(),
                 z1: out.z1.into(),
@@ -661,6 +502,255 @@ impl Agent {
             },
         }
     }
+
+    /// Advances the start-up reference generators (D19) to delayed step `kd` of step `k`: every
+    /// member's from its first shared state, the same on all agents, advanced on the delayed time
+    /// axis with the member's delayed slot (`leader`, the offsets). `delayed`: this agent's own
+    /// delayed position and velocity, the stand-in for a state not yet known. A member that came
+    /// back from a down window gets a fresh one from its state then (re-entry,
+    /// `runtime.rejoin_reference`, in the controllers `rejoin_reference_for` names): itself at its
+    /// first step back, a neighbour at its first usable share from then on; and a controller that
+    /// comes back resumes the generators still running (its neighbours', and its own when it does
+    /// not re-arm it; cold, all it knows of) from their states then: it did not advance them while
+    /// it was down. One that re-arms its own reference re-arms every neighbour's too, from its
+    /// newest usable share, over or not (a cold one resumes them): its own offset starts at zero,
+    /// so its consensus errors (8)-(9) must start at zero on the neighbours' side as well, or they
+    /// charge it with its neighbours' tracking errors and the RBFNN integrates them
+    /// (docs/failures.md, bumpless re-entry).
+    fn advance_references(&mut self, k: u64, kd: u64, delayed: Kinematic, leader: &LeaderInfo) {
+        let pg = &self.p.gains.position;
+        let startup = pg.startup_blend_accel_m_s2.map(|a_s| BlendGains {
+            accel: a_s,
+            jerk: pg.startup_blend_jerk_m_s3,
+            rate: pg.startup_blend_rate_1_s,
+        });
+        let zero: Offsets = [[0.0; 3]; 3];
+        let t_kd = kd as f64 * self.p.dt;
+        let mut itself = Reentry::default();
+        for m in 0..self.startup.len() {
+            let rejoin = self.rejoin_of(m, k, kd, &mut itself);
+            let resume = itself.back && (!self.startup_set || self.startup[m].is_some());
+            if rejoin.is_none() && !resume && self.startup_set && self.startup[m].is_none() {
+                continue; // off, or over: nothing to look up
+            }
+            let o = self.offsets[m].at_or_before(kd).unwrap_or(zero);
+            let s = std::array::from_fn(|d| {
+                std::array::from_fn(|k| [leader.p, leader.v, leader.a][d][k] + o[d][k])
+            });
+            let state_at = |m: usize, step: u64| match m {
+                0 => delayed,
+                _ => self.neighbours[m - 1].at_or_before(step).unwrap_or(delayed),
+            };
+            if let Some((gains, seen)) = rejoin {
+                let (p, v) = state_at(m, seen);
+                self.startup[m] = Blend::resumed(p, v, t_kd, &s, gains);
+            } else if resume {
+                let (p, v) = state_at(m, kd);
+                self.startup[m] = startup.and_then(|g| Blend::resumed(p, v, t_kd, &s, g));
+            } else if !self.startup_set {
+                let (p, v) = state_at(m, kd);
+                self.startup[m] = startup.and_then(|g| Blend::new(p, v, t_kd, &s, g));
+            } else if let Some(b) = &mut self.startup[m] {
+                if b.advance(t_kd, &s).is_none() {
+                    self.startup[m] = None;
+                }
+            }
+        }
+        self.startup_set = true;
+    }
+
+    /// Whether the reference generator of member `m` (0: this agent, else neighbour m - 1)
+    /// re-arms at step `k` (delayed step `kd`): the re-entry gains and the step of the state it
+    /// re-arms from, or `None`. Records the member's return in `rearmed`, and this agent's own in
+    /// `itself` (member 0 comes first).
+    fn rejoin_of(
+        &mut self,
+        m: usize,
+        k: u64,
+        kd: u64,
+        itself: &mut Reentry,
+    ) -> Option<(BlendGains, u64)> {
+        let gains = self.p.rejoin_reference?;
+        let (j, seen) = match m {
+            0 => (self.p.id, Some(k)),
+            _ => (self.p.neighbours[m - 1].0, self.usable_step(m - 1, kd)),
+        };
+        let back = seen.and_then(|s| self.timeline.latest_return(j, self.rearmed[m], s));
+        if let (Some(back), Some(seen)) = (back, seen) {
+            self.rearmed[m] = back;
+            itself.back |= m == 0;
+            let members = self.p.rejoin_members;
+            let rearm = if m == 0 {
+                members.itself()
+            } else {
+                members.neighbours()
+            };
+            let rejoin = rearm.then_some((gains, seen));
+            itself.rearmed |= m == 0 && rejoin.is_some();
+            rejoin
+        } else if let (true, Some(seen)) = (m > 0 && itself.rearmed, seen) {
+            Some((gains, seen))
+        } else {
+            None
+        }
+    }
+
+    /// This agent as a member of the formation at delayed step `kd` (its delayed state `delayed`
+    /// and its offsets with the start-up blend) and its consensus errors (8)-(9) against the
+    /// neighbours with a usable share and the `leader`.
+    fn formation_errors(
+        &self,
+        kd: u64,
+        delayed: Kinematic,
+        leader: &LeaderInfo,
+    ) -> (Member, [f64; 3], [f64; 3]) {
+        let (p_d, v_d) = delayed;
+        let zero: Offsets = [[0.0; 3]; 3];
+        let blend = |m: usize, o: Offsets| -> Offsets {
+            match self.startup[m].and_then(|b| b.offset()) {
+                Some(e) => std::array::from_fn(|d| std::array::from_fn(|k| o[d][k] + e[d][k])),
+                None => o,
+            }
+        };
+        let off = blend(0, self.offsets[0].at_or_before(kd).unwrap_or(zero));
+        let me = Member {
+            p: p_d,
+            v: v_d,
+            off: off[0],
+            off_v: off[1],
+            off_a: off[2],
+        };
+        let neighbours = self
+            .p
+            .neighbours
+            .iter()
+            .enumerate()
+            .filter_map(|(idx, (_, a))| {
+                // A neighbour without a usable share (stale beyond stale_after) is dropped.
+                let m = self.usable_step(idx, kd)?;
+                let (p, v) = self.neighbours[idx].at_or_before(m).unwrap_or(delayed);
+                let o = blend(
+                    idx + 1,
+                    self.offsets[idx + 1].at_or_before(kd).unwrap_or(zero),
+                );
+                Some((
+                    *a,
+                    Member {
+                        p,
+                        v,
+                        off: o[0],
+                        off_v: o[1],
+                        off_a: o[2],
+                    },
+                ))
+            });
+        let (ep, ev) = consensus_errors(&me, neighbours, self.p.leader_weight, leader);
+        (me, ep, ev)
+    }
+
+    /// The position law of `me` for the consensus errors `ep`, `ev`: U_iP with F-hat_iP of the
+    /// RBFNN (11), limited (D5), converted (28) with psi_iC = 0 into thrust and a tilt-limited
+    /// attitude command.
+    fn position_law(
+        &mut self,
+        me: &Member,
+        ep: [f64; 3],
+        ev: [f64; 3],
+        leader: &LeaderInfo,
+    ) -> Law {
+        let g = &self.p.gains;
+        let use_nn = self.p.variant != Variant::NoRbfnn;
+        let f_hat = if use_nn {
+            self.nn.evaluate(me.p, me.v)
+        } else {
+            [0.0; 3]
+        };
+        let u_raw = raw_law(&g.position, ep, ev, f_hat, me, leader, self.p.leader_data);
+        let u_p = limit(&g.position, self.p.gravity, u_raw);
+        let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
+        let tilt = g.position.max_tilt_rad;
+        att_raw[0] = att_raw[0].clamp(-tilt, tilt);
+        att_raw[1] = att_raw[1].clamp(-tilt, tilt);
+        // D15: the position loop's command is not what the vehicle gets while U_iP sits on the
+        // acceleration limit of D5 or the attitude command it asks for moves command filter 1 at
+        // its rate limit (D14); the error then measures the limits, not what F-hat misses, and
+        // the network does not learn from it (conditional integration).
+        let saturated = u_p != u_raw || self.attitude_filter.rate_limited(att_raw);
+        Law {
+            use_nn,
+            f_hat,
+            u_p,
+            thrust,
+            attitude_raw: att_raw,
+            saturated,
+        }
+    }
+
+    /// The RBFNN update (15) after the position `law` of `me`: driven by the consensus errors
+    /// `ep`, `ev` and, once the start-up is through, the errors against the `leader` (D23); none
+    /// without the network or while the law is saturated (D15).
+    fn learn(&mut self, law: &Law, me: &Member, leader: &LeaderInfo, ep: [f64; 3], ev: [f64; 3]) {
+        let g = &self.p.gains;
+        if !law.use_nn || (law.saturated && g.rbfnn.freeze_when_saturated) {
+            return;
+        }
+        let pg = &g.position;
+        // The network learns from the same (shaped, D18) position error the law acts on.
+        let shaped = pg.position_error_limit_m.unwrap_or(f64::INFINITY);
+        let ep_nn = clip_norm(ep, shaped);
+        let mut drive: [f64; 3] = std::array::from_fn(|k| pg.nn_k_p * ep_nn[k] + pg.nn_k_v * ev[k]);
+        // D23: the leader-relative errors of D11 drive the network too, once this agent's own
+        // start-up reference generator (D19) has brought its reference to the slot, or within
+        // nn_leader_gate_m of it: the network does not integrate the shaped approach of the
+        // start-up.
+        // A controller that has come back (rearmed[0] > 0) gates with the re-entry gate if one
+        // is set, else with the start-up gate.
+        let gate = if self.rearmed[0] > 0 {
+            self.p.rejoin_drive_gate.or(pg.nn_leader_gate_m)
+        } else {
+            pg.nn_leader_gate_m
+        };
+        let started = drive_gate_open(self.startup[0].and_then(|b| b.offset()), gate);
+        if self.p.leader_data && started && (pg.nn_leader_k_p != 0.0 || pg.nn_leader_k_v != 0.0) {
+            let lp = clip_norm(
+                std::array::from_fn(|k| me.p[k] - leader.p[k] - me.off[k]),
+                shaped,
+            );
+            let lv = std::array::from_fn(|k| me.v[k] - leader.v[k] - me.off_v[k]);
+            let lead = leader_drive(lp, lv, pg);
+            for (d, l) in drive.iter_mut().zip(lead) {
+                *d += l;
+            }
+        }
+        self.nn
+            .update(drive, pg.nn_learning_rate, pg.nn_leakage, self.p.dt);
+    }
+}
+
+/// This agent's return from a down window as its reference generators see it in one step.
+#[derive(Debug, Default)]
+struct Reentry {
+    /// It came back at this step.
+    back: bool,
+    /// It re-armed its own reference generator at this step.
+    rearmed: bool,
+}
+
+/// The position loop's output of one step ([`Agent::step`]).
+#[derive(Debug)]
+struct Law {
+    /// The RBFNN is used (every variant but the no-RBFNN one).
+    use_nn: bool,
+    /// F-hat_iP, m/s² (zero without the RBFNN).
+    f_hat: [f64; 3],
+    /// U_iP after the acceleration limit of D5, m/s².
+    u_p: [f64; 3],
+    /// Collective thrust, N.
+    thrust: f64,
+    /// Attitude command (28), roll and pitch tilt-limited, rad.
+    attitude_raw: [f64; 3],
+    /// U_iP was limited or the attitude command moves command filter 1 at its rate limit (D15).
+    saturated: bool,
 }
 
 #[cfg(test)]

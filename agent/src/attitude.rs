@@ -16,9 +16,10 @@
 
 use crate::blf::Barrier;
 use crate::command_filter::CommandFilter;
-use crate::fault_id::{FaultIdentifier, SATURATION_GUARD};
+use crate::fault_id::{FaultIdentifier, NominalBody, SATURATION_GUARD};
 use crate::params::AgentParams;
 use formation_config::kinematics::{rotational_drift, AttitudeTrig};
+use formation_config::scenario::{AuxiliaryGains, Controller};
 use formation_config::Variant;
 use nalgebra::{Matrix3, Vector3};
 
@@ -162,21 +163,49 @@ impl AttitudeLoop {
             let mid = 0.5 * (hi[k] + lo[k]);
             (expected[k] - mid).abs() > SATURATION_GUARD * 0.5 * (hi[k] - lo[k])
         });
-        self.identifier.observe(
-            w,
-            &torque,
-            unit_probe,
-            near_limit,
-            &j,
-            &Vector3::from(p.drag),
-            dt,
-        );
+        let body = NominalBody {
+            inertia: j,
+            drag: Vector3::from(p.drag),
+        };
+        self.identifier
+            .observe(w, &torque, unit_probe, near_limit, &body, dt);
+        let s = Signals {
+            j_inv,
+            drift,
+            nu1: b1.nu,
+            nu2: b2.nu,
+            tanh_nu2,
+            torque,
+            r_r,
+            d_alpha: alpha - alpha_c,
+            lo,
+            hi,
+        };
+        self.adapt(g, &s, dt);
+        self.advance_auxiliary(&g.auxiliary, &s, dt);
+
+        // ---- Command filter of alpha_iC.
+        self.rate_filter.advance(alpha_c.into(), dt);
+
+        AttitudeOutput {
+            torque,
+            z1,
+            z2,
+            alpha,
+            blf1: b1.value,
+            blf2: b2.value,
+            c1: if unconstrained { f64::INFINITY } else { c1 },
+            c2: if unconstrained { f64::INFINITY } else { c2 },
+        }
+    }
+
+    /// The adaptive laws (46)-(49) of one step of `dt`, explicit Euler, on the `s`ignals of the
+    /// step, with the composite terms of D16 towards the fault identifier's values.
+    fn adapt(&mut self, g: &Controller, s: &Signals, dt: f64) {
         let id = self.identifier.identified();
         let k_c = g.fault_identification.composite_rate;
-
-        // ---- Adaptive laws (46)-(49), explicit Euler.
         let ad = &g.adaptive;
-        let nu2 = b2.nu;
+        let (nu2, drift, j_inv, torque) = (s.nu2, s.drift, s.j_inv, s.torque);
         // (46), our transpose reading, leakage towards the nominal Delta F = I.
         self.model_hat += (ad.model_rate * nu2 * drift.transpose()
             - ad.model_leakage * (self.model_hat - Matrix3::identity()))
@@ -207,15 +236,18 @@ impl AttitudeLoop {
             }
         }
         // (49), D-hat kept non-negative (it estimates a bound).
-        let d_drive = nu2.dot(&tanh_nu2);
+        let d_drive = nu2.dot(&s.tanh_nu2);
         self.d_hat = (self.d_hat
             + ad.disturbance_rate * (d_drive - ad.disturbance_leakage * self.d_hat) * dt)
             .max(0.0);
+    }
 
-        // ---- Auxiliary systems (35), (50), our reading D10.
-        let aux = &g.auxiliary;
-        let d_alpha = alpha - alpha_c;
-        let coupling1 = (b1.nu.transpose() * r_r * d_alpha)[0].abs();
+    /// The auxiliary systems (35), (50) of one step of `dt` in our reading (D10), on the `s`ignals
+    /// of the step and the adaptive estimates already advanced.
+    fn advance_auxiliary(&mut self, aux: &AuxiliaryGains, s: &Signals, dt: f64) {
+        let (j_inv, nu2, torque, lo, hi) = (s.j_inv, s.nu2, s.torque, s.lo, s.hi);
+        let d_alpha = s.d_alpha;
+        let coupling1 = (s.nu1.transpose() * s.r_r * d_alpha)[0].abs();
         self.e1 = aux_step(
             self.e1,
             aux.k1_e,
@@ -238,21 +270,32 @@ impl AttitudeLoop {
             coupling2,
             dt,
         );
-
-        // ---- Command filter of alpha_iC.
-        self.rate_filter.advance(alpha_c.into(), dt);
-
-        AttitudeOutput {
-            torque,
-            z1,
-            z2,
-            alpha,
-            blf1: b1.value,
-            blf2: b2.value,
-            c1: if unconstrained { f64::INFINITY } else { c1 },
-            c2: if unconstrained { f64::INFINITY } else { c2 },
-        }
     }
+}
+
+/// The signals of one step of the attitude loop that its adaptive laws and auxiliary systems
+/// integrate.
+struct Signals {
+    /// J_i^-1 (diagonal), 1/(kg m²).
+    j_inv: Vector3<f64>,
+    /// F_iA of the nominal model at the current rate, rad/s².
+    drift: Vector3<f64>,
+    /// nu_1 of the attitude barrier (31).
+    nu1: Vector3<f64>,
+    /// nu_2 of the rate barrier (40).
+    nu2: Vector3<f64>,
+    /// tanh(nu_2 / mu_2), per channel.
+    tanh_nu2: Vector3<f64>,
+    /// U_iAC, N m.
+    torque: Vector3<f64>,
+    /// R_r, the Euler rate matrix at the current attitude.
+    r_r: Matrix3<f64>,
+    /// alpha_i - alpha_iC, the command filter's lag, rad/s.
+    d_alpha: Vector3<f64>,
+    /// The lower torque limits, N m.
+    lo: Vector3<f64>,
+    /// The upper torque limits, N m.
+    hi: Vector3<f64>,
 }
 
 /// One step of an auxiliary system (35)/(50) in our reading (D10): above the threshold

@@ -74,6 +74,15 @@ pub struct Identified {
     pub valid: [bool; 3],
 }
 
+/// The nominal rigid body the identifier measures the delivered torque against.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NominalBody {
+    /// J_i, the diagonal of the nominal inertia, kg m².
+    pub inertia: Vector3<f64>,
+    /// K_iD, the diagonal of the nominal aerodynamic damping, N m s/rad.
+    pub drag: Vector3<f64>,
+}
+
 impl FaultIdentifier {
     /// The identifier of `spec` at step `dt` (off when the amplitude or the period is zero).
     pub fn new(spec: &FaultIdentificationSpec, dt: f64) -> FaultIdentifier {
@@ -131,24 +140,22 @@ impl FaultIdentifier {
 
     /// Closes the pending sample with the rate `w` now measured (Omega_{k+1}), then holds the command `u`
     /// of this step (probe included), the rate `w` it starts from, its unit probe `s` and whether the
-    /// expected delivered torque may be saturated. `j`, `drag`: the nominal inertia and damping.
-    #[allow(clippy::too_many_arguments)]
+    /// expected delivered torque may be saturated. `body`: the nominal inertia and damping.
     pub fn observe(
         &mut self,
         w: &Vector3<f64>,
         u: &Vector3<f64>,
         s: f64,
         saturated: bool,
-        j: &Vector3<f64>,
-        drag: &Vector3<f64>,
+        body: &NominalBody,
         dt: f64,
     ) {
         if !self.active() {
             return;
         }
         if let Some(prev) = self.pending {
-            let accel = (w - prev.w) / dt - rotational_drift(j, drag, &prev.w);
-            let y = j.component_mul(&accel);
+            let accel = (w - prev.w) / dt - rotational_drift(&body.inertia, &body.drag, &prev.w);
+            let y = body.inertia.component_mul(&accel);
             self.push(prev, y);
         }
         self.pending = Some(Pending {
@@ -239,6 +246,7 @@ mod tests {
         let dt = 0.001;
         let j = Vector3::new(0.02351, 0.02351, 0.04701);
         let drag = Vector3::new(0.003, 0.003, 0.003);
+        let body = NominalBody { inertia: j, drag };
         let gamma = Vector3::new(0.7, 0.45, 0.77);
         let delta = Vector3::new(0.1, -0.05, -0.8);
         let mut id = FaultIdentifier::new(&spec(), dt);
@@ -249,7 +257,7 @@ mod tests {
             let base = -delta.component_div(&gamma) * (1.0 + 0.05 * (0.3 * t).sin()) - w * 0.5;
             let s = id.unit_probe(k);
             let u = base + id.probe(k);
-            id.observe(&w, &u, s, false, &j, &drag, dt);
+            id.observe(&w, &u, s, false, &body, dt);
             let wd = rotational_drift(&j, &drag, &w)
                 + (gamma.component_mul(&u) + delta).component_div(&j);
             w += wd * dt;
@@ -278,16 +286,17 @@ mod tests {
         let dt = 0.001;
         let j = Vector3::new(0.02351, 0.02351, 0.04701);
         let drag = Vector3::zeros();
+        let body = NominalBody { inertia: j, drag };
         let mut id = FaultIdentifier::new(&spec(), dt);
         let w = Vector3::zeros();
         for k in 0..40u64 {
             let u = id.probe(k);
-            id.observe(&w, &u, id.unit_probe(k), k >= 30, &j, &drag, dt);
+            id.observe(&w, &u, id.unit_probe(k), k >= 30, &body, dt);
         }
         let frozen = id.m_su;
         for k in 40..50u64 {
             let u = id.probe(k);
-            id.observe(&w, &u, id.unit_probe(k), false, &j, &drag, dt);
+            id.observe(&w, &u, id.unit_probe(k), false, &body, dt);
         }
         assert_eq!(id.m_su, frozen);
     }

@@ -9,7 +9,7 @@
 //! the boxcar over one probe period, the identified values).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use formation_agent::fault_id::FaultIdentifier;
+use formation_agent::fault_id::{FaultIdentifier, NominalBody};
 use formation_analysis::scenario_gen::{generate, graphs::GraphKind, GenOptions};
 use formation_config::{Scenario, Variant};
 use formation_runtime::record::coverage::CoverageGrid;
@@ -104,14 +104,16 @@ fn fault_identification_step(c: &mut Criterion) {
     let s = Scenario::paper();
     let dt = s.simulation.dt_s;
     let mut id = FaultIdentifier::new(&s.controller.fault_identification, dt);
-    let j = Vector3::from(s.vehicle.inertia_kg_m2);
-    let drag = Vector3::from(s.vehicle.rotational_drag);
+    let body = NominalBody {
+        inertia: Vector3::from(s.vehicle.inertia_kg_m2),
+        drag: Vector3::from(s.vehicle.rotational_drag),
+    };
     let mut k = 0u64;
     let step = |id: &mut FaultIdentifier, k: u64| {
         let unit = id.unit_probe(k);
         let u = Vector3::new(0.01, -0.02, 0.005) + id.probe_of(unit);
         let w = Vector3::new(1e-3 * (k % 7) as f64, 2e-3, -1e-3);
-        id.observe(&w, &u, unit, false, &j, &drag, dt);
+        id.observe(&w, &u, unit, false, &body, dt);
         id.identified()
     };
     while k < 2000 {

@@ -300,7 +300,6 @@ pub fn level_hover(
 /// `last` (the last command its controller sent, with its telemetry) while within `hold_s`, then
 /// the failsafe `fly` (thrust, torque and attitude target), whose telemetry carries only its
 /// attitude target so the constraint metrics measure the quadrotor against what it is asked to do.
-#[allow(clippy::too_many_arguments)] // the step, the vehicle and the policy, each its own kind
 pub fn command(
     rt: &Runtime,
     last: &ControlCommand,
@@ -496,16 +495,22 @@ mod tests {
         assert!(u.x.abs() < 0.02 + 1e-12, "already at the largest rate: {u}");
     }
 
+    /// Actuator faults on the torque: U delivered = gamma U + delta, per channel.
+    struct ActuatorFaults {
+        /// Effectiveness Gamma.
+        gamma: Vector3<f64>,
+        /// Bias delta, N m.
+        delta: Vector3<f64>,
+    }
+
     /// Flies `x` on the cascade for `steps` steps of 1 ms towards `target(t)`, with the actuator
-    /// faults `gamma`, `delta` on the torque and the external acceleration `force(x)` it does not
-    /// know (a small-angle rigid body, enough for the tests); calls `each(t, x)` after every step
-    /// and returns the largest body rate.
-    #[allow(clippy::too_many_arguments)] // the vehicle, its faults, its world and the probe
+    /// `faults` on the torque and the external acceleration `force(x)` it does not know (a
+    /// small-angle rigid body, enough for the tests); calls `each(t, x)` after every step and
+    /// returns the largest body rate.
     fn fly(
         x: &mut RigidState,
         fs: &mut Failsafe,
-        gamma: Vector3<f64>,
-        delta: Vector3<f64>,
+        faults: ActuatorFaults,
         target: impl Fn(f64) -> Target,
         force: impl Fn(&RigidState) -> Vector3<f64>,
         steps: usize,
@@ -517,7 +522,7 @@ mod tests {
         for k in 0..steps {
             let t = k as f64 * dt;
             let (thrust, u, _) = fly_to(fs, &target(t), Vector3::zeros(), 0.0, x, &f, dt);
-            let applied = (u.component_mul(&gamma) + delta).zip_zip_map(
+            let applied = (u.component_mul(&faults.gamma) + faults.delta).zip_zip_map(
                 &f.torque_lo,
                 &f.torque_hi,
                 |u, lo, hi| u.clamp(lo, hi),
@@ -549,8 +554,10 @@ mod tests {
         let worst_rate = fly(
             &mut x,
             &mut fs,
-            Vector3::new(0.7, 0.75, 0.8),
-            Vector3::new(0.15, -0.1, 0.8),
+            ActuatorFaults {
+                gamma: Vector3::new(0.7, 0.75, 0.8),
+                delta: Vector3::new(0.15, -0.1, 0.8),
+            },
             |_| target,
             |_| force,
             30_000,
@@ -588,8 +595,10 @@ mod tests {
         let worst_rate = fly(
             &mut x,
             &mut fs,
-            Vector3::new(1.0, 1.0, 1.0),
-            Vector3::zeros(),
+            ActuatorFaults {
+                gamma: Vector3::new(1.0, 1.0, 1.0),
+                delta: Vector3::zeros(),
+            },
             slot,
             |x| Vector3::new(0.8, (1.6 * x.p.y + x.v.y).sin(), 0.0),
             20_000,

@@ -51,7 +51,7 @@ struct Meters {
 pub fn run(
     b: &Boot,
     i: usize,
-    mut agent: Agent,
+    agent: Agent,
     ports: &Ports,
     checkpoints: &mut Checkpoints,
     local_mission: Option<formation_leader::Mission>,
@@ -59,43 +59,110 @@ pub fn run(
     if let Some(w) = formation_config::node::sched::realtime_setup(b.args.rt_priority) {
         eprintln!("warning: {w}");
     }
-    let mut m = Meters::default();
-    let mut refs: VecDeque<ReferenceFrame> = VecDeque::with_capacity(128);
-    let mut pending_delays: Vec<DelayInjection> = Vec::new();
-    let mut latest: Option<VehicleState> = None;
-    // A successor: the newest step whose reference it observed (from the mission or the leader).
-    let mut referenced: Option<u64> = None;
-    let mut local_reference = ReferenceFrame::default();
-    // The newest step whose command went out.
-    let mut answered: Option<u64> = None;
-    let mut sampler = Sampler::new(&b.scenario, i);
     let dt_ns = (b.scenario.simulation.dt_s * 1e9).round() as u64;
     let tau_m_ns = (b.scenario.simulation.max_delay_s * 1e9).round() as u64;
-    // A successor's live re-entry: the first step it got live, and the steps it listens before it
-    // answers (tau_M and one step: every delayed input it then reads was received live).
-    let mut re_entry = LiveReEntry::new(tau_m_ns.div_ceil(dt_ns.max(1)) + 1);
+    let mut node = Realtime {
+        b,
+        i,
+        agent,
+        ports,
+        checkpoints,
+        local_mission,
+        m: Meters::default(),
+        refs: VecDeque::with_capacity(128),
+        pending_delays: Vec::new(),
+        latest: None,
+        referenced: None,
+        local_reference: ReferenceFrame::default(),
+        answered: None,
+        sampler: Sampler::new(&b.scenario, i),
+        dt_ns,
+        tau_m_ns,
+        re_entry: LiveReEntry::new(tau_m_ns.div_ceil(dt_ns.max(1)) + 1),
+    };
     loop {
+        if node.receive_inputs()? {
+            return report(b, i, &node.m);
+        }
+        node.receive_states()?;
+        if let Some(s) = node.latest {
+            node.on_state(&s)?;
+        }
+        if let Some(why) = b.lifeline.must_stop() {
+            return Err(NodeError::Stopped(format!(
+                "agent {} stopping: {why}",
+                i + 1
+            )));
+        }
+        ports.wake.wait(CHILD_WAIT)?;
+    }
+}
+
+/// Agent i on the wall clock: the controller and what its loop holds between wake-ups.
+struct Realtime<'a> {
+    b: &'a Boot,
+    /// Agent index i (0-based).
+    i: usize,
+    agent: Agent,
+    ports: &'a Ports,
+    checkpoints: &'a mut Checkpoints,
+    /// A successor computes the references the leader sent before it subscribed from the mission.
+    local_mission: Option<formation_leader::Mission>,
+    m: Meters,
+    /// References received and not yet observed.
+    refs: VecDeque<ReferenceFrame>,
+    /// Delay injections not yet at their step.
+    pending_delays: Vec<DelayInjection>,
+    /// The newest state not answered yet.
+    latest: Option<VehicleState>,
+    /// A successor: the newest step whose reference it observed (from the mission or the leader).
+    referenced: Option<u64>,
+    /// The reference frame computed from `local_mission`.
+    local_reference: ReferenceFrame,
+    /// The newest step whose command went out.
+    answered: Option<u64>,
+    sampler: Sampler,
+    /// The step dt, ns.
+    dt_ns: u64,
+    /// tau_M, ns.
+    tau_m_ns: u64,
+    /// A successor's live re-entry: the first step it got live, and the steps it listens before it
+    /// answers (tau_M and one step: every delayed input it then reads was received live).
+    re_entry: LiveReEntry,
+}
+
+impl Realtime<'_> {
+    /// Reads stop, delay injections, references and the neighbours' shares; true on stop.
+    fn receive_inputs(&mut self) -> Result<bool, NodeError> {
+        let ports = self.ports;
         while let Some(c) = ports.control.receive()? {
             if c.kind == CONTROL_STOP {
-                return report(b, i, &m);
+                return Ok(true);
             }
         }
         while let Some(d) = ports.delays.receive()? {
-            pending_delays.push(*d);
+            self.pending_delays.push(*d);
         }
         while let Some(r) = ports.reference.receive()? {
-            refs.push_back(*r);
+            self.refs.push_back(*r);
         }
         for sub in &ports.shares_in {
             while let Some(s) = sub.receive()? {
                 if s.sent_ns != 0 {
-                    m.share_hop.record(now_ns().saturating_sub(s.sent_ns));
+                    self.m.share_hop.record(now_ns().saturating_sub(s.sent_ns));
                 }
-                agent.observe_neighbour(&s);
+                self.agent.observe_neighbour(&s);
             }
         }
+        Ok(false)
+    }
+
+    /// Reads every queued state: each enters the history and has its share sent, the newest is
+    /// kept in `latest` to be answered.
+    fn receive_states(&mut self) -> Result<(), NodeError> {
+        let ports = self.ports;
         while let Some(s) = ports.state.receive()? {
-            if answered.is_some_and(|a| s.step <= a) {
+            if self.answered.is_some_and(|a| s.step <= a) {
                 // The warm-up's states of step 0 again (`WARMUP_RESEND` in the plant): answered
                 // already; its share goes out again for a neighbour that started after it went.
                 if s.step == 0 {
@@ -107,17 +174,17 @@ pub fn run(
                 continue;
             }
             if s.sent_ns != 0 {
-                m.state_hop.record(now_ns().saturating_sub(s.sent_ns));
+                self.m.state_hop.record(now_ns().saturating_sub(s.sent_ns));
             }
-            if latest.replace(*s).is_some_and(|l| l.step != s.step) {
+            if self.latest.replace(*s).is_some_and(|l| l.step != s.step) {
                 // A newer state replaces one not answered yet: only the newest is answered.
-                m.skipped += 1;
+                self.m.skipped += 1;
             }
-            if !agent.has_own(s.step) || s.step == 0 {
-                let mut share = if agent.has_own(s.step) {
+            if !self.agent.has_own(s.step) || s.step == 0 {
+                let mut share = if self.agent.has_own(s.step) {
                     crate::agent::share_of(&s)
                 } else {
-                    agent.observe_own(&s)
+                    self.agent.observe_own(&s)
                 };
                 share.sent_ns = now_ns();
                 send(&ports.share_out, share)?;
@@ -127,85 +194,101 @@ pub fn run(
                 }
             }
         }
-        if let Some(s) = latest {
-            let k = s.step;
-            while refs.front().is_some_and(|r| r.step <= k) {
-                match refs.pop_front() {
-                    // Computed from the mission already (a successor).
-                    Some(r) if referenced.is_some_and(|s| r.step <= s) => {}
-                    Some(r) => {
-                        referenced = Some(r.step);
-                        agent.observe_reference(&r);
-                        sampler.observe_reference(&r);
-                    }
-                    None => {}
-                }
+        Ok(())
+    }
+
+    /// Brings the references and delay injections up to the step of the newest state `s`, then
+    /// answers it, or listens (a successor's live re-entry).
+    fn on_state(&mut self, s: &VehicleState) -> Result<(), NodeError> {
+        let k = s.step;
+        self.take_references(k);
+        let agent = &mut self.agent;
+        self.pending_delays.retain(|d| {
+            if d.step <= k {
+                agent.set_delay(d);
+                false
+            } else {
+                true
             }
-            if let Some(m) = local_mission
-                .as_ref()
-                .filter(|_| referenced.is_none_or(|r| r < k))
-            {
-                // The leader's frame of k went out before this process subscribed.
-                m.reference(
-                    k,
-                    k as f64 * b.scenario.simulation.dt_s,
-                    &mut local_reference,
-                );
-                referenced = Some(k);
-                agent.observe_reference(&local_reference);
-                sampler.observe_reference(&local_reference);
-            }
-            pending_delays.retain(|d| {
-                if d.step <= k {
-                    agent.set_delay(d);
+        });
+        let listening = self.local_mission.is_some()
+            && k > 0
+            && match self.re_entry.at(k) {
+                ReEntry::Listen => true,
+                ReEntry::Meet => {
+                    self.agent.set_up_again(self.i, k);
+                    self.agent.resync(s);
                     false
-                } else {
-                    true
                 }
-            });
-            let listening = local_mission.is_some()
-                && k > 0
-                && match re_entry.at(k) {
-                    ReEntry::Listen => true,
-                    ReEntry::Meet => {
-                        agent.set_up_again(i, k);
-                        agent.resync(&s);
-                        false
-                    }
-                    ReEntry::Answer => false,
-                };
-            if listening {
-                latest = None;
-            } else if k > 0 || agent.ready(0) {
-                // Outside the timed control: a warm restart restores the newest checkpoint.
-                checkpoints.before_step(&agent, k);
-                let t0 = now_ns();
-                let mut cmd = agent.step(&s);
-                let t1 = now_ns();
-                m.compute.record(t1 - t0);
-                let (injected, effective) = agent.applied_delay_steps(k);
-                m.injected.record(injected * dt_ns);
-                m.effective.record(effective * dt_ns);
-                m.over_tau_m += u64::from(effective * dt_ns > tau_m_ns);
-                cmd.sent_ns = t1;
-                send(&ports.command, cmd)?;
-                answered = Some(k);
-                poke(&ports.plant_wake);
-                if sampler.due_once(k) {
-                    let latency = std::time::Duration::from_nanos(t1 - t0);
-                    // Best effort: a failed telemetry send never disturbs control.
-                    let _ = send(&ports.telemetry, sampler.sample(&s, &cmd, latency));
+                ReEntry::Answer => false,
+            };
+        if listening {
+            self.latest = None;
+        } else if k > 0 || self.agent.ready(0) {
+            self.answer(s)?;
+            self.latest = None;
+        }
+        Ok(())
+    }
+
+    /// Observes the references up to step k: the leader's received, and a successor's from the
+    /// mission for a step whose frame the leader sent before this process subscribed.
+    fn take_references(&mut self, k: u64) {
+        while self.refs.front().is_some_and(|r| r.step <= k) {
+            match self.refs.pop_front() {
+                // Computed from the mission already (a successor).
+                Some(r) if self.referenced.is_some_and(|s| r.step <= s) => {}
+                Some(r) => {
+                    self.referenced = Some(r.step);
+                    self.agent.observe_reference(&r);
+                    self.sampler.observe_reference(&r);
                 }
-                latest = None;
+                None => {}
             }
         }
-        if let Some(why) = b.lifeline.must_stop() {
-            return Err(NodeError::Stopped(format!(
-                "agent {} stopping: {why}",
-                i + 1
-            )));
+        let referenced = self.referenced;
+        if let Some(m) = self
+            .local_mission
+            .as_ref()
+            .filter(|_| referenced.is_none_or(|r| r < k))
+        {
+            // The leader's frame of k went out before this process subscribed.
+            m.reference(
+                k,
+                k as f64 * self.b.scenario.simulation.dt_s,
+                &mut self.local_reference,
+            );
+            self.referenced = Some(k);
+            self.agent.observe_reference(&self.local_reference);
+            self.sampler.observe_reference(&self.local_reference);
         }
-        ports.wake.wait(CHILD_WAIT)?;
+    }
+
+    /// Computes, measures and sends the command of the state `s`, and a telemetry sample when one
+    /// is due.
+    fn answer(&mut self, s: &VehicleState) -> Result<(), NodeError> {
+        let k = s.step;
+        let (dt_ns, m) = (self.dt_ns, &mut self.m);
+        // Outside the timed control: a warm restart restores the newest checkpoint.
+        self.checkpoints.before_step(&self.agent, k);
+        let t0 = now_ns();
+        let mut cmd = self.agent.step(s);
+        let t1 = now_ns();
+        m.compute.record(t1 - t0);
+        let (injected, effective) = self.agent.applied_delay_steps(k);
+        m.injected.record(injected * dt_ns);
+        m.effective.record(effective * dt_ns);
+        m.over_tau_m += u64::from(effective * dt_ns > self.tau_m_ns);
+        cmd.sent_ns = t1;
+        send(&self.ports.command, cmd)?;
+        self.answered = Some(k);
+        poke(&self.ports.plant_wake);
+        if self.sampler.due_once(k) {
+            let latency = std::time::Duration::from_nanos(t1 - t0);
+            // Best effort: a failed telemetry send never disturbs control.
+            let _ = send(&self.ports.telemetry, self.sampler.sample(s, &cmd, latency));
+        }
+        Ok(())
     }
 }
 
