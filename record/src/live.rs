@@ -8,7 +8,7 @@
 use super::sink::{Cadence, Sink, Step};
 use formation_config::scenario::events::Event;
 use formation_config::Scenario;
-use formation_viz::{Frame, Limits, LiveView, SceneConfig};
+use formation_viz::{Frame, Limits, LiveView, SceneConfig, StepRecords};
 
 /// The live view of one run and what the recorder needs to feed it.
 pub struct LiveFeed {
@@ -63,14 +63,16 @@ impl Sink for LiveFeed {
     fn step(&mut self, s: &Step<'_>) -> std::io::Result<()> {
         if self.view.wants(s.step) {
             self.view.offer(Frame::from_records(
-                s.step,
-                s.reference.t,
-                s.p_d(),
-                s.target(),
-                s.offsets(),
-                s.truths,
-                s.commands,
-                s.errors,
+                StepRecords {
+                    step: s.step,
+                    t: s.reference.t,
+                    p_d: s.p_d(),
+                    target: s.target(),
+                    offsets: s.offsets(),
+                    truths: s.truths,
+                    commands: s.commands,
+                    errors: s.errors,
+                },
                 self.limits,
             ));
         }

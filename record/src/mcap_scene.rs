@@ -6,7 +6,7 @@
 use super::sink::Step;
 use formation_config::Scenario;
 use formation_viz::channels::{channels, encode, Encoded};
-use formation_viz::{Frame, Limits, SceneBuilder};
+use formation_viz::{Frame, Limits, SceneBuilder, StepRecords};
 use std::collections::BTreeMap;
 
 /// The scene's part of the MCAP writer.
@@ -62,14 +62,16 @@ impl McapScene {
             return Ok(());
         }
         let frame = Frame::from_records(
-            step,
-            t,
-            rows.p_d(),
-            rows.target(),
-            rows.offsets(),
-            rows.truths,
-            rows.commands,
-            rows.errors,
+            StepRecords {
+                step,
+                t,
+                p_d: rows.p_d(),
+                target: rows.target(),
+                offsets: rows.offsets(),
+                truths: rows.truths,
+                commands: rows.commands,
+                errors: rows.errors,
+            },
             self.limits,
         );
         let scene = self.builder.build(&frame);

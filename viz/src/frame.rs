@@ -70,22 +70,43 @@ fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
+/// The records of one step as a recorder receives them, borrowed: the input of
+/// [`Frame::from_records`].
+#[derive(Debug, Clone, Copy)]
+pub struct StepRecords<'a> {
+    /// Simulation step k.
+    pub step: u64,
+    /// Simulation time t_k = k dt, s.
+    pub t: f64,
+    /// Virtual leader P_d, m.
+    pub p_d: [f64; 3],
+    /// Ground target T_g, m.
+    pub target: [f64; 3],
+    /// Formation offsets Delta_i0 of the N agents, m.
+    pub offsets: &'a [[f64; 3]],
+    /// The plant's truths of the N agents.
+    pub truths: &'a [PlantTruth],
+    /// The N commands.
+    pub commands: &'a [ControlCommand],
+    /// Formation error of each agent, m.
+    pub errors: &'a [f64],
+}
+
 impl Frame {
-    /// The frame of step `step` from the records a recorder receives: the reference (P_d, T_g,
+    /// The frame of one step from the records a recorder receives: the reference (P_d, T_g,
     /// Delta_i0), the plant's truths, the commands and the formation errors of the N agents.
     /// Margins are computed with the same operations as `summary.json`'s.
-    #[allow(clippy::too_many_arguments)] // the parts of one step record, as the recorder holds them
-    pub fn from_records(
-        step: u64,
-        t: f64,
-        p_d: [f64; 3],
-        target: [f64; 3],
-        offsets: &[[f64; 3]],
-        truths: &[PlantTruth],
-        commands: &[ControlCommand],
-        errors: &[f64],
-        limits: Limits,
-    ) -> Frame {
+    pub fn from_records(r: StepRecords<'_>, limits: Limits) -> Frame {
+        let StepRecords {
+            step,
+            t,
+            p_d,
+            target,
+            offsets,
+            truths,
+            commands,
+            errors,
+        } = r;
         let slots = offsets
             .iter()
             .map(|o| [p_d[0] + o[0], p_d[1] + o[1], p_d[2] + o[2]])
@@ -141,14 +162,16 @@ mod tests {
             rate_limit_rad_s: 3.0,
         };
         let f = Frame::from_records(
-            7,
-            0.007,
-            [10.0, 0.0, 5.0],
-            [1.0, 1.0, 0.0],
-            &[[1.0, -1.0, 0.0]],
-            &[truth],
-            &[cmd],
-            &[0.25],
+            StepRecords {
+                step: 7,
+                t: 0.007,
+                p_d: [10.0, 0.0, 5.0],
+                target: [1.0, 1.0, 0.0],
+                offsets: &[[1.0, -1.0, 0.0]],
+                truths: &[truth],
+                commands: &[cmd],
+                errors: &[0.25],
+            },
             limits,
         );
         assert_eq!(f.slots, vec![[11.0, -1.0, 5.0]]);

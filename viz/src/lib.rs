@@ -18,7 +18,7 @@ pub mod live;
 pub mod scene;
 pub mod topview;
 
-pub use frame::{AgentSample, Frame, Limits};
+pub use frame::{AgentSample, Frame, Limits, StepRecords};
 pub use live::{LiveError, LiveStats, LiveView};
 pub use scene::{Scene, SceneBuilder, SceneConfig};
 
