@@ -206,6 +206,29 @@ mod tests {
         }
     }
 
+    /// A successor of agent `me` restored from the checkpoint of step `s` and rebuilt up to the
+    /// step `down` the live controller went down at, checked against its `commands`.
+    fn replay_warm(
+        sc: &Scenario,
+        me: usize,
+        checkpoint: &[u8],
+        (s, down): (u64, u64),
+        commands: &[(f64, [f64; 3])],
+    ) -> (Replayed, Rejoin) {
+        let mut successor = Agent::new(sc, me, Variant::Proposed);
+        successor.restore(checkpoint).unwrap();
+        let plan = Rejoin {
+            checkpoint: Some(s),
+            down_from: down,
+            rejoin_at: down + 1,
+            recorded_from: 0,
+        };
+        let replayed = rebuild(&mut successor, &plan, reference, moving, |k| {
+            commands[k.min(down - 1) as usize]
+        });
+        (replayed, plan)
+    }
+
     fn reference(k: u64) -> ReferenceFrame {
         ReferenceFrame {
             step: k,
@@ -250,17 +273,7 @@ mod tests {
             let c = live.step(&own);
             commands.push((c.thrust_n, c.torque_nm));
         }
-        let mut successor = Agent::new(&sc, me, Variant::Proposed);
-        successor.restore(&checkpoint.unwrap()).unwrap();
-        let plan = Rejoin {
-            checkpoint: Some(s),
-            down_from: down,
-            rejoin_at: down + 1,
-            recorded_from: 0,
-        };
-        let replayed = rebuild(&mut successor, &plan, reference, moving, |k| {
-            commands[k.min(down - 1) as usize]
-        });
+        let (replayed, plan) = replay_warm(&sc, me, &checkpoint.unwrap(), (s, down), &commands);
         assert_eq!(replayed.steps, down - s);
         assert_eq!(
             replayed.mismatches, 0,
@@ -305,17 +318,7 @@ mod tests {
             let c = live.step(&own);
             commands.push((c.thrust_n, c.torque_nm));
         }
-        let mut successor = Agent::new(&sc, me, Variant::Proposed);
-        successor.restore(&checkpoint.unwrap()).unwrap();
-        let plan = Rejoin {
-            checkpoint: Some(s),
-            down_from: down,
-            rejoin_at: down + 1,
-            recorded_from: 0,
-        };
-        let replayed = rebuild(&mut successor, &plan, reference, moving, |k| {
-            commands[k.min(down - 1) as usize]
-        });
+        let (replayed, _) = replay_warm(&sc, me, &checkpoint.unwrap(), (s, down), &commands);
         assert_eq!(
             (replayed.steps, replayed.mismatches),
             (down - s, 0),
