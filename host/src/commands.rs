@@ -90,13 +90,7 @@ pub fn host_main(a: HostArgs) -> Result<(), HostError> {
         return Err(HostError::Name(name));
     }
     // The launcher's own name is refused before anything is printed or opened.
-    if name == formation_net::cluster::LAUNCHER {
-        return Err(crate::refusal::ServeError::Name {
-            name,
-            launcher: formation_net::cluster::LAUNCHER,
-        }
-        .into());
-    }
+    crate::daemon::check_name(&name)?;
     let listen = if a.listen.is_empty() {
         vec![session::local_endpoint(&name)?]
     } else {

@@ -153,14 +153,21 @@ fn private_dir(dir: &Path) -> Result<(), FolderError> {
     std::fs::set_permissions(dir, std::fs::Permissions::from_mode(0o700)).map_err(io)
 }
 
-/// Runs the daemon until `stop` is set (SIGINT/SIGTERM). `Err`: it could not start.
-pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), ServeError> {
-    if !proto::valid_name(&o.name) || o.name == formation_net::cluster::LAUNCHER {
+/// Whether `name` can name a daemon: a key-safe host name ([`proto::valid_name`]) other than the
+/// launcher's own.
+pub fn check_name(name: &str) -> Result<(), ServeError> {
+    if !proto::valid_name(name) || name == formation_net::cluster::LAUNCHER {
         return Err(ServeError::Name {
-            name: o.name.clone(),
+            name: name.to_string(),
             launcher: formation_net::cluster::LAUNCHER,
         });
     }
+    Ok(())
+}
+
+/// Runs the daemon until `stop` is set (SIGINT/SIGTERM). `Err`: it could not start.
+pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), ServeError> {
+    check_name(&o.name)?;
     private_dir(&o.root)?;
     sweep_stale(&o.root);
     // The token, the requests, the clock probe (answered at once, in Zenoh's thread) and the
