@@ -103,13 +103,13 @@ enum Command {
     /// (docs/multi-host.md).
     #[cfg(feature = "multihost")]
     #[command(
-        after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen tls/0.0.0.0:7447 --tls /etc/formation/tls"
+        after_help = "Examples:\n  formation host --name b\n  formation host --name b --listen quic/0.0.0.0:7447 --tls /etc/formation/tls"
     )]
     Host(formation_host::HostArgs),
     /// List the `formation host` daemons reachable from here (name, address, CPUs, runs, build).
     #[cfg(feature = "multihost")]
     #[command(
-        after_help = "Examples:\n  formation hosts\n  formation hosts --connect tls/10.0.0.2:7447 --tls ~/.formation/tls --json"
+        after_help = "Examples:\n  formation hosts\n  formation hosts --connect quic/10.0.0.2:7447 --tls ~/.formation/tls --json"
     )]
     Hosts(formation_host::HostsArgs),
     /// Make a certificate authority and per-host certificates for mutual TLS between hosts

@@ -15,8 +15,9 @@ use std::time::Duration;
 /// Arguments of `formation host`.
 #[derive(clap::Args, Debug)]
 pub struct HostArgs {
-    /// Endpoint to listen on (repeatable): tls/ADDR:PORT (TCP) or quic/ADDR:PORT (UDP) with
-    /// --tls, tcp/ADDR:PORT (with --auth) or unixsock-stream/PATH. Default: a Unix socket named after the host in your
+    /// Endpoint to listen on (repeatable): quic/ADDR:PORT (UDP) or tls/ADDR:PORT (TCP; Zenoh
+    /// 1.10's TLS link is unsound under traffic, warned) with --tls, tcp/ADDR:PORT (with --auth)
+    /// or unixsock-stream/PATH. Default: a Unix socket named after the host in your
     /// private runtime folder, which only your user can connect to.
     #[arg(long, value_name = "ENDPOINT")]
     pub listen: Vec<String>,
@@ -216,7 +217,7 @@ pub enum CertsCommand {
         /// The host's name (`formation host --name`; the orchestrator's machine needs one too).
         #[arg(long)]
         name: String,
-        /// An IP address the host is reached at (`tls/ADDR:PORT`; repeatable).
+        /// An IP address the host is reached at (`quic/ADDR:PORT` or `tls/ADDR:PORT`; repeatable).
         #[arg(long, value_name = "IP")]
         addr: Vec<std::net::IpAddr>,
         /// A DNS name the host is reached by (repeatable; the --name is one already).

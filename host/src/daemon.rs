@@ -184,6 +184,9 @@ pub fn serve(o: DaemonOptions, stop: &AtomicBool) -> Result<(), ServeError> {
         cpus(),
         o.root.display()
     );
+    for w in o.session.warnings() {
+        eprintln!("formation host: {w}");
+    }
     let mut d = Daemon {
         o,
         out: link.outbox(),

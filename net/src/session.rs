@@ -77,6 +77,34 @@ pub struct Options {
     pub lease_ms: u64,
 }
 
+/// What a `tls/` link risks with Zenoh 1.10 (docs/multi-host.md, "Known problem of Zenoh 1.10.2's
+/// TLS link"): its sending and receiving tasks share one rustls connection without a lock
+/// (eclipse-zenoh/zenoh#2557). Under traffic the link drops (the run names the host as lost) or
+/// the process aborts on corrupted memory (seen: a daemon's "memory allocation of 140257123150048
+/// bytes failed" in rustls under `zenoh_link_tls` beside two CPU-bound loops). `quic/` takes the
+/// same `--tls` folder and shares nothing unlocked between its tasks.
+pub const TLS_LINK_RISK: &str = "Zenoh 1.10's TLS link is unsound (eclipse-zenoh/zenoh#2557: one \
+rustls connection shared by two tasks without a lock): under traffic the link can drop or this \
+process abort; quic/HOST:PORT takes the same --tls folder without that race (docs/multi-host.md)";
+
+impl Options {
+    /// Warnings about options that are accepted but risky: a `tls/` endpoint ([`TLS_LINK_RISK`]).
+    /// One line each, without the program's prefix.
+    pub fn warnings(&self) -> Vec<String> {
+        let tls: Vec<&str> = self
+            .listen
+            .iter()
+            .chain(&self.connect)
+            .map(String::as_str)
+            .filter(|e| e.starts_with("tls/"))
+            .collect();
+        if tls.is_empty() {
+            return Vec::new();
+        }
+        vec![format!("warning: {}: {TLS_LINK_RISK}", tls.join(" "))]
+    }
+}
+
 /// Zenoh access control of a daemon: no link may declare a queryable or a liveliness token on a
 /// daemon's keys (`formation/host/**`, `formation/clock/**`). Only the daemon itself answers its
 /// requests, so a holder of its credentials cannot stand in for it and receive the `Prepare`
@@ -744,6 +772,21 @@ mod tests {
             tls: None,
             lease_ms: DEFAULT_LEASE_MS,
         }
+    }
+
+    #[test]
+    fn a_tls_endpoint_is_warned_about_once_naming_it_and_the_sound_quic_link() {
+        let w = opts(
+            Mode::Orchestrator,
+            &[],
+            &["tls/10.0.0.2:7447", "quic/10.0.0.3:7447", "tls/10.0.0.4:7447"],
+        )
+        .warnings();
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].starts_with("warning: tls/10.0.0.2:7447 tls/10.0.0.4:7447: "));
+        assert!(w[0].contains("zenoh#2557") && w[0].contains("quic/HOST:PORT"), "{}", w[0]);
+        assert!(opts(Mode::Daemon, &["quic/0.0.0.0:7447"], &[]).warnings().is_empty());
+        assert!(opts(Mode::Daemon, &["tls/0.0.0.0:7447"], &[]).warnings().len() == 1);
     }
 
     #[test]

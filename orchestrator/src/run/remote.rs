@@ -168,6 +168,9 @@ pub fn connect(a: &PlaceArgs, scenario: &Scenario) -> Result<Option<Remote>, Rem
         a.connect.clone()
     };
     let opts = a.link.options(Mode::Orchestrator, vec![], connect);
+    for w in opts.warnings() {
+        eprintln!("formation run: {w}");
+    }
     crate::link::ignore_sigpipe();
     let cluster = Cluster::open(&opts).map_err(|source| RemoteError::Handshake {
         source,
