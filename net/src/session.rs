@@ -779,14 +779,29 @@ mod tests {
         let w = opts(
             Mode::Orchestrator,
             &[],
-            &["tls/10.0.0.2:7447", "quic/10.0.0.3:7447", "tls/10.0.0.4:7447"],
+            &[
+                "tls/10.0.0.2:7447",
+                "quic/10.0.0.3:7447",
+                "tls/10.0.0.4:7447",
+            ],
         )
         .warnings();
         assert_eq!(w.len(), 1, "{w:?}");
         assert!(w[0].starts_with("warning: tls/10.0.0.2:7447 tls/10.0.0.4:7447: "));
-        assert!(w[0].contains("zenoh#2557") && w[0].contains("quic/HOST:PORT"), "{}", w[0]);
-        assert!(opts(Mode::Daemon, &["quic/0.0.0.0:7447"], &[]).warnings().is_empty());
-        assert!(opts(Mode::Daemon, &["tls/0.0.0.0:7447"], &[]).warnings().len() == 1);
+        assert!(
+            w[0].contains("zenoh#2557") && w[0].contains("quic/HOST:PORT"),
+            "{}",
+            w[0]
+        );
+        assert!(opts(Mode::Daemon, &["quic/0.0.0.0:7447"], &[])
+            .warnings()
+            .is_empty());
+        assert!(
+            opts(Mode::Daemon, &["tls/0.0.0.0:7447"], &[])
+                .warnings()
+                .len()
+                == 1
+        );
     }
 
     #[test]

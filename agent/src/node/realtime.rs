@@ -59,6 +59,14 @@ pub fn run(
     if let Some(w) = formation_config::node::sched::realtime_setup(b.args.rt_priority) {
         eprintln!("warning: {w}");
     }
+    // Checkpoints off the control thread, below its priority (written synchronously if the
+    // thread cannot start).
+    if let Err(e) = checkpoints.write_in_background() {
+        eprintln!(
+            "warning: agent {}: checkpoints written on the control thread: {e}",
+            i + 1
+        );
+    }
     let dt_ns = (b.scenario.simulation.dt_s * 1e9).round() as u64;
     let tau_m_ns = (b.scenario.simulation.max_delay_s * 1e9).round() as u64;
     let mut node = Realtime {
@@ -269,8 +277,9 @@ impl Realtime<'_> {
     fn answer(&mut self, s: &VehicleState) -> Result<(), NodeError> {
         let k = s.step;
         let (dt_ns, m) = (self.dt_ns, &mut self.m);
-        // Outside the timed control: a warm restart restores the newest checkpoint.
-        self.checkpoints.before_step(&self.agent, k);
+        // Outside the timed control: a warm restart restores the newest checkpoint. Taken here,
+        // written once the command is out.
+        self.checkpoints.take(&self.agent, k);
         let t0 = now_ns();
         let mut cmd = self.agent.step(s);
         let t1 = now_ns();
@@ -288,6 +297,7 @@ impl Realtime<'_> {
             // Best effort: a failed telemetry send never disturbs control.
             let _ = send(&self.ports.telemetry, self.sampler.sample(s, &cmd, latency));
         }
+        self.checkpoints.write_taken();
         Ok(())
     }
 }
