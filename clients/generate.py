@@ -16,7 +16,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 SCALARS = {"u32": ("ctypes.c_uint32", "uint32_t"), "u64": ("ctypes.c_uint64", "uint64_t"),
-           "f64": ("ctypes.c_double", "double")}
+           "f32": ("ctypes.c_float", "float"), "f64": ("ctypes.c_double", "double")}
 
 
 def parse(ty):

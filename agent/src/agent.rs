@@ -453,7 +453,7 @@ impl Agent {
         let leader = self.leader.at_or_before(kd).unwrap_or_default();
         self.advance_references(k, kd, delayed, &leader);
         let (me, ep, ev) = self.formation_errors(kd, delayed, &leader);
-        let law = self.position_law(&me, ep, ev, &leader);
+        let law = self.position_law(&me, ep, ev, &leader, own);
         self.learn(&law, &me, &leader, ep, ev);
 
         // Attitude loop on the filtered command (command filter 1).
@@ -499,6 +499,8 @@ impl Agent {
                 model_hat_dev: (at.model_hat - nalgebra::Matrix3::identity()).norm(),
                 e1: at.e1.into(),
                 e2: at.e2.into(),
+                sep_correction: law.sep_correction,
+                sep_predicted_m: law.sep_predicted_m,
             },
         }
     }
@@ -649,14 +651,16 @@ impl Agent {
     }
 
     /// The position law of `me` for the consensus errors `ep`, `ev`: U_iP with F-hat_iP of the
-    /// RBFNN (11), limited (D5), converted (28) with psi_iC = 0 into thrust and a tilt-limited
-    /// attitude command.
+    /// RBFNN (11), limited (D5), through the separation layer (D25) on the vehicle's current
+    /// state `own` and the traffic it reports, converted (28) with psi_iC = 0 into thrust and a
+    /// tilt-limited attitude command.
     fn position_law(
         &mut self,
         me: &Member,
         ep: [f64; 3],
         ev: [f64; 3],
         leader: &LeaderInfo,
+        own: &VehicleState,
     ) -> Law {
         let g = &self.p.gains;
         let use_nn = self.p.variant != Variant::NoRbfnn;
@@ -666,7 +670,20 @@ impl Agent {
             [0.0; 3]
         };
         let u_raw = raw_law(&g.position, ep, ev, f_hat, me, leader, self.p.leader_data);
-        let u_p = limit(&g.position, self.p.gravity, u_raw);
+        let u_l = limit(&g.position, self.p.gravity, u_raw);
+        let accel = if own.traffic.count > 0 {
+            self.acceleration(own)
+        } else {
+            None
+        };
+        let sep = crate::separation::filter(&self.p.separation, own, accel, u_l);
+        // The layer's U_iS goes through D5's limits again only when it changed U_iP, so that
+        // a step it does not act in is bit-identical with the layer off.
+        let u_p = if sep.acted {
+            limit(&g.position, self.p.gravity, sep.u)
+        } else {
+            u_l
+        };
         let (thrust, mut att_raw) = thrust_and_attitude(u_p, self.p.mass, self.p.gravity, 0.0);
         let tilt = g.position.max_tilt_rad;
         att_raw[0] = att_raw[0].clamp(-tilt, tilt);
@@ -675,7 +692,9 @@ impl Agent {
         // acceleration limit of D5 or the attitude command it asks for moves command filter 1 at
         // its rate limit (D14); the error then measures the limits, not what F-hat misses, and
         // the network does not learn from it (conditional integration).
-        let saturated = u_p != u_raw || self.attitude_filter.rate_limited(att_raw);
+        // The same holds while the separation layer overrides the law (D25): the error then
+        // measures the avoidance.
+        let saturated = u_l != u_raw || sep.acted || self.attitude_filter.rate_limited(att_raw);
         Law {
             use_nn,
             f_hat,
@@ -683,7 +702,23 @@ impl Agent {
             thrust,
             attitude_raw: att_raw,
             saturated,
+            sep_correction: std::array::from_fn(|k| u_p[k] - u_l[k]),
+            sep_predicted_m: sep.predicted_m,
         }
+    }
+
+    /// The vehicle's acceleration at the step of `own`, m/s²: its velocity change over the last
+    /// [`crate::separation::ACCEL_WINDOW_S`] from its own states (`None` before it has any).
+    fn acceleration(&self, own: &VehicleState) -> Option<[f64; 3]> {
+        let k = own.step;
+        let window = (crate::separation::ACCEL_WINDOW_S / self.p.dt).round().max(1.0) as u64;
+        let s = self
+            .own
+            .step_at_or_before(k.saturating_sub(window))
+            .filter(|&s| s < k)?;
+        let (_, v) = self.own.at_or_before(s)?;
+        let span = (k - s) as f64 * self.p.dt;
+        Some(std::array::from_fn(|d| (own.velocity[d] - v[d]) / span))
     }
 
     /// The RBFNN update (15) after the position `law` of `me`: driven by the consensus errors
@@ -749,8 +784,13 @@ struct Law {
     thrust: f64,
     /// Attitude command (28), roll and pitch tilt-limited, rad.
     attitude_raw: [f64; 3],
-    /// U_iP was limited or the attitude command moves command filter 1 at its rate limit (D15).
+    /// U_iP was limited, the separation layer acted (D25), or the attitude command moves command
+    /// filter 1 at its rate limit (D15).
     saturated: bool,
+    /// U_iS - U_iP, m/s² (D25; zero while the layer does not act).
+    sep_correction: [f64; 3],
+    /// The smallest predicted separation this step, m (D25).
+    sep_predicted_m: f64,
 }
 
 #[cfg(test)]

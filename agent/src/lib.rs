@@ -21,6 +21,7 @@ pub mod fault_id;
 pub mod params;
 pub mod position;
 pub mod rbfnn;
+pub mod separation;
 pub mod restart;
 pub mod startup;
 

@@ -60,6 +60,8 @@ pub struct AgentParams {
     /// Gate of D23's drive once this controller has come back (`runtime.rejoin_drive_gate_m`, m;
     /// `None`: the start-up gate `nn_leader_gate_m`; 0: held until its re-armed generator is over).
     pub rejoin_drive_gate: Option<f64>,
+    /// The separation layer (D25).
+    pub separation: crate::separation::SeparationParams,
 }
 
 impl AgentParams {
@@ -93,6 +95,13 @@ impl AgentParams {
             }),
             rejoin_members: s.runtime.rejoin_reference_for,
             rejoin_drive_gate: s.runtime.rejoin_drive_gate_m,
+            separation: crate::separation::SeparationParams::new(
+                &s.controller.separation,
+                s.metrics.safety_distance_m,
+                &s.controller.position,
+                s.simulation.dt_s,
+                s.simulation.gravity_m_s2,
+            ),
         }
     }
 

@@ -323,7 +323,7 @@ fn command_exit_code(e: &CommandError) -> u8 {
         | CommandError::OutFolder(_)
         | CommandError::UnknownRole(_)
         | CommandError::NodeArgs { .. } => cli::EXIT_INVALID,
-        CommandError::Diverged(_) => cli::EXIT_RESULT_FAILED,
+        CommandError::Diverged(_) | CommandError::TooClose { .. } => cli::EXIT_RESULT_FAILED,
         CommandError::Interrupted(_) => cli::EXIT_INTERRUPTED,
         CommandError::WriteScenario { .. }
         | CommandError::WriteOutputs { .. }

@@ -6,7 +6,23 @@
 
 #include <stdint.h>
 
-/* 128 bytes, align 8; iceoryx2 type name "formation.v2.VehicleState". */
+/* 32 bytes, align 4. */
+typedef struct fm_TrafficEntry {
+    uint32_t agent; /* - */
+    uint32_t flags; /* - */
+    float position[3]; /* m */
+    float velocity[3]; /* m/s */
+} fm_TrafficEntry;
+
+/* 272 bytes, align 8. */
+typedef struct fm_Traffic {
+    uint64_t step; /* - */
+    uint32_t count; /* - */
+    uint32_t _pad; /* - */
+    fm_[TrafficEntry; MAX_TRAFFIC] entries; /* - */
+} fm_Traffic;
+
+/* 400 bytes, align 8; iceoryx2 type name "formation.v3.VehicleState". */
 typedef struct fm_VehicleState {
     uint64_t step; /* - */
     double t; /* s */
@@ -17,8 +33,9 @@ typedef struct fm_VehicleState {
     double velocity[3]; /* m/s */
     double attitude[3]; /* rad */
     double rate[3]; /* rad/s */
+    fm_Traffic traffic; /* - */
 } fm_VehicleState;
-#define FM_VEHICLESTATE_TYPE_NAME "formation.v2.VehicleState"
+#define FM_VEHICLESTATE_TYPE_NAME "formation.v3.VehicleState"
 
 /* 80 bytes, align 8; iceoryx2 type name "formation.v3.NeighbourState". */
 typedef struct fm_NeighbourState {
@@ -48,7 +65,7 @@ typedef struct fm_ReferenceFrame {
 } fm_ReferenceFrame;
 #define FM_REFERENCEFRAME_TYPE_NAME "formation.v1.ReferenceFrame"
 
-/* 376 bytes, align 8. */
+/* 408 bytes, align 8. */
 typedef struct fm_ControllerTelemetry {
     double tau_s; /* s */
     double e_p[3]; /* m */
@@ -71,9 +88,11 @@ typedef struct fm_ControllerTelemetry {
     double model_hat_dev; /* - */
     double e1[3]; /* - */
     double e2[3]; /* - */
+    double sep_correction[3]; /* m/s^2 */
+    double sep_predicted_m; /* m */
 } fm_ControllerTelemetry;
 
-/* 440 bytes, align 8; iceoryx2 type name "formation.v2.ControlCommand". */
+/* 472 bytes, align 8; iceoryx2 type name "formation.v3.ControlCommand". */
 typedef struct fm_ControlCommand {
     uint64_t step; /* - */
     double t; /* s */
@@ -84,9 +103,9 @@ typedef struct fm_ControlCommand {
     double torque_nm[3]; /* N m */
     fm_ControllerTelemetry telemetry; /* - */
 } fm_ControlCommand;
-#define FM_CONTROLCOMMAND_TYPE_NAME "formation.v2.ControlCommand"
+#define FM_CONTROLCOMMAND_TYPE_NAME "formation.v3.ControlCommand"
 
-/* 256 bytes, align 8. */
+/* 528 bytes, align 8. */
 typedef struct fm_PlantTruth {
     fm_VehicleState state; /* - */
     double thrust_n; /* N */
@@ -120,7 +139,7 @@ typedef struct fm_DelayInjection {
 } fm_DelayInjection;
 #define FM_DELAYINJECTION_TYPE_NAME "formation.v1.DelayInjection"
 
-/* 480 bytes, align 8; iceoryx2 type name "formation.v1.AgentTelemetry". */
+/* 512 bytes, align 8; iceoryx2 type name "formation.v2.AgentTelemetry". */
 typedef struct fm_AgentTelemetry {
     uint64_t step; /* - */
     double t; /* s */
@@ -134,7 +153,7 @@ typedef struct fm_AgentTelemetry {
     double loop_latency_us; /* us */
     fm_ControllerTelemetry controller; /* - */
 } fm_AgentTelemetry;
-#define FM_AGENTTELEMETRY_TYPE_NAME "formation.v1.AgentTelemetry"
+#define FM_AGENTTELEMETRY_TYPE_NAME "formation.v2.AgentTelemetry"
 
 /* 16 bytes, align 8; iceoryx2 type name "formation.v1.RunControl". */
 typedef struct fm_RunControl {
@@ -159,12 +178,12 @@ typedef struct fm_Hello {
 } fm_Hello;
 #define FM_HELLO_TYPE_NAME "formation.v1.Hello"
 
-/* 696 bytes, align 8; iceoryx2 type name "formation.v2.StepEntry". */
+/* 1000 bytes, align 8; iceoryx2 type name "formation.v3.StepEntry". */
 typedef struct fm_StepEntry {
     fm_PlantTruth truth; /* - */
     fm_ControlCommand command; /* - */
 } fm_StepEntry;
-#define FM_STEPENTRY_TYPE_NAME "formation.v2.StepEntry"
+#define FM_STEPENTRY_TYPE_NAME "formation.v3.StepEntry"
 
 /* 112 bytes, align 8; iceoryx2 type name "formation.v2.InjectRequest". */
 typedef struct fm_InjectRequest {

@@ -7,6 +7,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod mission;
+pub mod shaping;
 pub mod smooth;
 
 /// The role process around the library: its ports, its event loop (lockstep and realtime).

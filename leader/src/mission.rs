@@ -1,6 +1,7 @@
 //! The mission of Section 4: T_g, P_d and Lambda_F (see `formation_config::scenario::Mission` for the
 //! parameters and docs/deviations.md for our readings D1-D3).
 
+use crate::shaping::{cap, spin_bounds, step_bounds, Transition};
 use crate::smooth::{rise, smooth_step, time, Jet};
 use formation_config::protocol::wire::ReferenceFrame;
 use formation_config::scenario::Scenario;
@@ -29,6 +30,8 @@ pub struct Mission {
     t1: f64,
     t2: f64,
     t3: f64,
+    /// The radius change, the spin onset and the descent, as written and as flown (D26).
+    transitions: [Transition; 3],
 }
 
 impl Mission {
@@ -54,7 +57,10 @@ impl Mission {
             let (c, e, p) = m.formation.slot(i, n).unwrap_or_default();
             (cover_radius[i], enclose_radius[i], phases[i]) = (c, e, p);
         }
+        let transitions = transitions(s, n, &cover_radius, &enclose_radius);
+        let [radius, spin, descent] = transitions.map(|t| t.flown);
         Mission {
+            transitions,
             n,
             target_radius: m.target.path_radius_m,
             target_rate: m.target.angular_rate_rad_s,
@@ -63,12 +69,12 @@ impl Mission {
             cruise_altitude: m.leader.cruise_altitude_m,
             climb_rate: m.leader.climb_rate,
             descent: m.leader.descent_m,
-            descent_sharpness: m.leader.descent_sharpness,
+            descent_sharpness: descent,
             cover_radius,
             enclose_radius,
-            radius_sharpness: m.formation.radius_sharpness,
+            radius_sharpness: radius,
             spin_rate: m.formation.spin_rate_rad_s,
-            spin_sharpness: m.formation.spin_onset_sharpness,
+            spin_sharpness: spin,
             phases,
             t1: m.formation.t1_s,
             t2: m.formation.t2_s,
@@ -79,6 +85,12 @@ impl Mission {
     /// Number of agents.
     pub fn n_agents(&self) -> usize {
         self.n
+    }
+
+    /// The radius change, the spin onset and the descent: the sharpness each is written with and
+    /// flown with, and what each asks of a slot (D26).
+    pub fn transitions(&self) -> &[Transition; 3] {
+        &self.transitions
     }
 
     /// Ground target T_g(t) = [r sin(w t), r cos(w t), 0] with derivatives, per axis (x, y).
@@ -189,4 +201,48 @@ impl Mission {
             }
         }
     }
+}
+
+/// The mission's three transitions with their sharpness capped to `mission.shaping` (D26): the
+/// radius change over the largest change of any ring, the spin onset on the largest ring, the
+/// descent.
+fn transitions(
+    s: &Scenario,
+    n: usize,
+    cover: &[f64; MAX_AGENTS],
+    enclose: &[f64; MAX_AGENTS],
+) -> [Transition; 3] {
+    let m = &s.mission;
+    let sh = &m.shaping;
+    let change = (0..n)
+        .map(|i| (cover[i] - enclose[i]).abs())
+        .fold(0.0, f64::max);
+    let ring = (0..n).map(|i| cover[i].max(enclose[i])).fold(0.0, f64::max);
+    let rate = m.formation.spin_rate_rad_s;
+    let descent = m.leader.descent_m;
+    let one = |name, k: f64, bounds: &dyn Fn(f64) -> (f64, f64)| {
+        let flown = if sh.enabled {
+            cap(k, bounds, sh.accel_m_s2, sh.jerk_m_s3)
+        } else {
+            k
+        };
+        Transition {
+            name,
+            written: k,
+            flown,
+            asked: bounds(k),
+            flies: bounds(flown),
+        }
+    };
+    [
+        one("radius", m.formation.radius_sharpness, &|k| {
+            step_bounds(k, change)
+        }),
+        one("spin", m.formation.spin_onset_sharpness, &|k| {
+            spin_bounds(k, ring, rate)
+        }),
+        one("descent", m.leader.descent_sharpness, &|k| {
+            step_bounds(k, descent)
+        }),
+    ]
 }

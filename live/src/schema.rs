@@ -470,7 +470,7 @@ mod tests {
             .expect("telemetry");
         let m = tel.message.as_ref().expect("a message");
         assert_eq!(m.rust, "AgentTelemetry");
-        assert_eq!(m.iceoryx2, "formation.v1.AgentTelemetry");
+        assert_eq!(m.iceoryx2, "formation.v2.AgentTelemetry");
         assert_eq!(
             (m.size, m.align),
             (
@@ -537,7 +537,7 @@ mod tests {
             .iter()
             .find(|t| t["name"] == "AgentTelemetry")
             .expect("AgentTelemetry");
-        assert_eq!(tel["iceoryx2"], "formation.v1.AgentTelemetry");
+        assert_eq!(tel["iceoryx2"], "formation.v2.AgentTelemetry");
         assert_eq!(tel["size"], size_of::<AgentTelemetry>());
         let loop_latency = tel["fields"]
             .as_array()
@@ -558,7 +558,7 @@ mod tests {
         let s = schema(5);
         let t = text(&s);
         assert!(
-            t.contains("AgentTelemetry, iceoryx2 formation.v1.AgentTelemetry: 480 bytes, align 8")
+            t.contains("AgentTelemetry, iceoryx2 formation.v2.AgentTelemetry: 512 bytes, align 8")
         );
         assert!(t.lines().any(|l| l.split_whitespace().collect::<Vec<_>>()
             == ["formation_error_m", "24", "8", "f64", "m"]));

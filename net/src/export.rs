@@ -13,11 +13,11 @@
 //! | key | payload | encoding schema |
 //! |---|---|---|
 //! | `formation/<run>/info` | queryable: JSON ([`info_json`]) | `application/json` |
-//! | `formation/<run>/state/<agent>` | `VehicleState` of quadrotor `<agent>` (1-based), every step | `formation.v2.VehicleState` |
-//! | `formation/<run>/steps` | the step record: N `StepEntry` back to back, every step | `formation.v2.StepEntry` |
+//! | `formation/<run>/state/<agent>` | `VehicleState` of quadrotor `<agent>` (1-based), every step | `formation.v3.VehicleState` |
+//! | `formation/<run>/steps` | the step record: N `StepEntry` back to back, every step | `formation.v3.StepEntry` |
 //! | `formation/<run>/reference` | `ReferenceFrame` of every step recorded | `formation.v1.ReferenceFrame` |
 //! | `formation/<run>/events` | `RuntimeEvent` (crash, hang, link, loss, takeover, ...) | `formation.v1.RuntimeEvent` |
-//! | `formation/<run>/telemetry/<agent>` | `AgentTelemetry` of agent `<agent>` (1-based), latest | `formation.v1.AgentTelemetry` |
+//! | `formation/<run>/telemetry/<agent>` | `AgentTelemetry` of agent `<agent>` (1-based), latest | `formation.v2.AgentTelemetry` |
 //! | `formation/<run>/end` | JSON [`EndReport`], once, after the run's last step | `application/json` |
 //!
 //! Payloads are the `#[repr(C)]` bytes the iceoryx2 services carry (little endian, layout in the
@@ -905,7 +905,7 @@ mod tests {
     fn the_encoding_carries_the_versioned_wire_type_name() {
         assert_eq!(
             encoding(wire_type_name::<VehicleState>()).to_string(),
-            "application/octet-stream;formation.v2.VehicleState"
+            "application/octet-stream;formation.v3.VehicleState"
         );
     }
 
@@ -920,7 +920,7 @@ mod tests {
         let keys = v["keys"].as_array().unwrap();
         let state = keys.iter().find(|k| k["topic"] == "state").unwrap();
         assert_eq!(state["key"], "formation/1a2b/state/<agent>");
-        assert_eq!(state["type_name"], "formation.v2.VehicleState");
+        assert_eq!(state["type_name"], "formation.v3.VehicleState");
         assert_eq!(state["size"], size_of::<VehicleState>());
         let steps = keys.iter().find(|k| k["topic"] == "steps").unwrap();
         assert_eq!(steps["samples_per_payload"], 5);

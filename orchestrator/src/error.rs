@@ -53,6 +53,21 @@ pub enum CommandError {
         .0.time_s, .0.agent, .0.cause, crate::cli::EXIT_RESULT_FAILED
     )]
     Diverged(Divergence),
+    /// The run ran to its end and wrote its outputs, but two quadrotors came nearer than the
+    /// safety distance (exit 3).
+    #[error(
+        "separation failed: {steps} steps below the safety distance of {safety_m} m, closest {:.3} m (agents {} and {} at t = {:.3} s; outputs are written; exit code {})",
+        .closest.distance_m, .closest.agents[0], .closest.agents[1], .closest.time_s,
+        crate::cli::EXIT_RESULT_FAILED
+    )]
+    TooClose {
+        /// Steps below the safety distance.
+        steps: u64,
+        /// The safety distance, m.
+        safety_m: f64,
+        /// The closest approach.
+        closest: crate::record::separation::Approach,
+    },
     /// Ctrl-C: the outputs up to the last recorded step are in `out` (exit 130).
     #[error("interrupted: outputs up to the last recorded step are in {}", .0.display())]
     Interrupted(PathBuf),

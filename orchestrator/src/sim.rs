@@ -83,11 +83,18 @@ pub fn main(args: SimArgs) -> Result<(), CommandError> {
 
 /// The end of a runner (`sim`, `run`) that ran to its end and wrote its outputs: `Ok`, or
 /// [`CommandError::Diverged`] (exit code [`crate::cli::EXIT_RESULT_FAILED`], 3) when the run
-/// diverged.
+/// diverged, [`CommandError::TooClose`] (the same code) when two quadrotors came nearer than the
+/// safety distance.
 pub fn result_of(summary: &Summary) -> Result<(), CommandError> {
-    match &summary.divergence {
-        None => Ok(()),
-        Some(d) => Err(CommandError::Diverged(d.clone())),
+    let sep = &summary.separation;
+    match (&summary.divergence, sep.min_distance.whole) {
+        (Some(d), _) => Err(CommandError::Diverged(d.clone())),
+        (None, Some(a)) if sep.steps_below_safety > 0 => Err(CommandError::TooClose {
+            steps: sep.steps_below_safety,
+            safety_m: sep.safety_distance_m,
+            closest: a,
+        }),
+        (None, _) => Ok(()),
     }
 }
 

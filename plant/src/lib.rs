@@ -12,6 +12,7 @@ pub mod faults;
 pub mod memo;
 pub mod perturbations;
 pub mod plant;
+pub mod traffic;
 
 /// The role process around the library: its ports, its event loop (lockstep and realtime).
 #[cfg(feature = "node")]

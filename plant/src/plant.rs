@@ -5,6 +5,7 @@ use crate::fallback::{Airframe, Failsafe, Target};
 use crate::faults::{actuate, FaultModel};
 use crate::memo::Memo;
 use crate::perturbations::uncertainty;
+use crate::traffic::{Beacon, Broadcast};
 use formation_config::protocol::wire::{
     ControlCommand, FaultInjection, PlantTruth, ReferenceFrame, VehicleState,
 };
@@ -36,6 +37,20 @@ struct Vehicle {
     p_step: Vector3<f64>,
     /// The onboard failsafe's state while it flies the quadrotor (None: its controller does).
     failsafe: Option<Failsafe>,
+    /// Its fallback flew it over the current step (its controller is down): what its broadcast
+    /// says at the next step (D25).
+    on_fallback: bool,
+}
+
+impl Vehicle {
+    /// What its position broadcast says of it now (D25).
+    fn beacon(&self) -> Beacon {
+        Beacon {
+            position: self.state.p.into(),
+            velocity: self.state.v.into(),
+            uncooperative: self.on_fallback,
+        }
+    }
 }
 
 /// The plant: N quadrotors, the step counter and the shared body parameters.
@@ -56,6 +71,9 @@ pub struct Plant {
     /// exp, sin and cos of the time profiles (faults, disturbance, model perturbation) by
     /// argument: what the quadrotors share in a step is evaluated once (`memo`).
     memo: Memo,
+    /// The position broadcast the quadrotors receive: what each state message reports of the
+    /// others (D25).
+    broadcast: Broadcast,
 }
 
 impl Plant {
@@ -100,9 +118,17 @@ impl Plant {
                     advanced: false,
                     p_step: Vector3::from(a.initial_position_m),
                     failsafe: None,
+                    on_fallback: false,
                 }
             })
-            .collect();
+            .collect::<Vec<Vehicle>>();
+        let sep = &s.controller.separation;
+        let beacons: Vec<Beacon> = vehicles.iter().map(Vehicle::beacon).collect();
+        let broadcast = Broadcast::new(
+            &beacons,
+            sep.sensing_range_m,
+            (sep.broadcast_delay_s / s.simulation.dt_s).round() as u64,
+        );
         Plant {
             dt: s.simulation.dt_s,
             step: 0,
@@ -118,6 +144,7 @@ impl Plant {
             },
             safety_m: s.metrics.safety_distance_m,
             memo: Memo::default(),
+            broadcast,
             body,
         }
     }
@@ -154,6 +181,7 @@ impl Plant {
             velocity: x.v.into(),
             attitude: x.a.into(),
             rate: x.w.into(),
+            traffic: self.broadcast.report(i),
         }
     }
 
@@ -168,6 +196,7 @@ impl Plant {
     pub fn apply(&mut self, i: usize, cmd: &ControlCommand) {
         self.vehicles[i].last_command = *cmd;
         self.vehicles[i].failsafe = None;
+        self.vehicles[i].on_fallback = false;
         self.set_input(i, cmd);
     }
 
@@ -176,6 +205,7 @@ impl Plant {
     pub fn apply_fallback(&mut self, i: usize, since_steps: u64, rt: &Runtime) -> ControlCommand {
         let dt = self.dt;
         let step = self.step;
+        self.vehicles[i].on_fallback = true;
         let held = crate::fallback::held(rt, since_steps, dt);
         let (target, push) = if held || rt.fallback == Fallback::Hover {
             (None, Vector3::zeros())
@@ -334,6 +364,8 @@ impl Plant {
             veh.advanced = false;
         }
         self.step += 1;
+        self.broadcast
+            .record(self.step, self.vehicles.iter().map(Vehicle::beacon));
     }
 
     /// Applies a fault injection (constant override, or back to the profile).

@@ -129,6 +129,10 @@ columns! {
     FHatZ = "f_hat_z", "m/s^2", "RBFNN output F-hat_iP, z";
     NnNorm = "nn_norm", "-", "Frobenius norm of the RBFNN weights W-hat_i";
     Tau = "tau", "s", "delay tau_i(t) the agent applied";
+    SepUx = "sep_ux", "m/s^2", "separation layer's correction U_iS - U_iP (D25), x; 0 while it does not act";
+    SepUy = "sep_uy", "m/s^2", "separation layer's correction U_iS - U_iP, y";
+    SepUz = "sep_uz", "m/s^2", "separation layer's correction U_iS - U_iP, z";
+    SepPred = "sep_pred", "m", "smallest predicted separation to another quadrotor from the delayed broadcast (D25); inf with none in range";
 }
 
 /// Buffered, synchronous writer of `trajectory.csv` rows (runs on the writer thread).
@@ -181,7 +185,7 @@ impl RowWriter {
             ];
             let att_cmd_norm = norm(tm.attitude_cmd);
             let d_norm = norm(tr.disturbance);
-            let values: [&[f64]; 26] = [
+            let values: [&[f64]; 28] = [
                 &st.position,
                 &st.velocity,
                 &st.attitude,
@@ -208,6 +212,8 @@ impl RowWriter {
                 &tr.uncertainty,
                 &tm.f_hat,
                 &[tm.nn_weight_norm, tm.tau_s],
+                &tm.sep_correction,
+                &[tm.sep_predicted_m],
             ];
             for group in values {
                 for v in group {

@@ -74,6 +74,40 @@ pub fn closest_pair_sweep(p: &[[f64; 3]], order: &mut Vec<usize>) -> Option<(f64
     (p.len() >= 2).then(|| (best.0.sqrt(), best.1, best.2))
 }
 
+/// Each quadrotor's distance to its nearest other at one step, into `out` (infinite for a lone
+/// one), by the same sweep along x: quadrotor a's scan in each direction ends once (x_b - x_a)²
+/// exceeds its best squared distance so far. `order` is scratch space.
+pub fn nearest_each(p: &[[f64; 3]], order: &mut Vec<usize>, out: &mut [f64]) {
+    order.clear();
+    order.extend(0..p.len());
+    order.sort_unstable_by(|&a, &b| p[a][0].total_cmp(&p[b][0]).then(a.cmp(&b)));
+    out.iter_mut().for_each(|d| *d = f64::INFINITY);
+    let d2 = |a: usize, b: usize| {
+        let (u, v) = (&p[a], &p[b]);
+        let (dx, dy, dz) = (u[0] - v[0], u[1] - v[1], u[2] - v[2]);
+        dx * dx + dy * dy + dz * dz
+    };
+    for (ia, &a) in order.iter().enumerate() {
+        let mut best = out[a];
+        for &b in &order[ia + 1..] {
+            let dx = p[b][0] - p[a][0];
+            if dx * dx > best {
+                break;
+            }
+            best = best.min(d2(a, b));
+        }
+        for &b in order[..ia].iter().rev() {
+            let dx = p[a][0] - p[b][0];
+            if dx * dx > best {
+                break;
+            }
+            best = best.min(d2(a, b));
+        }
+        out[a] = best;
+    }
+    out.iter_mut().for_each(|d| *d = d.sqrt());
+}
+
 /// Running separation statistics of a run.
 #[derive(Debug, Clone)]
 pub struct Separation {
@@ -89,6 +123,10 @@ pub struct Separation {
     pub whole: Option<Approach>,
     /// Closest distance of the latest step, m.
     pub last: Option<f64>,
+    /// Per quadrotor: the smallest distance to any other over the run, m (infinite: none yet).
+    pub nearest: Vec<f64>,
+    /// Per quadrotor: its nearest other's distance at the latest step (scratch), m.
+    now: Vec<f64>,
     /// Positions of the current step (allocated once).
     scratch: Vec<[f64; 3]>,
     /// The sweep's order of the current step (allocated once).
@@ -105,6 +143,8 @@ impl Separation {
             enclose: None,
             whole: None,
             last: None,
+            nearest: Vec::new(),
+            now: Vec::new(),
             scratch: Vec::new(),
             order: Vec::new(),
         }
@@ -115,6 +155,8 @@ impl Separation {
         let mut s = Separation::new(safety_distance_m);
         s.scratch.reserve(n);
         s.order.reserve(n);
+        s.nearest = vec![f64::INFINITY; n];
+        s.now = vec![f64::INFINITY; n];
         s
     }
 
@@ -134,6 +176,17 @@ impl Separation {
         self.last = Some(d);
         if d < self.safety_distance_m {
             self.steps_below_safety += 1;
+        }
+        // Per quadrotor only where it can lower a minimum: the step's closest distance is below
+        // some quadrotor's minimum so far (the run's closest pair is always a candidate).
+        if self.nearest.len() == self.scratch.len()
+            && self.nearest.iter().any(|&m| d < m)
+        {
+            let now = &mut self.now;
+            nearest_each(&self.scratch, &mut self.order, now);
+            for (m, n) in self.nearest.iter_mut().zip(now.iter()) {
+                *m = m.min(*n);
+            }
         }
         let a = Approach {
             distance_m: d,

@@ -35,8 +35,23 @@ pub struct SeparationSummary {
     pub safety_distance_m: f64,
     /// Steps at which the closest two quadrotors were nearer than the safety distance.
     pub steps_below_safety: u64,
+    /// `"ok"`, or `"fail"` when two quadrotors came nearer than the safety distance: the run
+    /// failed (`sim` and `run` exit with code 3, as for a divergence; docs/cli.md).
+    pub verdict: &'static str,
     /// Closest approach (distance, time, pair) per window.
     pub min_distance: ApproachPerWindow,
+}
+
+/// One agent's separation: how long its separation layer acted (D25) and how close it came.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct AgentSeparation {
+    /// Time its layer changed U_iP, s.
+    pub layer_active_s: f64,
+    /// Smallest separation its layer predicted from the delayed broadcast, m (null: never
+    /// another quadrotor in its sensing range).
+    pub min_predicted_m: Option<f64>,
+    /// Smallest true distance to any other quadrotor, m (null: alone).
+    pub min_actual_m: Option<f64>,
 }
 
 /// Metrics of one agent.
@@ -58,6 +73,8 @@ pub struct AgentSummary {
     pub min_rate_margin_rad_s: Option<f64>,
     /// Share of steps with a torque channel at its limit.
     pub torque_saturation_fraction: f64,
+    /// Its separation layer and closest approach (D25).
+    pub separation: AgentSeparation,
     /// Times its process was restarted under `runtime.restart = "on-failure"`.
     pub restarts: u32,
     /// Checkpoints refused at a restart (damaged, another agent's or another run's), each
@@ -152,6 +169,11 @@ impl Summary {
             separation: SeparationSummary {
                 safety_distance_m: m.separation.safety_distance_m,
                 steps_below_safety: m.separation.steps_below_safety,
+                verdict: if m.separation.steps_below_safety == 0 {
+                    "ok"
+                } else {
+                    "fail"
+                },
                 min_distance: ApproachPerWindow {
                     cover: m.separation.cover,
                     enclose: m.separation.enclose,
@@ -182,6 +204,11 @@ impl Summary {
                         a.saturated_steps as f64 / m.steps as f64
                     } else {
                         0.0
+                    },
+                    separation: AgentSeparation {
+                        layer_active_s: a.separation_active_steps as f64 * dt,
+                        min_predicted_m: finite(a.min_predicted_separation),
+                        min_actual_m: m.separation.nearest.get(i).copied().and_then(finite),
                     },
                     restarts: 0,
                     checkpoints_refused: 0,
@@ -222,7 +249,7 @@ impl Summary {
                 .map_or("-".into(), |c| format!("{:.1} %", 100.0 * c))
         );
         println!(
-            "{:>5} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9} {:>6}",
+            "{:>5} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9} {:>6} {:>7} {:>8} {:>8}",
             "agent",
             "rms_cov",
             "max_cov",
@@ -232,11 +259,14 @@ impl Summary {
             "rate_vio",
             "att_marg",
             "rate_marg",
-            "sat%"
+            "sat%",
+            "sep_s",
+            "sep_pred",
+            "sep_min"
         );
         for a in &self.agents {
             println!(
-                "{:>5} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9} {:>6.2}",
+                "{:>5} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>9} {:>9} {:>6.2} {:>7.2} {:>8} {:>8}",
                 a.id,
                 f(a.rms_formation_error_m.cover),
                 f(a.max_formation_error_m.cover),
@@ -246,7 +276,10 @@ impl Summary {
                 a.rate_constraint_violations,
                 f(a.min_attitude_margin_rad),
                 f(a.min_rate_margin_rad_s),
-                100.0 * a.torque_saturation_fraction
+                100.0 * a.torque_saturation_fraction,
+                a.separation.layer_active_s,
+                f(a.separation.min_predicted_m),
+                f(a.separation.min_actual_m)
             );
         }
         let sep = &self.separation;
@@ -259,6 +292,12 @@ impl Summary {
             )
             }
             None => println!("separation: - (fewer than two quadrotors)"),
+        }
+        if sep.steps_below_safety > 0 {
+            println!(
+                "FAIL: two quadrotors came nearer than the safety distance of {} m ({} steps)",
+                sep.safety_distance_m, sep.steps_below_safety
+            );
         }
         for e in &self.events {
             let who = match (e.agent, e.agents) {

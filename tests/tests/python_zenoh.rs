@@ -123,7 +123,7 @@ fn a_python_reader_over_zenoh_gets_the_info_and_exactly_the_recorded_states() {
         .find(|k| k["topic"] == "state")
         .expect("state key");
     assert_eq!(state["key"], format!("formation/{id}/state/<agent>"));
-    assert_eq!(state["type_name"], "formation.v2.VehicleState");
+    assert_eq!(state["type_name"], "formation.v3.VehicleState");
     assert_eq!(state["size"], size_of::<VehicleState>());
     let layout = info["types"]
         .as_array()

@@ -202,7 +202,7 @@ fn forged_frame(from: &str) -> Vec<u8> {
         Record::From(from),
         Record::Sample {
             name: "formation/agent/3/state",
-            type_name: "formation.v2.VehicleState",
+            type_name: "formation.v3.VehicleState",
             bytes: &state,
         },
         Record::Event("formation/wake/agent/3"),

@@ -4,8 +4,30 @@
 import ctypes
 
 
+class TrafficEntry(ctypes.Structure):
+    """32 bytes, align 4."""
+
+    _fields_ = [
+        ("agent", ctypes.c_uint32),  # -
+        ("flags", ctypes.c_uint32),  # -
+        ("position", (ctypes.c_float * 3)),  # m
+        ("velocity", (ctypes.c_float * 3)),  # m/s
+    ]
+
+
+class Traffic(ctypes.Structure):
+    """272 bytes, align 8."""
+
+    _fields_ = [
+        ("step", ctypes.c_uint64),  # -
+        ("count", ctypes.c_uint32),  # -
+        ("_pad", ctypes.c_uint32),  # -
+        ("entries", [TrafficEntry; MAX_TRAFFIC]),  # -
+    ]
+
+
 class VehicleState(ctypes.Structure):
-    """128 bytes, align 8; iceoryx2 type name formation.v2.VehicleState."""
+    """400 bytes, align 8; iceoryx2 type name formation.v3.VehicleState."""
 
     _fields_ = [
         ("step", ctypes.c_uint64),  # -
@@ -17,12 +39,13 @@ class VehicleState(ctypes.Structure):
         ("velocity", (ctypes.c_double * 3)),  # m/s
         ("attitude", (ctypes.c_double * 3)),  # rad
         ("rate", (ctypes.c_double * 3)),  # rad/s
+        ("traffic", Traffic),  # -
     ]
 
     @staticmethod
     def type_name():
         """The iceoryx2 type name the run's service declares."""
-        return "formation.v2.VehicleState"
+        return "formation.v3.VehicleState"
 
 
 class NeighbourState(ctypes.Structure):
@@ -68,7 +91,7 @@ class ReferenceFrame(ctypes.Structure):
 
 
 class ControllerTelemetry(ctypes.Structure):
-    """376 bytes, align 8."""
+    """408 bytes, align 8."""
 
     _fields_ = [
         ("tau_s", ctypes.c_double),  # s
@@ -92,11 +115,13 @@ class ControllerTelemetry(ctypes.Structure):
         ("model_hat_dev", ctypes.c_double),  # -
         ("e1", (ctypes.c_double * 3)),  # -
         ("e2", (ctypes.c_double * 3)),  # -
+        ("sep_correction", (ctypes.c_double * 3)),  # m/s^2
+        ("sep_predicted_m", ctypes.c_double),  # m
     ]
 
 
 class ControlCommand(ctypes.Structure):
-    """440 bytes, align 8; iceoryx2 type name formation.v2.ControlCommand."""
+    """472 bytes, align 8; iceoryx2 type name formation.v3.ControlCommand."""
 
     _fields_ = [
         ("step", ctypes.c_uint64),  # -
@@ -112,11 +137,11 @@ class ControlCommand(ctypes.Structure):
     @staticmethod
     def type_name():
         """The iceoryx2 type name the run's service declares."""
-        return "formation.v2.ControlCommand"
+        return "formation.v3.ControlCommand"
 
 
 class PlantTruth(ctypes.Structure):
-    """256 bytes, align 8."""
+    """528 bytes, align 8."""
 
     _fields_ = [
         ("state", VehicleState),  # -
@@ -167,7 +192,7 @@ class DelayInjection(ctypes.Structure):
 
 
 class AgentTelemetry(ctypes.Structure):
-    """480 bytes, align 8; iceoryx2 type name formation.v1.AgentTelemetry."""
+    """512 bytes, align 8; iceoryx2 type name formation.v2.AgentTelemetry."""
 
     _fields_ = [
         ("step", ctypes.c_uint64),  # -
@@ -186,7 +211,7 @@ class AgentTelemetry(ctypes.Structure):
     @staticmethod
     def type_name():
         """The iceoryx2 type name the run's service declares."""
-        return "formation.v1.AgentTelemetry"
+        return "formation.v2.AgentTelemetry"
 
 
 class RunControl(ctypes.Structure):
@@ -234,7 +259,7 @@ class Hello(ctypes.Structure):
 
 
 class StepEntry(ctypes.Structure):
-    """696 bytes, align 8; iceoryx2 type name formation.v2.StepEntry."""
+    """1000 bytes, align 8; iceoryx2 type name formation.v3.StepEntry."""
 
     _fields_ = [
         ("truth", PlantTruth),  # -
@@ -244,7 +269,7 @@ class StepEntry(ctypes.Structure):
     @staticmethod
     def type_name():
         """The iceoryx2 type name the run's service declares."""
-        return "formation.v2.StepEntry"
+        return "formation.v3.StepEntry"
 
 
 class InjectRequest(ctypes.Structure):

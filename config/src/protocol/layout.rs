@@ -89,13 +89,15 @@ use crate::protocol::messages::{
 };
 use crate::protocol::wire::{
     AgentTelemetry, ControlCommand, ControllerTelemetry, DelayInjection, FaultInjection,
-    NeighbourState, PlantTruth, ReferenceFrame, VehicleState,
+    NeighbourState, PlantTruth, ReferenceFrame, Traffic, TrafficEntry, VehicleState,
 };
 
 /// Every wire type: the messages of the services and the structs nested in them, each after the
 /// types it contains.
-pub fn every_type() -> [TypeLayout; 15] {
+pub fn every_type() -> [TypeLayout; 17] {
     [
+        TypeLayout::of::<TrafficEntry>(),
+        TypeLayout::of::<Traffic>(),
         TypeLayout::of::<VehicleState>(),
         TypeLayout::of::<NeighbourState>(),
         TypeLayout::of::<ReferenceFrame>(),

@@ -127,7 +127,7 @@ crate::wire_fields!(Hello {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v2.StepEntry")
+    type_name("formation.v3.StepEntry")
 )]
 pub struct StepEntry {
     /// The plant's truth after applying the command.

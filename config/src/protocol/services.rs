@@ -702,9 +702,9 @@ mod tests {
     fn the_wire_type_name_is_the_declared_versioned_name_not_the_rust_path() {
         assert_eq!(
             wire_type_name::<AgentTelemetry>(),
-            "formation.v1.AgentTelemetry"
+            "formation.v2.AgentTelemetry"
         );
-        assert_eq!(wire_type_name::<StepEntry>(), "formation.v2.StepEntry");
+        assert_eq!(wire_type_name::<StepEntry>(), "formation.v3.StepEntry");
     }
 
     #[test]

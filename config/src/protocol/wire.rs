@@ -20,13 +20,94 @@ use crate::MAX_AGENTS;
 #[cfg(feature = "ipc")]
 use iceoryx2::prelude::ZeroCopySend;
 
-/// Plant -> agent i: the state of quadrotor i at step k (eq. (1)-(2) states).
+/// Most other quadrotors one [`VehicleState`] reports in its [`Traffic`]: the nearest ones within
+/// the sensing range (`controller.separation.sensing_range_m`, docs/deviations.md D25).
+pub const MAX_TRAFFIC: usize = 8;
+
+/// [`TrafficEntry::flags`]: the quadrotor's controller was down at the measurement (its onboard
+/// failsafe flies it): it does not take its share of an avoidance (D25).
+pub const TRAFFIC_UNCOOPERATIVE: u32 = 1;
+
+/// One other quadrotor as quadrotor i's position broadcast receiver reports it (D25): its state at
+/// the report's measurement step. Single precision, as a broadcast quantises it (1 µm at 15 m).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v2.VehicleState")
+    type_name("formation.v1.TrafficEntry")
+)]
+pub struct TrafficEntry {
+    /// Agent index j (0-based).
+    pub agent: u32,
+    /// [`TRAFFIC_UNCOOPERATIVE`] or 0.
+    pub flags: u32,
+    /// Position P_j at the measurement, m.
+    pub position: [f32; 3],
+    /// Velocity V_j at the measurement, m/s.
+    pub velocity: [f32; 3],
+}
+
+crate::wire_fields!(TrafficEntry {
+    agent: u32 => "-",
+    flags: u32 => "-",
+    position: [f32; 3] => "m",
+    velocity: [f32; 3] => "m/s",
+});
+
+/// The other quadrotors within the sensing range of quadrotor i, nearest first (D25).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v1.Traffic")
+)]
+pub struct Traffic {
+    /// Step of the measurement (at most k; k minus the broadcast delay in steps once past it).
+    pub step: u64,
+    /// Entries in use, at most [`MAX_TRAFFIC`].
+    pub count: u32,
+    /// Padding, zero.
+    pub _pad: u32,
+    /// The entries, `count` of them first, nearest first; the rest zero.
+    pub entries: [TrafficEntry; MAX_TRAFFIC],
+}
+
+crate::wire_fields!(Traffic {
+    step: u64 => "-",
+    count: u32 => "-",
+    _pad: u32 => "-",
+    entries: [TrafficEntry; MAX_TRAFFIC] => "-",
+});
+
+impl TrafficEntry {
+    /// Position, m, in double precision.
+    pub fn p(&self) -> [f64; 3] {
+        self.position.map(f64::from)
+    }
+
+    /// Velocity, m/s, in double precision.
+    pub fn v(&self) -> [f64; 3] {
+        self.velocity.map(f64::from)
+    }
+}
+
+impl Traffic {
+    /// The entries in use.
+    pub fn used(&self) -> &[TrafficEntry] {
+        &self.entries[..(self.count as usize).min(MAX_TRAFFIC)]
+    }
+}
+
+/// Plant -> agent i: the state of quadrotor i at step k (eq. (1)-(2) states), with the other
+/// quadrotors its position broadcast receiver reports (D25).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(
+    feature = "ipc",
+    derive(ZeroCopySend),
+    type_name("formation.v3.VehicleState")
 )]
 pub struct VehicleState {
     /// Simulation step k.
@@ -47,6 +128,8 @@ pub struct VehicleState {
     pub attitude: [f64; 3],
     /// Body rate Omega_i = [p, q, r], rad/s.
     pub rate: [f64; 3],
+    /// The other quadrotors within the sensing range, up to the broadcast delay old (D25).
+    pub traffic: Traffic,
 }
 
 crate::wire_fields!(VehicleState {
@@ -59,6 +142,7 @@ crate::wire_fields!(VehicleState {
     velocity: [f64; 3] => "m/s",
     attitude: [f64; 3] => "rad",
     rate: [f64; 3] => "rad/s",
+    traffic: Traffic => "-",
 });
 
 /// Agent i -> neighbours: the information the paper exchanges, (P_i, V_i) at step k.
@@ -207,7 +291,7 @@ impl Default for ReferenceFrame {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v1.ControllerTelemetry")
+    type_name("formation.v2.ControllerTelemetry")
 )]
 pub struct ControllerTelemetry {
     /// Delay tau_i(t_k) the agent applied, s.
@@ -252,6 +336,13 @@ pub struct ControllerTelemetry {
     pub e1: [f64; 3],
     /// Auxiliary state E_i2, eq. (50).
     pub e2: [f64; 3],
+    /// The separation layer's correction U_iS - U_iP of the virtual control (D25), m/s²; zero
+    /// while it does not act.
+    pub sep_correction: [f64; 3],
+    /// The smallest predicted distance to another quadrotor this step (its delayed report carried
+    /// forward to t_k, less the prediction's uncertainty), m; infinite with none in the sensing
+    /// range (D25).
+    pub sep_predicted_m: f64,
 }
 
 crate::wire_fields!(ControllerTelemetry {
@@ -276,6 +367,8 @@ crate::wire_fields!(ControllerTelemetry {
     model_hat_dev: f64 => "-",
     e1: [f64; 3] => "-",
     e2: [f64; 3] => "-",
+    sep_correction: [f64; 3] => "m/s^2",
+    sep_predicted_m: f64 => "m",
 });
 
 /// Agent i -> plant: total thrust and torque command U_iAC for step k, with the telemetry.
@@ -284,7 +377,7 @@ crate::wire_fields!(ControllerTelemetry {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v2.ControlCommand")
+    type_name("formation.v3.ControlCommand")
 )]
 pub struct ControlCommand {
     /// Simulation step k the command is for.
@@ -322,7 +415,7 @@ crate::wire_fields!(ControlCommand {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v2.PlantTruth")
+    type_name("formation.v3.PlantTruth")
 )]
 pub struct PlantTruth {
     /// The state at step k.
@@ -448,7 +541,7 @@ crate::wire_fields!(DelayInjection {
 #[cfg_attr(
     feature = "ipc",
     derive(ZeroCopySend),
-    type_name("formation.v1.AgentTelemetry")
+    type_name("formation.v2.AgentTelemetry")
 )]
 pub struct AgentTelemetry {
     /// Simulation step k of the sample.

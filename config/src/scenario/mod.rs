@@ -106,6 +106,10 @@ pub struct Mission {
     pub leader: LeaderSpec,
     /// Formation function Lambda_F.
     pub formation: FormationSpec,
+    /// The transitions' sharpness capped to the vehicle's limits (ours, docs/deviations.md D26).
+    /// Absent: the defaults (on).
+    #[serde(default)]
+    pub shaping: ReferenceShapingSpec,
 }
 
 /// Ground target T_g = [r sin(w t), r cos(w t), 0]. Paper: r = 15 m, w = 0.026 rad/s.
@@ -333,6 +337,95 @@ pub struct Controller {
     pub fault_identification: FaultIdentificationSpec,
     /// Gains of the `unconstrained` comparison variant (stands in for the paper's [51]).
     pub unconstrained: UnconstrainedGains,
+    /// The separation layer on the position loop's virtual control and the position broadcast it
+    /// reads (ours, docs/deviations.md D25). Absent: the defaults (on).
+    #[serde(default)]
+    pub separation: SeparationSpec,
+}
+
+/// The separation layer (ours, docs/deviations.md D25): a control-barrier-function filter on the
+/// position loop's virtual control U_iP that keeps every pair of quadrotors at least
+/// D_L = `metrics.safety_distance_m` + `margin_m` apart, from the delayed reports of a position
+/// broadcast, allowing for the time the vehicle takes to turn its acceleration around. Paper:
+/// none (it models no collisions). Defaults: ours (docs/tuning.md section 14).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SeparationSpec {
+    /// The layer acts (`false`: U_iP goes through untouched; the broadcast is still reported and
+    /// the predicted separation still logged). Ours: true.
+    pub enabled: bool,
+    /// Margin kept on top of the safety distance, m: the barrier's distance is D_L = safety + this.
+    /// Ours: 0.15.
+    pub margin_m: f64,
+    /// Activation distance D_A, m: a pair enters the filter only once its predicted distance less
+    /// the distance the two need to stop, d^ - S, is below D_A; a run in which no pair comes that
+    /// close is bit-identical with the layer on and off. Ours: 0.9 (the paper's enclosing ring
+    /// keeps neighbours 1.18 m apart).
+    pub activation_m: f64,
+    /// a_B: the deceleration each quadrotor commits to an avoidance, m/s² (half the 3 m/s² of
+    /// `max_horizontal_accel_m_s2`). Ours: 1.5.
+    pub braking_accel_m_s2: f64,
+    /// j_B: the jerk with which a quadrotor turns its acceleration around, m/s³ (the attitude
+    /// command filter's rate limit allows about g x 0.47 rad/s = 4.6 m/s³). Ours: 3.5.
+    pub jerk_m_s3: f64,
+    /// T_D: the attitude loop's lag behind a new acceleration command, s. Ours: 0.1.
+    pub response_time_s: f64,
+    /// gamma_S: rate of the barrier condition dh/dt >= -gamma_S h, 1/s. Ours: 2.0.
+    pub barrier_rate_1_s: f64,
+    /// sigma_S: sidestep, the share of a pair's unmet braking demand added at right angles to the
+    /// line of sight (to the right, seen from above): two vehicles head-on pass each other instead
+    /// of stopping nose to nose. Ours: 0.5.
+    pub sidestep_ratio: f64,
+    /// Sensing range R_S of the position broadcast: the plant reports the nearest `MAX_TRAFFIC`
+    /// (8) other quadrotors within it, m. Ours: 6.0.
+    pub sensing_range_m: f64,
+    /// tau_B: age of the broadcast reports, s (whole steps): the report of step k carries the
+    /// other quadrotors' states of step k - tau_B / dt. Ours: 0.05, the delay bound tau_M.
+    pub broadcast_delay_s: f64,
+}
+
+impl Default for SeparationSpec {
+    fn default() -> SeparationSpec {
+        SeparationSpec {
+            enabled: true,
+            margin_m: 0.15,
+            activation_m: 0.9,
+            braking_accel_m_s2: 1.5,
+            jerk_m_s3: 3.5,
+            response_time_s: 0.1,
+            barrier_rate_1_s: 2.0,
+            sidestep_ratio: 0.5,
+            sensing_range_m: 6.0,
+            broadcast_delay_s: 0.05,
+        }
+    }
+}
+
+/// The shaping of the slot references to the vehicle's limits (ours, docs/deviations.md D26): the
+/// leader caps the sharpness of the formation's transitions (the radius change at T1, the spin
+/// onset at T2, the descent at T3) so that none asks more acceleration or jerk of a slot than
+/// these; a transition within them is flown as written, bit for bit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReferenceShapingSpec {
+    /// The shaping acts. Ours: true.
+    pub enabled: bool,
+    /// a_R: most acceleration one transition asks of a slot, m/s². Ours: 2.0 (of the 3 m/s² limit
+    /// of D5: the rest is for the feedback and the leader's own motion).
+    pub accel_m_s2: f64,
+    /// j_R: most jerk one transition asks of a slot, m/s³. Ours: 3.0 (the attitude command
+    /// filter's rate limit allows about g x 0.47 rad/s = 4.6 m/s³).
+    pub jerk_m_s3: f64,
+}
+
+impl Default for ReferenceShapingSpec {
+    fn default() -> ReferenceShapingSpec {
+        ReferenceShapingSpec {
+            enabled: true,
+            accel_m_s2: 2.0,
+            jerk_m_s3: 3.0,
+        }
+    }
 }
 
 /// NTDPC gains of eq. (14)-(15) and the structural guards we add.
