@@ -70,7 +70,18 @@ pub fn to_json(run: &str, process: Option<&ProcessEntry>, s: &AgentTelemetry) ->
         "gamma_hat": c.gamma_hat, "delta_hat": c.delta_hat, "d_hat": c.d_hat,
         "model_hat_dev": c.model_hat_dev, "e1": c.e1, "e2": c.e2,
         "loop_latency_us": s.loop_latency_us,
+        "separation": {
+            "correction": c.sep_correction,
+            "predicted_m": finite(c.sep_predicted_m),
+            "active_s": s.sep_active_s,
+            "min_predicted_m": finite(s.sep_min_predicted_m),
+        },
     })
+}
+
+/// A distance that may be infinite (none in range) as JSON: `null` then.
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -142,6 +153,20 @@ pub fn to_text(run: &str, n: usize, process: Option<&ProcessEntry>, s: &AgentTel
         c.d_hat, c.model_hat_dev
     );
     o += &format!("E1 {}  E2 {}\n", v3(c.e1), v3(c.e2));
+    let dist = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.3} m")
+        } else {
+            "- (none in range)".to_string()
+        }
+    };
+    o += &format!(
+        "separation        predicted {}  correction {} m/s^2  active {:.2} s  min predicted {}\n",
+        dist(c.sep_predicted_m),
+        v3(c.sep_correction),
+        s.sep_active_s,
+        dist(s.sep_min_predicted_m)
+    );
     o
 }
 

@@ -299,6 +299,7 @@ impl Lockstep<'_> {
         let cmd = self.agent.step(s);
         send(&ports.command, cmd)?;
         poke(&ports.plant_wake);
+        self.sampler.observe_command(&cmd);
         if let Some(share) = self.share_later.take() {
             send(&ports.share_out, share)?;
         }

@@ -292,6 +292,7 @@ impl Realtime<'_> {
         send(&self.ports.command, cmd)?;
         self.answered = Some(k);
         poke(&self.ports.plant_wake);
+        self.sampler.observe_command(&cmd);
         if self.sampler.due_once(k) {
             let latency = std::time::Duration::from_nanos(t1 - t0);
             // Best effort: a failed telemetry send never disturbs control.

@@ -21,6 +21,11 @@ pub struct Sampler {
     target: [f64; 3],
     /// Period index (`k / every`) of the latest sample taken by [`Sampler::due_once`].
     last_period: Option<u64>,
+    /// Steps at which the separation layer acted, and the smallest separation it predicted,
+    /// since this process started (D25).
+    sep_active_steps: u64,
+    sep_min_predicted_m: f64,
+    dt: f64,
     /// Samples sent and the wall time spent building and sending them (the overhead).
     sent: u64,
     send_time: Duration,
@@ -37,6 +42,9 @@ impl Sampler {
             rate_limit: s.controller.attitude.rate_limit_rad_s,
             target: [0.0; 3],
             last_period: None,
+            sep_active_steps: 0,
+            sep_min_predicted_m: f64::INFINITY,
+            dt: s.simulation.dt_s,
             sent: 0,
             send_time: Duration::ZERO,
         }
@@ -46,6 +54,15 @@ impl Sampler {
     pub fn observe_reference(&mut self, r: &ReferenceFrame) {
         let o = r.offset[self.agent];
         self.target = [r.p_d[0] + o[0], r.p_d[1] + o[1], r.p_d[2] + o[2]];
+    }
+
+    /// Accounts the separation layer of a command this process computed.
+    pub fn observe_command(&mut self, cmd: &ControlCommand) {
+        let t = &cmd.telemetry;
+        if t.sep_correction != [0.0; 3] {
+            self.sep_active_steps += 1;
+        }
+        self.sep_min_predicted_m = self.sep_min_predicted_m.min(t.sep_predicted_m);
     }
 
     /// True when step `k` is sampled.
@@ -87,6 +104,8 @@ impl Sampler {
             attitude_limit_rad: norm(cmd.telemetry.attitude_cmd) + self.margin,
             rate_limit_rad_s: self.rate_limit,
             loop_latency_us: latency.as_secs_f64() * 1e6,
+            sep_active_s: self.sep_active_steps as f64 * self.dt,
+            sep_min_predicted_m: self.sep_min_predicted_m,
             controller: cmd.telemetry,
         }
     }

@@ -177,6 +177,7 @@ pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
         worst: Level::Ok,
     };
     r.verdicts = verdicts::all(&r);
+    r.verdicts.extend(reference_verdicts(s));
     r.worst = r
         .verdicts
         .iter()
@@ -184,6 +185,54 @@ pub fn report_for(s: &Scenario, variant: formation_config::Variant) -> Report {
         .max_by_key(|l| *l as u8)
         .unwrap_or(Level::Ok);
     r
+}
+
+/// Whether each transition of the mission asks more of a slot than the vehicle can fly (D26):
+/// the attitude command filter's rate limit lets a quadrotor change its acceleration by about
+/// g x its roll and pitch rate limit (m/s³), and D5 caps the acceleration. WARN where the
+/// transition as written asks more (naming what the leader flies instead when `mission.shaping`
+/// caps it), OK where it does not.
+pub fn reference_verdicts(s: &Scenario) -> Vec<Verdict> {
+    let pg = &s.controller.position;
+    let rl = s.controller.attitude_command_filter.rate_limit;
+    let jerk = s.simulation.gravity_m_s2 * rl[0].min(rl[1]);
+    let accel = pg.max_horizontal_accel_m_s2;
+    let mission = formation_leader::Mission::from_scenario(s);
+    mission
+        .transitions()
+        .iter()
+        .map(|t| {
+            let (a, j) = t.asked;
+            let check = format!("reference.{}", t.name);
+            if a <= accel && j <= jerk {
+                Verdict::new(
+                    &check,
+                    Level::Ok,
+                    format!(
+                        "sharpness {:.3}/s asks {a:.2} m/s² and {j:.2} m/s³ of a slot, within {accel:.2} m/s² and {jerk:.2} m/s³",
+                        t.written
+                    ),
+                )
+            } else {
+                let flown = if t.flown < t.written {
+                    format!(
+                        "; mission.shaping flies it at {:.3}/s ({:.2} m/s², {:.2} m/s³)",
+                        t.flown, t.flies.0, t.flies.1
+                    )
+                } else {
+                    "; flown as written (mission.shaping is off)".to_string()
+                };
+                Verdict::new(
+                    &check,
+                    Level::Warn,
+                    format!(
+                        "sharpness {:.3}/s asks {a:.2} m/s² and {j:.2} m/s³ of a slot, more than the vehicle's {accel:.2} m/s² and {jerk:.2} m/s³{flown}",
+                        t.written
+                    ),
+                )
+            }
+        })
+        .collect()
 }
 
 /// Theorem 1's analysis, when L + B is positive definite.

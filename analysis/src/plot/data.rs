@@ -51,6 +51,9 @@ pub const REQUIRED_COLUMNS: &[Column] = &[
     Column::FHatX,
     Column::FHatY,
     Column::FHatZ,
+    Column::SepUx,
+    Column::SepUy,
+    Column::SepUz,
 ];
 
 /// The time series of one agent: one vector per column of [`REQUIRED_COLUMNS`].

@@ -564,6 +564,11 @@ pub struct AgentTelemetry {
     pub rate_limit_rad_s: f64,
     /// Wall time of the controller step of this sample (`Agent::step`), µs.
     pub loop_latency_us: f64,
+    /// Time the separation layer has changed U_iP since this process started (D25), s.
+    pub sep_active_s: f64,
+    /// Smallest separation the layer has predicted since this process started, m (infinite:
+    /// none in range yet).
+    pub sep_min_predicted_m: f64,
     /// The controller's internals at step k.
     pub controller: ControllerTelemetry,
 }
@@ -579,6 +584,8 @@ crate::wire_fields!(AgentTelemetry {
     attitude_limit_rad: f64 => "rad",
     rate_limit_rad_s: f64 => "rad/s",
     loop_latency_us: f64 => "us",
+    sep_active_s: f64 => "s",
+    sep_min_predicted_m: f64 => "m",
     controller: ControllerTelemetry => "-",
 });
 

@@ -1,0 +1,137 @@
+//! End-to-end: the separation layer (docs/deviations.md D25) and the shaped transitions (D26)
+//! through the real `formation sim` binary: the shipped abrupt-fault case keeps every pair apart,
+//! a run in which no pair comes within the activation distance is byte-identical with the layer
+//! on and off, crossing starts are flown apart, and a run under the safety distance fails with
+//! exit code 3 and the verdict `fail`.
+
+use formation_tests::{bin, temp_dir};
+use serde_json::Value;
+use std::path::PathBuf;
+use std::process::Command;
+
+/// Runs `formation sim <args>` into a fresh folder: (exit code, summary.json, the folder).
+fn sim(args: &[&str], tag: &str) -> (Option<i32>, Value, PathBuf, String) {
+    let out = temp_dir(tag);
+    let o = Command::new(bin("formation"))
+        .arg("sim")
+        .args(args)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("formation runs");
+    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json written");
+    (
+        o.status.code(),
+        serde_json::from_str(&text).expect("summary.json is JSON"),
+        out,
+        stderr,
+    )
+}
+
+fn steps_below(v: &Value) -> u64 {
+    v["separation"]["steps_below_safety"].as_u64().unwrap()
+}
+
+fn closest(v: &Value) -> f64 {
+    v["separation"]["min_distance"]["whole"]["distance_m"]
+        .as_f64()
+        .unwrap()
+}
+
+/// Swaps the start positions of two pairs of agents (1-based) of the paper scenario.
+fn swapped(pairs: &[(usize, usize)]) -> Vec<String> {
+    let starts = [
+        "[0.0, 17.64, 0.0]",
+        "[-2.5, 15.83, 0.0]",
+        "[-1.56, 12.88, 0.0]",
+        "[1.54, 12.86, 0.0]",
+        "[2.51, 15.8, 0.0]",
+    ];
+    let mut sets = Vec::new();
+    for &(a, b) in pairs {
+        sets.push("--set".to_string());
+        sets.push(format!("agents[{}].initial_position_m={}", a - 1, starts[b - 1]));
+        sets.push("--set".to_string());
+        sets.push(format!("agents[{}].initial_position_m={}", b - 1, starts[a - 1]));
+    }
+    sets
+}
+
+#[test]
+fn the_shipped_abrupt_fault_case_keeps_every_pair_beyond_the_safety_distance() {
+    let scenario = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../config/scenarios/abrupt-faults.toml"
+    );
+    let (code, v, out, stderr) = sim(&[scenario], "sep-abrupt");
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(steps_below(&v), 0);
+    assert_eq!(v["separation"]["verdict"], "ok");
+    assert!(closest(&v) > 0.5, "closest {}", closest(&v));
+    for a in v["agents"].as_array().unwrap() {
+        let s = &a["separation"];
+        assert!(s["min_actual_m"].as_f64().unwrap() >= closest(&v) - 1e-12);
+        assert!(s["layer_active_s"].as_f64().unwrap() >= 0.0);
+    }
+    let _ = std::fs::remove_dir_all(out);
+}
+
+/// A formation twice as wide as the paper's (neighbours 2.4 m apart when enclosing, more than the
+/// 0.9 m activation distance plus any stopping distance it flies at): the layer never acts, and
+/// the trajectory is the same, byte for byte, with it off.
+#[test]
+fn a_run_whose_pairs_stay_beyond_the_activation_distance_is_byte_identical_with_the_layer_off() {
+    let wide = [
+        "--set",
+        "mission.formation.cover_radius_m=4.0",
+        "--set",
+        "mission.formation.enclose_radius_m=2.0",
+        "--set",
+        "simulation.duration_s=45",
+    ];
+    let (code_on, on, dir_on, e1) = sim(&wide, "sep-inert-on");
+    let mut off_args = wide.to_vec();
+    off_args.extend(["--set", "controller.separation.enabled=false"]);
+    let (code_off, off, dir_off, e2) = sim(&off_args, "sep-inert-off");
+    assert_eq!((code_on, code_off), (Some(0), Some(0)), "{e1}{e2}");
+    for a in on["agents"].as_array().unwrap() {
+        assert_eq!(a["separation"]["layer_active_s"].as_f64(), Some(0.0));
+    }
+    assert!(closest(&on) > 1.5, "closest {}", closest(&on));
+    let a = std::fs::read(dir_on.join("trajectory.csv")).unwrap();
+    let b = std::fs::read(dir_off.join("trajectory.csv")).unwrap();
+    assert!(a == b, "trajectory.csv differs with the layer on and off");
+    assert_eq!(on["agents"], off["agents"]);
+    let _ = std::fs::remove_dir_all(dir_on);
+    let _ = std::fs::remove_dir_all(dir_off);
+}
+
+/// Two pairs of start positions exchanged: the start-up paths cross. Without the layer two
+/// quadrotors come nearer than the safety distance and the run fails (exit 3, verdict `fail`,
+/// stderr names the pair); with it they are flown apart.
+#[test]
+fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit_3() {
+    let sets = swapped(&[(1, 5), (2, 4)]);
+    let mut args: Vec<&str> = vec!["--set", "simulation.duration_s=12"];
+    args.extend(sets.iter().map(String::as_str));
+    let (code, on, dir_on, stderr) = sim(&args, "sep-swap-on");
+    assert_eq!(code, Some(0), "{stderr}");
+    assert_eq!(steps_below(&on), 0);
+    let active: f64 = on["agents"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a["separation"]["layer_active_s"].as_f64().unwrap())
+        .sum();
+    assert!(active > 0.0, "the layer acted");
+    args.extend(["--set", "controller.separation.enabled=false"]);
+    let (code, off, dir_off, stderr) = sim(&args, "sep-swap-off");
+    assert_eq!(code, Some(3), "{stderr}");
+    assert!(steps_below(&off) > 0);
+    assert_eq!(off["separation"]["verdict"], "fail");
+    assert!(stderr.contains("separation failed"), "{stderr}");
+    let _ = std::fs::remove_dir_all(dir_on);
+    let _ = std::fs::remove_dir_all(dir_off);
+}
