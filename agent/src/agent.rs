@@ -49,6 +49,9 @@ pub struct Agent {
     /// Per neighbour (in `p.neighbours` order): the step the plant took it down from after its
     /// process was lost ([`Agent::taken_down`]), if it was.
     lost_from: Vec<Option<u64>>,
+    /// Every agent's slot offset Delta_j0 of the newest reference frame: how far apart the
+    /// formation itself puts two quadrotors, which the separation layer does not fight (D25).
+    slots: Vec<[f64; 3]>,
 }
 
 /// Whether the leader-relative RBFNN drive (D23) acts: the agent's own start-up generator (D19)
@@ -131,6 +134,7 @@ impl Agent {
             startup_set: false,
             rearmed: vec![0; n_nb + 1],
             lost_from: vec![None; n_nb],
+            slots: vec![[0.0; 3]; p.n_agents],
             p,
         }
     }
@@ -240,6 +244,8 @@ impl Agent {
             },
         );
         let me = self.p.id;
+        let n = self.slots.len().min(r.n_agents as usize);
+        self.slots[..n].copy_from_slice(&r.offset[..n]);
         self.offsets[0].push(r.step, [r.offset[me], r.offset_vel[me], r.offset_acc[me]]);
         for (idx, (j, _)) in self.p.neighbours.iter().enumerate() {
             self.offsets[idx + 1].push(r.step, [r.offset[*j], r.offset_vel[*j], r.offset_acc[*j]]);
@@ -676,7 +682,7 @@ impl Agent {
         } else {
             None
         };
-        let sep = crate::separation::filter(&self.p.separation, own, accel, u_l);
+        let sep = crate::separation::filter(&self.p.separation, own, accel, &self.slots, u_l);
         // The layer's U_iS goes through D5's limits again only when it changed U_iP, so that
         // a step it does not act in is bit-identical with the layer off.
         let u_p = if sep.acted {

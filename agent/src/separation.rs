@@ -73,6 +73,10 @@ pub struct SeparationParams {
     pub enabled: bool,
     /// D_L: distance the barrier keeps, m (safety distance + margin).
     pub keep_m: f64,
+    /// The safety distance, m.
+    pub safety: f64,
+    /// The margin kept on top of it, m.
+    pub margin: f64,
     /// D_A: activation distance, m.
     pub activation_m: f64,
     /// a_B, m/s².
@@ -106,6 +110,8 @@ impl SeparationParams {
         SeparationParams {
             enabled: spec.enabled,
             keep_m: safety_m + spec.margin_m,
+            safety: safety_m,
+            margin: spec.margin_m,
             activation_m: spec.activation_m,
             braking: spec.braking_accel_m_s2,
             jerk: spec.jerk_m_s3,
@@ -140,6 +146,10 @@ struct Constraint {
     b: f64,
     /// Sidestep direction (horizontal, sigma_S long).
     side: [f64; 3],
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -178,6 +188,7 @@ fn pair(
     sp: &SeparationParams,
     age: f64,
     (p, v, a): ([f64; 3], [f64; 3], [f64; 3]),
+    (keep, activation): (f64, f64),
     e: &TrafficEntry,
 ) -> (f64, Option<Constraint>) {
     let (pe, ve) = (e.p(), e.v());
@@ -201,10 +212,10 @@ fn pair(
     };
     let alpha = -dot(n, a);
     let (stop, slope) = stopping(share * closing, alpha, sp.braking, sp.jerk, sp.lag);
-    if predicted - stop / share >= sp.activation_m {
+    if predicted - stop / share >= activation {
         return (predicted, None);
     }
-    let h = share * (predicted - sp.keep_m) - stop;
+    let h = share * (predicted - keep) - stop;
     let along = dot(n, w);
     let w_perp: [f64; 3] = std::array::from_fn(|d| w[d] - along * n[d]);
     let b = (share * closing - sp.rate * h) / slope - share * dot(w_perp, w_perp) / dist;
@@ -227,9 +238,21 @@ fn thrust_acceleration(att: [f64; 3], u_z: f64, g: f64) -> [f64; 3] {
     [lift * axis[0], lift * axis[1], u_z]
 }
 
+/// The distances a pair's filter keeps and activates at, (D_L,ij, D_A,ij), m, when the formation
+/// itself puts their slots `desired` apart: never more than the formation asks less the margin,
+/// so that the layer does not fight a formation whose slots are close (but never less than the
+/// safety distance); the defaults D_L, D_A wherever the slots are far enough apart.
+pub fn pair_distances(sp: &SeparationParams, desired: f64) -> (f64, f64) {
+    let room = desired - sp.margin;
+    let keep = room.clamp(sp.safety, sp.keep_m);
+    let activation = room.clamp(keep, sp.activation_m.max(keep));
+    (keep, activation)
+}
+
 /// The layer for agent i at its current state `own` (step, position, velocity, attitude and the
 /// traffic it reports), with its measured acceleration `accel` (m/s², from its own recent
-/// velocities; `None`: not yet known, the thrust's is used), on the position loop's limited
+/// velocities; `None`: not yet known, the thrust's is used), and the formation's slot offsets
+/// of every agent at the step `slots` (its own at `own.agent`), on the position loop's limited
 /// virtual control `u`. The vehicle's acceleration is U_iS plus what the thrust does not make
 /// (the lumped uncertainty and disturbance, F~ = accel - thrust acceleration): the half-spaces
 /// bound U_iS + F~.
@@ -237,6 +260,7 @@ pub fn filter(
     sp: &SeparationParams,
     own: &VehicleState,
     accel: Option<[f64; 3]>,
+    slots: &[[f64; 3]],
     u: [f64; 3],
 ) -> Filtered {
     let mut cs = [Constraint::default(); MAX_TRAFFIC];
@@ -272,11 +296,17 @@ pub fn filter(
         stopping(share * c_max, alpha_max, sp.braking, sp.jerk, sp.lag).0 / share
     };
     let gate = sp.activation_m + eps + stop(0.5).max(stop(1.0));
+    let me = slots.get(own.agent as usize);
     for (l, e) in used.iter().enumerate() {
         if d2[l] >= gate * gate {
             continue;
         }
-        if let (_, Some(c)) = pair(sp, age, (own.position, own.velocity, a), e) {
+        let desired = match (me, slots.get(e.agent as usize)) {
+            (Some(a), Some(b)) => dot(sub(*a, *b), sub(*a, *b)).sqrt(),
+            _ => f64::INFINITY,
+        };
+        let distances = pair_distances(sp, desired);
+        if let (_, Some(c)) = pair(sp, age, (own.position, own.velocity, a), distances, e) {
             cs[m] = c;
             m += 1;
         }
@@ -394,11 +424,11 @@ mod tests {
         let sp = params();
         let u = [0.123_456_789, -2.5, 0.3];
         let s = own(100, [0.0; 3], [1.0, 0.0, 0.0], &[at(100, [5.0, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
-        let f = filter(&sp, &s, None, u);
+        let f = filter(&sp, &s, None, &[], u);
         assert!(!f.acted);
         assert_eq!(f.u, u);
         assert_eq!(f.predicted_m, 5.0);
-        let none = filter(&sp, &own(100, [0.0; 3], [0.0; 3], &[]), None, u);
+        let none = filter(&sp, &own(100, [0.0; 3], [0.0; 3], &[]), None, &[], u);
         assert_eq!((none.u, none.predicted_m), (u, f64::INFINITY));
     }
 
@@ -408,7 +438,7 @@ mod tests {
     fn two_vehicles_head_on_brake_and_step_aside() {
         let sp = params();
         let s = own(100, [0.0; 3], [1.0, 0.0, 0.0], &[at(100, [2.0, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
-        let f = filter(&sp, &s, None, [1.0, 0.0, 0.0]);
+        let f = filter(&sp, &s, None, &[], [1.0, 0.0, 0.0]);
         assert!(f.acted);
         assert!(f.u[0] < 0.0, "brakes away from the other: {:?}", f.u);
         // n = -x (from the other to me); right of it seen from above: z x n = -y.
@@ -423,8 +453,8 @@ mod tests {
         let v = [1.0, 0.0, 0.0];
         let fresh = own(100, [0.0; 3], v, &[at(100, [1.5, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
         let old = own_at(100, 50, [0.0; 3], v, &[at(50, [1.55, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
-        let a = filter(&sp, &fresh, None, [0.0; 3]);
-        let b = filter(&sp, &old, None, [0.0; 3]);
+        let a = filter(&sp, &fresh, None, &[], [0.0; 3]);
+        let b = filter(&sp, &old, None, &[], [0.0; 3]);
         assert!((b.predicted_m - (1.5 - 0.5 * sp.other_accel * 0.05 * 0.05)).abs() < 1e-6);
         assert!(b.u[0] < a.u[0], "older data, harder braking: {:?} {:?}", a.u, b.u);
     }
@@ -438,10 +468,10 @@ mod tests {
         let (fast, _) = stopping(0.5, 2.0, sp.braking, sp.jerk, sp.lag);
         assert!(fast > slow + 0.2, "{slow} {fast}");
         let mut s = own(0, [0.0; 3], [1.0, 0.0, 0.0], &[at(0, [2.2, 0.0, 0.0], [0.0; 3])]);
-        let level = filter(&sp, &s, None, [0.0; 3]);
+        let level = filter(&sp, &s, None, &[], [0.0; 3]);
         // Pitched forward 0.2 rad: accelerating along +x, towards the other.
         s.attitude = [0.0, 0.2, 0.0];
-        let pitched = filter(&sp, &s, None, [0.0; 3]);
+        let pitched = filter(&sp, &s, None, &[], [0.0; 3]);
         assert!(!level.acted && pitched.acted, "{level:?} {pitched:?}");
     }
 
@@ -478,9 +508,9 @@ mod tests {
         let sp = params();
         let mut e = at(100, [1.2, 0.0, 0.0], [0.0; 3]);
         let v = [1.0, 0.0, 0.0];
-        let up = filter(&sp, &own(100, [0.0; 3], v, &[e]), None, [0.0; 3]);
+        let up = filter(&sp, &own(100, [0.0; 3], v, &[e]), None, &[], [0.0; 3]);
         e.flags = TRAFFIC_UNCOOPERATIVE;
-        let down = filter(&sp, &own(100, [0.0; 3], v, &[e]), None, [0.0; 3]);
+        let down = filter(&sp, &own(100, [0.0; 3], v, &[e]), None, &[], [0.0; 3]);
         assert!(up.acted && down.acted);
         assert!(down.u[0] < up.u[0], "harder braking alone: {down:?} vs {up:?}");
     }
@@ -501,10 +531,34 @@ mod tests {
                 at(0, [0.0, 0.8, 0.0], [0.0; 3]),
             ],
         );
-        let f = filter(&sp, &s, None, [0.0, 2.0, 0.5]);
+        let f = filter(&sp, &s, None, &[], [0.0, 2.0, 0.5]);
         assert!(f.acted);
         assert!(f.u[1] < 2.0, "held back from the one ahead on y: {:?}", f.u);
         assert!(f.u[0].abs() < 1e-9 && (f.u[2] - 0.5).abs() < 1e-12, "{:?}", f.u);
+    }
+
+    /// A formation whose slots are 0.7 m apart: the pair keeps 0.55 m (the slots less the
+    /// margin), not the 0.65 m of D_L, and is left alone while it holds its slots; slots far apart
+    /// get the defaults; slots closer than the safety distance still get the safety distance.
+    #[test]
+    fn the_layer_does_not_fight_a_formation_whose_slots_are_close() {
+        let sp = params();
+        assert_eq!(pair_distances(&sp, 5.0), (sp.keep_m, sp.activation_m));
+        let (keep, act) = pair_distances(&sp, 0.7);
+        assert!((keep - 0.55).abs() < 1e-12 && (act - 0.55).abs() < 1e-12);
+        assert_eq!(pair_distances(&sp, 0.2), (sp.safety, sp.safety));
+        let slots = [[0.0; 3], [0.7, 0.0, 0.0]];
+        let mut s = own(0, [0.0; 3], [0.0; 3], &[at(0, [0.7, 0.0, 0.0], [0.0; 3])]);
+        s.agent = 0;
+        let mut e = s.traffic.entries[0];
+        e.agent = 1;
+        s.traffic.entries[0] = e;
+        let u = [1.0, 0.0, 0.0];
+        let held = filter(&sp, &s, None, &slots, u);
+        assert!(!held.acted, "{held:?}");
+        let far_slots = [[0.0; 3], [3.0, 0.0, 0.0]];
+        let pushed = filter(&sp, &s, None, &far_slots, u);
+        assert!(pushed.acted && pushed.u[0] < u[0], "{pushed:?}");
     }
 
     #[test]
@@ -512,7 +566,7 @@ mod tests {
         let mut sp = params();
         sp.enabled = false;
         let s = own(0, [0.0; 3], [1.0, 0.0, 0.0], &[at(0, [0.6, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
-        let f = filter(&sp, &s, None, [1.0, 0.0, 0.0]);
+        let f = filter(&sp, &s, None, &[], [1.0, 0.0, 0.0]);
         assert!(!f.acted);
         assert_eq!(f.u, [1.0, 0.0, 0.0]);
         assert!((f.predicted_m - 0.6).abs() < 1e-6);

@@ -4,13 +4,13 @@
 //! on and off, crossing starts are flown apart, and a run under the safety distance fails with
 //! exit code 3 and the verdict `fail`.
 
-use formation_tests::{bin, temp_dir};
+use formation_tests::{bin, temp_dir, TempDir};
 use serde_json::Value;
-use std::path::PathBuf;
 use std::process::Command;
 
-/// Runs `formation sim <args>` into a fresh folder: (exit code, summary.json, the folder).
-fn sim(args: &[&str], tag: &str) -> (Option<i32>, Value, PathBuf, String) {
+/// Runs `formation sim <args>` into a fresh folder: (exit code, summary.json, the folder (removed
+/// when dropped), stderr).
+fn sim(args: &[&str], tag: &str) -> (Option<i32>, Value, TempDir, String) {
     let out = temp_dir(tag);
     let o = Command::new(bin("formation"))
         .arg("sim")
@@ -65,7 +65,7 @@ fn the_shipped_abrupt_fault_case_keeps_every_pair_beyond_the_safety_distance() {
         env!("CARGO_MANIFEST_DIR"),
         "/../config/scenarios/abrupt-faults.toml"
     );
-    let (code, v, out, stderr) = sim(&[scenario], "sep-abrupt");
+    let (code, v, _out, stderr) = sim(&[scenario], "sep-abrupt");
     assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(steps_below(&v), 0);
     assert_eq!(v["separation"]["verdict"], "ok");
@@ -75,7 +75,6 @@ fn the_shipped_abrupt_fault_case_keeps_every_pair_beyond_the_safety_distance() {
         assert!(s["min_actual_m"].as_f64().unwrap() >= closest(&v) - 1e-12);
         assert!(s["layer_active_s"].as_f64().unwrap() >= 0.0);
     }
-    let _ = std::fs::remove_dir_all(out);
 }
 
 /// A formation twice as wide as the paper's (neighbours 2.4 m apart when enclosing, more than the
@@ -104,8 +103,6 @@ fn a_run_whose_pairs_stay_beyond_the_activation_distance_is_byte_identical_with_
     let b = std::fs::read(dir_off.join("trajectory.csv")).unwrap();
     assert!(a == b, "trajectory.csv differs with the layer on and off");
     assert_eq!(on["agents"], off["agents"]);
-    let _ = std::fs::remove_dir_all(dir_on);
-    let _ = std::fs::remove_dir_all(dir_off);
 }
 
 /// Two pairs of start positions exchanged: the start-up paths cross. Without the layer two
@@ -132,6 +129,4 @@ fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit
     assert!(steps_below(&off) > 0);
     assert_eq!(off["separation"]["verdict"], "fail");
     assert!(stderr.contains("separation failed"), "{stderr}");
-    let _ = std::fs::remove_dir_all(dir_on);
-    let _ = std::fs::remove_dir_all(dir_off);
 }
