@@ -139,7 +139,7 @@ typedef struct fm_DelayInjection {
 } fm_DelayInjection;
 #define FM_DELAYINJECTION_TYPE_NAME "formation.v1.DelayInjection"
 
-/* 512 bytes, align 8; iceoryx2 type name "formation.v2.AgentTelemetry". */
+/* 528 bytes, align 8; iceoryx2 type name "formation.v2.AgentTelemetry". */
 typedef struct fm_AgentTelemetry {
     uint64_t step; /* - */
     double t; /* s */
@@ -151,6 +151,8 @@ typedef struct fm_AgentTelemetry {
     double attitude_limit_rad; /* rad */
     double rate_limit_rad_s; /* rad/s */
     double loop_latency_us; /* us */
+    double sep_active_s; /* s */
+    double sep_min_predicted_m; /* m */
     fm_ControllerTelemetry controller; /* - */
 } fm_AgentTelemetry;
 #define FM_AGENTTELEMETRY_TYPE_NAME "formation.v2.AgentTelemetry"

@@ -558,7 +558,7 @@ mod tests {
         let s = schema(5);
         let t = text(&s);
         assert!(
-            t.contains("AgentTelemetry, iceoryx2 formation.v2.AgentTelemetry: 512 bytes, align 8")
+            t.contains("AgentTelemetry, iceoryx2 formation.v2.AgentTelemetry: 528 bytes, align 8")
         );
         assert!(t.lines().any(|l| l.split_whitespace().collect::<Vec<_>>()
             == ["formation_error_m", "24", "8", "f64", "m"]));

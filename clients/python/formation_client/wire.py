@@ -192,7 +192,7 @@ class DelayInjection(ctypes.Structure):
 
 
 class AgentTelemetry(ctypes.Structure):
-    """512 bytes, align 8; iceoryx2 type name formation.v2.AgentTelemetry."""
+    """528 bytes, align 8; iceoryx2 type name formation.v2.AgentTelemetry."""
 
     _fields_ = [
         ("step", ctypes.c_uint64),  # -
@@ -205,6 +205,8 @@ class AgentTelemetry(ctypes.Structure):
         ("attitude_limit_rad", ctypes.c_double),  # rad
         ("rate_limit_rad_s", ctypes.c_double),  # rad/s
         ("loop_latency_us", ctypes.c_double),  # us
+        ("sep_active_s", ctypes.c_double),  # s
+        ("sep_min_predicted_m", ctypes.c_double),  # m
         ("controller", ControllerTelemetry),  # -
     ]
 
