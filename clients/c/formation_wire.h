@@ -19,7 +19,7 @@ typedef struct fm_Traffic {
     uint64_t step; /* - */
     uint32_t count; /* - */
     uint32_t _pad; /* - */
-    fm_[TrafficEntry; MAX_TRAFFIC] entries; /* - */
+    fm_TrafficEntry entries[8]; /* - */
 } fm_Traffic;
 
 /* 400 bytes, align 8; iceoryx2 type name "formation.v3.VehicleState". */

@@ -47,7 +47,7 @@ fn the_python_ctypes_structures_match_the_schema_field_by_field() {
          (regenerate: formation schema --json | python3 clients/generate.py):\n{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    assert!(String::from_utf8_lossy(&o.stdout).contains("15 types"));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("17 types"));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -22,7 +22,7 @@ class Traffic(ctypes.Structure):
         ("step", ctypes.c_uint64),  # -
         ("count", ctypes.c_uint32),  # -
         ("_pad", ctypes.c_uint32),  # -
-        ("entries", [TrafficEntry; MAX_TRAFFIC]),  # -
+        ("entries", (TrafficEntry * 8)),  # -
     ]
 
 

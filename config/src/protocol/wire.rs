@@ -78,7 +78,7 @@ crate::wire_fields!(Traffic {
     step: u64 => "-",
     count: u32 => "-",
     _pad: u32 => "-",
-    entries: [TrafficEntry; MAX_TRAFFIC] => "-",
+    entries: [TrafficEntry; 8] => "-",
 });
 
 impl TrafficEntry {
