@@ -13,7 +13,7 @@ use crate::rbfnn::{uniform, Rbfnn};
 use crate::startup::{Blend, BlendGains};
 use formation_config::protocol::wire::{
     ControlCommand, ControllerTelemetry, DelayInjection, NeighbourState, ReferenceFrame,
-    VehicleState,
+    VehicleState, MAX_TRAFFIC,
 };
 use formation_config::scenario::events::{Change, Event, Timeline};
 use formation_config::scenario::{DelaySpec, PositionGains, Scenario};
@@ -49,9 +49,11 @@ pub struct Agent {
     /// Per neighbour (in `p.neighbours` order): the step the plant took it down from after its
     /// process was lost ([`Agent::taken_down`]), if it was.
     lost_from: Vec<Option<u64>>,
-    /// Every agent's slot offset Delta_j0 of the newest reference frame: how far apart the
-    /// formation itself puts two quadrotors, which the separation layer does not fight (D25).
-    slots: Vec<[f64; 3]>,
+    /// How far apart the newest reference frame puts this agent's slot and the slot of each
+    /// quadrotor of the last traffic report (agent index, m; `u32::MAX`: none): the distance
+    /// the separation layer does not fight (D25). Read from each frame for the quadrotors the
+    /// last report named, so that a step costs the report's length, not N.
+    slot_distances: [(u32, f64); MAX_TRAFFIC],
 }
 
 /// Whether the leader-relative RBFNN drive (D23) acts: the agent's own start-up generator (D19)
@@ -134,7 +136,7 @@ impl Agent {
             startup_set: false,
             rearmed: vec![0; n_nb + 1],
             lost_from: vec![None; n_nb],
-            slots: vec![[0.0; 3]; p.n_agents],
+            slot_distances: [(u32::MAX, f64::INFINITY); MAX_TRAFFIC],
             p,
         }
     }
@@ -244,8 +246,16 @@ impl Agent {
             },
         );
         let me = self.p.id;
-        let n = self.slots.len().min(r.n_agents as usize);
-        self.slots[..n].copy_from_slice(&r.offset[..n]);
+        let n = r.n_agents as usize;
+        for (j, d) in self.slot_distances.iter_mut() {
+            let k = *j as usize;
+            *d = if k < n && me < n {
+                let (a, b) = (r.offset[me], r.offset[k]);
+                ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+            } else {
+                f64::INFINITY
+            };
+        }
         self.offsets[0].push(r.step, [r.offset[me], r.offset_vel[me], r.offset_acc[me]]);
         for (idx, (j, _)) in self.p.neighbours.iter().enumerate() {
             self.offsets[idx + 1].push(r.step, [r.offset[*j], r.offset_vel[*j], r.offset_acc[*j]]);
@@ -682,7 +692,16 @@ impl Agent {
         } else {
             None
         };
-        let sep = crate::separation::filter(&self.p.separation, own, accel, &self.slots, u_l);
+        let sep =
+            crate::separation::filter(&self.p.separation, own, accel, &self.slot_distances, u_l);
+        // The next frame measures the slots of this report's quadrotors.
+        let used = own.traffic.used();
+        for (l, slot) in self.slot_distances.iter_mut().enumerate() {
+            let id = used.get(l).map_or(u32::MAX, |e| e.agent);
+            if slot.0 != id {
+                *slot = (id, f64::INFINITY);
+            }
+        }
         // The layer's U_iS goes through D5's limits again only when it changed U_iP, so that
         // a step it does not act in is bit-identical with the layer off.
         let u_p = if sep.acted {

@@ -148,10 +148,6 @@ struct Constraint {
     side: [f64; 3],
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
@@ -251,16 +247,16 @@ pub fn pair_distances(sp: &SeparationParams, desired: f64) -> (f64, f64) {
 
 /// The layer for agent i at its current state `own` (step, position, velocity, attitude and the
 /// traffic it reports), with its measured acceleration `accel` (m/s², from its own recent
-/// velocities; `None`: not yet known, the thrust's is used), and the formation's slot offsets
-/// of every agent at the step `slots` (its own at `own.agent`), on the position loop's limited
-/// virtual control `u`. The vehicle's acceleration is U_iS plus what the thrust does not make
+/// velocities; `None`: not yet known, the thrust's is used), and how far apart the formation
+/// puts its slot and those of some quadrotors, `slots` ((agent index, m); a quadrotor not in it
+/// gets the defaults D_L, D_A), on the position loop's limited virtual control `u`. The vehicle's acceleration is U_iS plus what the thrust does not make
 /// (the lumped uncertainty and disturbance, F~ = accel - thrust acceleration): the half-spaces
 /// bound U_iS + F~.
 pub fn filter(
     sp: &SeparationParams,
     own: &VehicleState,
     accel: Option<[f64; 3]>,
-    slots: &[[f64; 3]],
+    slots: &[(u32, f64)],
     u: [f64; 3],
 ) -> Filtered {
     let mut cs = [Constraint::default(); MAX_TRAFFIC];
@@ -296,15 +292,14 @@ pub fn filter(
         stopping(share * c_max, alpha_max, sp.braking, sp.jerk, sp.lag).0 / share
     };
     let gate = sp.activation_m + eps + stop(0.5).max(stop(1.0));
-    let me = slots.get(own.agent as usize);
     for (l, e) in used.iter().enumerate() {
         if d2[l] >= gate * gate {
             continue;
         }
-        let desired = match (me, slots.get(e.agent as usize)) {
-            (Some(a), Some(b)) => dot(sub(*a, *b), sub(*a, *b)).sqrt(),
-            _ => f64::INFINITY,
-        };
+        let desired = slots
+            .iter()
+            .find(|s| s.0 == e.agent)
+            .map_or(f64::INFINITY, |s| s.1);
         let distances = pair_distances(sp, desired);
         if let (_, Some(c)) = pair(sp, age, (own.position, own.velocity, a), distances, e) {
             cs[m] = c;
@@ -547,7 +542,7 @@ mod tests {
         let (keep, act) = pair_distances(&sp, 0.7);
         assert!((keep - 0.55).abs() < 1e-12 && (act - 0.55).abs() < 1e-12);
         assert_eq!(pair_distances(&sp, 0.2), (sp.safety, sp.safety));
-        let slots = [[0.0; 3], [0.7, 0.0, 0.0]];
+        let slots = [(1, 0.7)];
         let mut s = own(0, [0.0; 3], [0.0; 3], &[at(0, [0.7, 0.0, 0.0], [0.0; 3])]);
         s.agent = 0;
         let mut e = s.traffic.entries[0];
@@ -556,7 +551,7 @@ mod tests {
         let u = [1.0, 0.0, 0.0];
         let held = filter(&sp, &s, None, &slots, u);
         assert!(!held.acted, "{held:?}");
-        let far_slots = [[0.0; 3], [3.0, 0.0, 0.0]];
+        let far_slots = [(1, 3.0)];
         let pushed = filter(&sp, &s, None, &far_slots, u);
         assert!(pushed.acted && pushed.u[0] < u[0], "{pushed:?}");
     }

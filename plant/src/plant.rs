@@ -128,6 +128,7 @@ impl Plant {
             &beacons,
             sep.sensing_range_m,
             (sep.broadcast_delay_s / s.simulation.dt_s).round() as u64,
+            (sep.broadcast_period_s / s.simulation.dt_s).round() as u64,
         );
         Plant {
             dt: s.simulation.dt_s,

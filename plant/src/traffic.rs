@@ -2,7 +2,8 @@
 //! separation layer of each controller knows of the others. Each quadrotor broadcasts its
 //! position, velocity and whether its controller flies it; the report of step k that reaches
 //! quadrotor i holds the nearest [`MAX_TRAFFIC`] others within the sensing range R_S as they were
-//! at step k - d_B (d_B = tau_B / dt, the broadcast delay; step 0's before that).
+//! at the last broadcast step at or before k - d_B (d_B = tau_B / dt, the broadcast delay; every
+//! quadrotor broadcasts every P steps, P = `broadcast_period_s` / dt; step 0's before that).
 //!
 //! The nearest are found with a uniform grid of cells R_S wide, hashed into a table of 2N
 //! buckets and filled by a counting sort: the cost of a step grows with N and with the pairs
@@ -31,7 +32,11 @@ pub struct Broadcast {
     n: usize,
     range: f64,
     delay_steps: u64,
-    /// Ring of `delay_steps + 1` snapshots of N beacons, by step.
+    /// Steps between two broadcasts P (the beacons of steps 0, P, 2P, ... go out).
+    period_steps: u64,
+    /// The measurement step of the current reports.
+    measured: u64,
+    /// Ring of `delay_steps + period_steps` snapshots of N beacons, by step.
     ring: Vec<Beacon>,
     /// The reports of the current step, one per quadrotor.
     reports: Vec<Traffic>,
@@ -66,10 +71,16 @@ fn bucket(c: [i64; 3], mask: usize) -> usize {
 
 impl Broadcast {
     /// The broadcast of `initial` beacons (step 0) with sensing range `range_m` (m) and a delay
-    /// of `delay_steps` steps.
-    pub fn new(initial: &[Beacon], range_m: f64, delay_steps: u64) -> Broadcast {
+    /// of `delay_steps` steps, broadcast every `period_steps` steps (at least 1).
+    pub fn new(
+        initial: &[Beacon],
+        range_m: f64,
+        delay_steps: u64,
+        period_steps: u64,
+    ) -> Broadcast {
         let n = initial.len();
-        let depth = delay_steps as usize + 1;
+        let period_steps = period_steps.max(1);
+        let depth = (delay_steps + period_steps) as usize;
         let mut ring = vec![Beacon::default(); n * depth];
         for slot in 0..depth {
             ring[slot * n..(slot + 1) * n].copy_from_slice(initial);
@@ -79,6 +90,8 @@ impl Broadcast {
             n,
             range: range_m,
             delay_steps,
+            period_steps,
+            measured: 0,
             ring,
             reports: vec![Traffic::default(); n],
             bucket_of: vec![0; n],
@@ -96,7 +109,7 @@ impl Broadcast {
 
     /// Records the beacons of step `step` (the step just reached) and builds that step's reports.
     pub fn record(&mut self, step: u64, beacons: impl Iterator<Item = Beacon>) {
-        let depth = self.delay_steps + 1;
+        let depth = self.depth();
         let slot = (step % depth) as usize * self.n;
         for (i, b) in beacons.enumerate().take(self.n) {
             self.ring[slot + i] = b;
@@ -106,11 +119,21 @@ impl Broadcast {
 
     /// The snapshot the reports of step `k` are built from: step k - d_B (0 before it).
     fn measured_step(&self, k: u64) -> u64 {
-        k.saturating_sub(self.delay_steps)
+        let m = k.saturating_sub(self.delay_steps);
+        m - m % self.period_steps
+    }
+
+    /// Snapshots the ring holds.
+    fn depth(&self) -> u64 {
+        self.delay_steps + self.period_steps
     }
 
     fn build_reports(&mut self, k: u64) {
         let m = self.measured_step(k);
+        if m == self.measured && k > 0 {
+            return; // the same broadcast as the last step's
+        }
+        self.measured = m;
         if self.n <= BRUTE_FORCE_UP_TO {
             self.pairwise(m);
         } else {
@@ -120,7 +143,7 @@ impl Broadcast {
 
     /// The reports from the snapshot of step `m`, pair by pair.
     fn pairwise(&mut self, m: u64) {
-        let base = (m % (self.delay_steps + 1)) as usize * self.n;
+        let base = (m % self.depth()) as usize * self.n;
         {
             let snap = &self.ring[base..base + self.n];
             let r2 = self.range * self.range;
@@ -140,7 +163,7 @@ impl Broadcast {
 
     /// The reports from the snapshot of step `m`, through the grid.
     fn grid(&mut self, m: u64) {
-        let base = (m % (self.delay_steps + 1)) as usize * self.n;
+        let base = (m % self.depth()) as usize * self.n;
         let snap = &self.ring[base..base + self.n];
         let mask = self.starts.len() - 2;
         // Counting sort of the quadrotors by bucket.
@@ -277,7 +300,7 @@ mod tests {
                 at(r * a.cos(), r * a.sin())
             })
             .collect();
-        let b = Broadcast::new(&beacons, 1.0, 0);
+        let b = Broadcast::new(&beacons, 1.0, 0, 1);
         // The pairwise path gives the same reports.
         let mut pairs = b.clone();
         pairs.pairwise(0);
@@ -306,7 +329,7 @@ mod tests {
     /// with their step, and says who is flown by its failsafe.
     #[test]
     fn reports_are_the_broadcast_delay_old_and_flag_a_quadrotor_down() {
-        let mut b = Broadcast::new(&[at(0.0, 0.0), at(1.0, 0.0)], 3.0, 2);
+        let mut b = Broadcast::new(&[at(0.0, 0.0), at(1.0, 0.0)], 3.0, 2, 1);
         assert_eq!(b.report(0).step, 0);
         for k in 1..=4u64 {
             let x = 1.0 + k as f64;
@@ -333,5 +356,19 @@ mod tests {
         b.record(6, [at(0.0, 0.0), at(4.0, 0.0)].into_iter());
         b.record(7, [at(0.0, 0.0), at(4.0, 0.0)].into_iter());
         assert_eq!(b.report(0).count, 0);
+    }
+
+    /// Broadcast every 3 steps with a delay of 2: the report of step k holds the beacons of the
+    /// last broadcast step at or before k - 2, and is rebuilt only when that changes.
+    #[test]
+    fn reports_hold_the_last_broadcast_between_two() {
+        let mut b = Broadcast::new(&[at(0.0, 0.0), at(1.0, 0.0)], 5.0, 2, 3);
+        for k in 1..=12u64 {
+            b.record(k, [at(0.0, 0.0), at(1.0 + k as f64 * 0.1, 0.0)].into_iter());
+            let m = k.saturating_sub(2) / 3 * 3;
+            assert_eq!(b.report(0).step, m, "step {k}");
+            let x = b.report(0).used()[0].p()[0];
+            assert!((x - (1.0 + m as f64 * 0.1)).abs() < 1e-6, "step {k}: {x}");
+        }
     }
 }

@@ -130,3 +130,28 @@ fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit
     assert_eq!(off["separation"]["verdict"], "fail");
     assert!(stderr.contains("separation failed"), "{stderr}");
 }
+
+/// A separation parameter outside its range is refused before anything runs, naming the field and
+/// the deviation it breaks (exit 2).
+#[test]
+fn a_bad_separation_parameter_exits_2_naming_the_field() {
+    let (code, _, _dir, stderr) = {
+        let out = temp_dir("sep-bad");
+        let o = Command::new(bin("formation"))
+            .args(["sim", "--set", "controller.separation.broadcast_delay_s=0.2", "--out"])
+            .arg(&out)
+            .output()
+            .expect("formation runs");
+        (
+            o.status.code(),
+            (),
+            out,
+            String::from_utf8_lossy(&o.stderr).to_string(),
+        )
+    };
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains("controller.separation.broadcast_delay_s") && stderr.contains("D25"),
+        "{stderr}"
+    );
+}

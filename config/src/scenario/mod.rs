@@ -382,6 +382,10 @@ pub struct SeparationSpec {
     /// tau_B: age of the broadcast reports, s (whole steps): the report of step k carries the
     /// other quadrotors' states of step k - tau_B / dt. Ours: 0.05, the delay bound tau_M.
     pub broadcast_delay_s: f64,
+    /// T_B: period of the position broadcast, s (whole steps): between two broadcasts the report
+    /// holds the last one, up to tau_B + T_B old. Ours: 0.01 (100 Hz; the plant finds the
+    /// nearest quadrotors once per broadcast).
+    pub broadcast_period_s: f64,
 }
 
 impl Default for SeparationSpec {
@@ -397,6 +401,7 @@ impl Default for SeparationSpec {
             sidestep_ratio: 0.5,
             sensing_range_m: 6.0,
             broadcast_delay_s: 0.05,
+            broadcast_period_s: 0.01,
         }
     }
 }

@@ -96,6 +96,12 @@ pub const EQ46_49: &str =
     "eq. (46)-(49): adaptation rates and leakages are non-negative design constants";
 /// The auxiliary systems (35), (50).
 pub const EQ35_50: &str = "eq. (35), (50): K_iE > 1 and gamma_iE > 0";
+/// The separation layer and its position broadcast (docs/deviations.md D25).
+pub const SEPARATION: &str =
+    "D25: the separation layer's barrier needs a positive braking, jerk, rate and sensing range, non-negative margins and lag, and a broadcast delay within the delay bound tau_M";
+/// The shaping of the transitions (docs/deviations.md D26).
+pub const SHAPING: &str =
+    "D26: a transition is capped to a positive acceleration and jerk";
 /// The mission of Section 4.
 pub const MISSION: &str =
     "Section 4: the leader's convergence terms (1 - e^{-r t}) converge only for r > 0; sharpness and radii are >= 0";
@@ -158,6 +164,7 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
         check_agent(s, i, a, &mut c);
     }
     check_runtime(s, &mut c);
+    check_separation(s, &mut c);
     for (k, e) in s.events.iter().enumerate() {
         check_event(s, &format!("events[{k}]"), e, &mut c);
     }
@@ -166,6 +173,42 @@ pub fn validate(s: &Scenario) -> Result<(), ValidationErrors> {
     } else {
         Err(ValidationErrors(c.0))
     }
+}
+
+/// D25 and D26: the separation layer's and the shaping's parameters.
+fn check_separation(s: &Scenario, c: &mut Collector) {
+    let sp = &s.controller.separation;
+    let f = |name: &str| format!("controller.separation.{name}");
+    c.non_negative(&f("margin_m"), sp.margin_m, SEPARATION);
+    c.non_negative(&f("activation_m"), sp.activation_m, SEPARATION);
+    c.positive(&f("braking_accel_m_s2"), sp.braking_accel_m_s2, SEPARATION);
+    c.positive(&f("jerk_m_s3"), sp.jerk_m_s3, SEPARATION);
+    c.non_negative(&f("response_time_s"), sp.response_time_s, SEPARATION);
+    c.positive(&f("barrier_rate_1_s"), sp.barrier_rate_1_s, SEPARATION);
+    c.non_negative(&f("sidestep_ratio"), sp.sidestep_ratio, SEPARATION);
+    c.positive(&f("sensing_range_m"), sp.sensing_range_m, SEPARATION);
+    let tau_m = s.simulation.max_delay_s;
+    if !(sp.broadcast_delay_s >= 0.0 && sp.broadcast_delay_s <= tau_m) {
+        c.push(
+            f("broadcast_delay_s"),
+            SEPARATION,
+            format!("must be in [0, tau_M = {tau_m}] s, got {}", sp.broadcast_delay_s),
+        );
+    }
+    let dt = s.simulation.dt_s;
+    if !(sp.broadcast_period_s >= dt && sp.broadcast_period_s <= 1.0) {
+        c.push(
+            f("broadcast_period_s"),
+            SEPARATION,
+            format!(
+                "must be in [dt = {dt}, 1] s, got {}",
+                sp.broadcast_period_s
+            ),
+        );
+    }
+    let sh = &s.mission.shaping;
+    c.positive("mission.shaping.accel_m_s2", sh.accel_m_s2, SHAPING);
+    c.positive("mission.shaping.jerk_m_s3", sh.jerk_m_s3, SHAPING);
 }
 
 /// D16: the probe must fit the torque range and the identifier's one-period buffer.
