@@ -113,7 +113,7 @@ fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit
     let sets = swapped(&[(1, 5), (2, 4)]);
     let mut args: Vec<&str> = vec!["--set", "simulation.duration_s=12"];
     args.extend(sets.iter().map(String::as_str));
-    let (code, on, dir_on, stderr) = sim(&args, "sep-swap-on");
+    let (code, on, _dir_on, stderr) = sim(&args, "sep-swap-on");
     assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(steps_below(&on), 0);
     let active: f64 = on["agents"]
@@ -124,7 +124,7 @@ fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit
         .sum();
     assert!(active > 0.0, "the layer acted");
     args.extend(["--set", "controller.separation.enabled=false"]);
-    let (code, off, dir_off, stderr) = sim(&args, "sep-swap-off");
+    let (code, off, _dir_off, stderr) = sim(&args, "sep-swap-off");
     assert_eq!(code, Some(3), "{stderr}");
     assert!(steps_below(&off) > 0);
     assert_eq!(off["separation"]["verdict"], "fail");
