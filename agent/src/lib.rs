@@ -21,8 +21,8 @@ pub mod fault_id;
 pub mod params;
 pub mod position;
 pub mod rbfnn;
-pub mod separation;
 pub mod restart;
+pub mod separation;
 pub mod startup;
 
 /// The role process around the library: its ports, its event loop (lockstep and realtime).

@@ -288,9 +288,8 @@ pub fn filter(
     };
     let c_max = dot(own.velocity, own.velocity).sqrt() + fastest.sqrt() + sp.other_accel * age;
     let alpha_max = dot(a, a).sqrt();
-    let stop = |share: f64| {
-        stopping(share * c_max, alpha_max, sp.braking, sp.jerk, sp.lag).0 / share
-    };
+    let stop =
+        |share: f64| stopping(share * c_max, alpha_max, sp.braking, sp.jerk, sp.lag).0 / share;
     let gate = sp.activation_m + eps + stop(0.5).max(stop(1.0));
     for (l, e) in used.iter().enumerate() {
         if d2[l] >= gate * gate {
@@ -418,7 +417,12 @@ mod tests {
     fn far_traffic_leaves_the_virtual_control_untouched_bit_for_bit() {
         let sp = params();
         let u = [0.123_456_789, -2.5, 0.3];
-        let s = own(100, [0.0; 3], [1.0, 0.0, 0.0], &[at(100, [5.0, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
+        let s = own(
+            100,
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            &[at(100, [5.0, 0.0, 0.0], [-1.0, 0.0, 0.0])],
+        );
         let f = filter(&sp, &s, None, &[], u);
         assert!(!f.acted);
         assert_eq!(f.u, u);
@@ -432,7 +436,12 @@ mod tests {
     #[test]
     fn two_vehicles_head_on_brake_and_step_aside() {
         let sp = params();
-        let s = own(100, [0.0; 3], [1.0, 0.0, 0.0], &[at(100, [2.0, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
+        let s = own(
+            100,
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            &[at(100, [2.0, 0.0, 0.0], [-1.0, 0.0, 0.0])],
+        );
         let f = filter(&sp, &s, None, &[], [1.0, 0.0, 0.0]);
         assert!(f.acted);
         assert!(f.u[0] < 0.0, "brakes away from the other: {:?}", f.u);
@@ -446,12 +455,28 @@ mod tests {
     fn a_delayed_report_is_carried_forward_and_its_uncertainty_counted() {
         let sp = params();
         let v = [1.0, 0.0, 0.0];
-        let fresh = own(100, [0.0; 3], v, &[at(100, [1.5, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
-        let old = own_at(100, 50, [0.0; 3], v, &[at(50, [1.55, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
+        let fresh = own(
+            100,
+            [0.0; 3],
+            v,
+            &[at(100, [1.5, 0.0, 0.0], [-1.0, 0.0, 0.0])],
+        );
+        let old = own_at(
+            100,
+            50,
+            [0.0; 3],
+            v,
+            &[at(50, [1.55, 0.0, 0.0], [-1.0, 0.0, 0.0])],
+        );
         let a = filter(&sp, &fresh, None, &[], [0.0; 3]);
         let b = filter(&sp, &old, None, &[], [0.0; 3]);
         assert!((b.predicted_m - (1.5 - 0.5 * sp.other_accel * 0.05 * 0.05)).abs() < 1e-6);
-        assert!(b.u[0] < a.u[0], "older data, harder braking: {:?} {:?}", a.u, b.u);
+        assert!(
+            b.u[0] < a.u[0],
+            "older data, harder braking: {:?} {:?}",
+            a.u,
+            b.u
+        );
     }
 
     /// A vehicle already accelerating towards the other needs longer to stop (its acceleration
@@ -462,7 +487,12 @@ mod tests {
         let (slow, _) = stopping(0.5, 0.0, sp.braking, sp.jerk, sp.lag);
         let (fast, _) = stopping(0.5, 2.0, sp.braking, sp.jerk, sp.lag);
         assert!(fast > slow + 0.2, "{slow} {fast}");
-        let mut s = own(0, [0.0; 3], [1.0, 0.0, 0.0], &[at(0, [2.2, 0.0, 0.0], [0.0; 3])]);
+        let mut s = own(
+            0,
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            &[at(0, [2.2, 0.0, 0.0], [0.0; 3])],
+        );
         let level = filter(&sp, &s, None, &[], [0.0; 3]);
         // Pitched forward 0.2 rad: accelerating along +x, towards the other.
         s.attitude = [0.0, 0.2, 0.0];
@@ -507,7 +537,10 @@ mod tests {
         e.flags = TRAFFIC_UNCOOPERATIVE;
         let down = filter(&sp, &own(100, [0.0; 3], v, &[e]), None, &[], [0.0; 3]);
         assert!(up.acted && down.acted);
-        assert!(down.u[0] < up.u[0], "harder braking alone: {down:?} vs {up:?}");
+        assert!(
+            down.u[0] < up.u[0],
+            "harder braking alone: {down:?} vs {up:?}"
+        );
     }
 
     /// Three pairs at once: the result meets every half-space and is the closest such point
@@ -529,7 +562,11 @@ mod tests {
         let f = filter(&sp, &s, None, &[], [0.0, 2.0, 0.5]);
         assert!(f.acted);
         assert!(f.u[1] < 2.0, "held back from the one ahead on y: {:?}", f.u);
-        assert!(f.u[0].abs() < 1e-9 && (f.u[2] - 0.5).abs() < 1e-12, "{:?}", f.u);
+        assert!(
+            f.u[0].abs() < 1e-9 && (f.u[2] - 0.5).abs() < 1e-12,
+            "{:?}",
+            f.u
+        );
     }
 
     /// A formation whose slots are 0.7 m apart: the pair keeps 0.55 m (the slots less the
@@ -560,7 +597,12 @@ mod tests {
     fn the_layer_switched_off_predicts_but_does_not_act() {
         let mut sp = params();
         sp.enabled = false;
-        let s = own(0, [0.0; 3], [1.0, 0.0, 0.0], &[at(0, [0.6, 0.0, 0.0], [-1.0, 0.0, 0.0])]);
+        let s = own(
+            0,
+            [0.0; 3],
+            [1.0, 0.0, 0.0],
+            &[at(0, [0.6, 0.0, 0.0], [-1.0, 0.0, 0.0])],
+        );
         let f = filter(&sp, &s, None, &[], [1.0, 0.0, 0.0]);
         assert!(!f.acted);
         assert_eq!(f.u, [1.0, 0.0, 0.0]);

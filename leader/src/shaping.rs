@@ -96,7 +96,10 @@ mod tests {
             pa = pa.max((2.0 * k * k * q / (PI * den * den)).abs());
             pj = pj.max((2.0 * k.powi(3) * (3.0 * q * q - 1.0) / (PI * den.powi(3))).abs());
         }
-        assert!((a - pa).abs() < 1e-6 * pa && (j - pj).abs() < 1e-6 * pj, "{a} {pa} {j} {pj}");
+        assert!(
+            (a - pa).abs() < 1e-6 * pa && (j - pj).abs() < 1e-6 * pj,
+            "{a} {pa} {j} {pj}"
+        );
         // The figures: sharpness 5 on a 1 m change asks 5.2 m/s² and 80 m/s³.
         assert!((a - 5.17).abs() < 0.01 && (j - 79.6).abs() < 0.1);
         // Spin: theta'' peak 2 w k / pi, theta''' peak 0.6591 w k².
@@ -119,6 +122,9 @@ mod tests {
         assert_eq!(cap(1.0, b, 2.0, 2.5), 1.0);
         let k = cap(5.0, b, 2.0, 2.5);
         let (a, j) = b(k);
-        assert!(k < 5.0 && a <= 2.0 && j <= 2.5 && j > 2.5 * 0.999_999, "{k} {a} {j}");
+        assert!(
+            k < 5.0 && a <= 2.0 && j <= 2.5 && j > 2.5 * 0.999_999,
+            "{k} {a} {j}"
+        );
     }
 }

@@ -11,9 +11,7 @@
 //! per step. Ties in distance go to the lower agent index, so the report does not depend on the
 //! order the grid is walked in.
 
-use formation_config::protocol::wire::{
-    Traffic, TrafficEntry, MAX_TRAFFIC, TRAFFIC_UNCOOPERATIVE,
-};
+use formation_config::protocol::wire::{Traffic, TrafficEntry, MAX_TRAFFIC, TRAFFIC_UNCOOPERATIVE};
 
 /// One quadrotor's broadcast at one step.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -72,12 +70,7 @@ fn bucket(c: [i64; 3], mask: usize) -> usize {
 impl Broadcast {
     /// The broadcast of `initial` beacons (step 0) with sensing range `range_m` (m) and a delay
     /// of `delay_steps` steps, broadcast every `period_steps` steps (at least 1).
-    pub fn new(
-        initial: &[Beacon],
-        range_m: f64,
-        delay_steps: u64,
-        period_steps: u64,
-    ) -> Broadcast {
+    pub fn new(initial: &[Beacon], range_m: f64, delay_steps: u64, period_steps: u64) -> Broadcast {
         let n = initial.len();
         let period_steps = period_steps.max(1);
         let depth = (delay_steps + period_steps) as usize;
@@ -240,14 +233,7 @@ fn clear(t: &mut Traffic) {
 
 /// Inserts quadrotor `j` at squared distance `d2` into the report `t` kept nearest first (ties:
 /// lower index first), dropping the farthest beyond [`MAX_TRAFFIC`].
-fn insert(
-    t: &mut Traffic,
-    dist: &mut [f64; MAX_TRAFFIC],
-    d2: f64,
-    m: u64,
-    j: usize,
-    b: &Beacon,
-) {
+fn insert(t: &mut Traffic, dist: &mut [f64; MAX_TRAFFIC], d2: f64, m: u64, j: usize, b: &Beacon) {
     let used = t.count as usize;
     let before = |l: usize| d2 < dist[l] || (d2 == dist[l] && (j as u32) < t.entries[l].agent);
     let mut at = used;
@@ -320,8 +306,17 @@ mod tests {
                 .collect();
             want.sort_by(|a, b| a.partial_cmp(b).unwrap());
             want.truncate(MAX_TRAFFIC);
-            let got: Vec<usize> = b.report(i).used().iter().map(|e| e.agent as usize).collect();
-            assert_eq!(got, want.iter().map(|w| w.1).collect::<Vec<_>>(), "agent {i}");
+            let got: Vec<usize> = b
+                .report(i)
+                .used()
+                .iter()
+                .map(|e| e.agent as usize)
+                .collect();
+            assert_eq!(
+                got,
+                want.iter().map(|w| w.1).collect::<Vec<_>>(),
+                "agent {i}"
+            );
         }
     }
 

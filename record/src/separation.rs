@@ -179,9 +179,7 @@ impl Separation {
         }
         // Per quadrotor only where it can lower a minimum: the step's closest distance is below
         // some quadrotor's minimum so far (the run's closest pair is always a candidate).
-        if self.nearest.len() == self.scratch.len()
-            && self.nearest.iter().any(|&m| d < m)
-        {
+        if self.nearest.len() == self.scratch.len() && self.nearest.iter().any(|&m| d < m) {
             let now = &mut self.now;
             nearest_each(&self.scratch, &mut self.order, now);
             for (m, n) in self.nearest.iter_mut().zip(now.iter()) {

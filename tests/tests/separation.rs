@@ -52,9 +52,17 @@ fn swapped(pairs: &[(usize, usize)]) -> Vec<String> {
     let mut sets = Vec::new();
     for &(a, b) in pairs {
         sets.push("--set".to_string());
-        sets.push(format!("agents[{}].initial_position_m={}", a - 1, starts[b - 1]));
+        sets.push(format!(
+            "agents[{}].initial_position_m={}",
+            a - 1,
+            starts[b - 1]
+        ));
         sets.push("--set".to_string());
-        sets.push(format!("agents[{}].initial_position_m={}", b - 1, starts[a - 1]));
+        sets.push(format!(
+            "agents[{}].initial_position_m={}",
+            b - 1,
+            starts[a - 1]
+        ));
     }
     sets
 }
@@ -138,7 +146,12 @@ fn a_bad_separation_parameter_exits_2_naming_the_field() {
     let (code, _, _dir, stderr) = {
         let out = temp_dir("sep-bad");
         let o = Command::new(bin("formation"))
-            .args(["sim", "--set", "controller.separation.broadcast_delay_s=0.2", "--out"])
+            .args([
+                "sim",
+                "--set",
+                "controller.separation.broadcast_delay_s=0.2",
+                "--out",
+            ])
             .arg(&out)
             .output()
             .expect("formation runs");

@@ -100,8 +100,7 @@ pub const EQ35_50: &str = "eq. (35), (50): K_iE > 1 and gamma_iE > 0";
 pub const SEPARATION: &str =
     "D25: the separation layer's barrier needs a positive braking, jerk, rate and sensing range, non-negative margins and lag, and a broadcast delay within the delay bound tau_M";
 /// The shaping of the transitions (docs/deviations.md D26).
-pub const SHAPING: &str =
-    "D26: a transition is capped to a positive acceleration and jerk";
+pub const SHAPING: &str = "D26: a transition is capped to a positive acceleration and jerk";
 /// The mission of Section 4.
 pub const MISSION: &str =
     "Section 4: the leader's convergence terms (1 - e^{-r t}) converge only for r > 0; sharpness and radii are >= 0";
@@ -192,7 +191,10 @@ fn check_separation(s: &Scenario, c: &mut Collector) {
         c.push(
             f("broadcast_delay_s"),
             SEPARATION,
-            format!("must be in [0, tau_M = {tau_m}] s, got {}", sp.broadcast_delay_s),
+            format!(
+                "must be in [0, tau_M = {tau_m}] s, got {}",
+                sp.broadcast_delay_s
+            ),
         );
     }
     let dt = s.simulation.dt_s;
@@ -200,10 +202,7 @@ fn check_separation(s: &Scenario, c: &mut Collector) {
         c.push(
             f("broadcast_period_s"),
             SEPARATION,
-            format!(
-                "must be in [dt = {dt}, 1] s, got {}",
-                sp.broadcast_period_s
-            ),
+            format!("must be in [dt = {dt}, 1] s, got {}", sp.broadcast_period_s),
         );
     }
     let sh = &s.mission.shaping;
