@@ -736,9 +736,7 @@ impl Agent {
     /// [`crate::separation::ACCEL_WINDOW_S`] from its own states (`None` before it has any).
     fn acceleration(&self, own: &VehicleState) -> Option<[f64; 3]> {
         let k = own.step;
-        let window = (crate::separation::ACCEL_WINDOW_S / self.p.dt)
-            .round()
-            .max(1.0) as u64;
+        let window = self.p.separation.accel_window_steps;
         let s = self
             .own
             .step_at_or_before(k.saturating_sub(window))

@@ -14,8 +14,6 @@ pub struct AgentParams {
     pub id: usize,
     /// Controller variant.
     pub variant: Variant,
-    /// Number of agents N.
-    pub n_agents: usize,
     /// Neighbours j with weights a_ij (0-based, ascending).
     pub neighbours: Vec<(usize, f64)>,
     /// Leader weight b_i.
@@ -73,7 +71,6 @@ impl AgentParams {
         AgentParams {
             id,
             variant,
-            n_agents: s.n_agents(),
             neighbours: topo.neighbours[id].clone(),
             leader_weight: topo.leader_weights[id],
             leader_data: s.graph.leader_broadcast.reaches(topo.leader_weights[id]),

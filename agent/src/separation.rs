@@ -93,6 +93,8 @@ pub struct SeparationParams {
     pub other_accel: f64,
     /// Step dt, s.
     pub dt: f64,
+    /// Steps over which the agent measures its own acceleration ([`ACCEL_WINDOW_S`], at least 1).
+    pub accel_window_steps: u64,
     /// g, m/s².
     pub gravity: f64,
 }
@@ -123,6 +125,7 @@ impl SeparationParams {
                 .max(pg.max_up_accel_m_s2)
                 .max(pg.max_down_accel_m_s2),
             dt,
+            accel_window_steps: (ACCEL_WINDOW_S / dt).round().max(1.0) as u64,
             gravity,
         }
     }
@@ -178,26 +181,25 @@ pub fn stopping(c: f64, alpha: f64, braking: f64, jerk: f64, lag: f64) -> (f64, 
 }
 
 /// The pair's half-space for agent i at `p`, `v` with acceleration `a` against one report
-/// `age` s old, or `None` when the pair is not within the activation distance; and the predicted
-/// separation d^.
+/// `age` s old, or `None` when the pair is not within the activation distance.
 fn pair(
     sp: &SeparationParams,
     age: f64,
     (p, v, a): ([f64; 3], [f64; 3], [f64; 3]),
     (keep, activation): (f64, f64),
     e: &TrafficEntry,
-) -> (f64, Option<Constraint>) {
+) -> Option<Constraint> {
     let (pe, ve) = (e.p(), e.v());
     let pj: [f64; 3] = std::array::from_fn(|d| pe[d] + ve[d] * age);
     let eps = 0.5 * sp.other_accel * age * age;
     let nu = sp.other_accel * age;
     let r: [f64; 3] = std::array::from_fn(|d| p[d] - pj[d]);
     let dist = dot(r, r).sqrt();
-    let predicted = dist - eps;
     if dist <= 0.0 {
         // Coincident centres: no direction to push along.
-        return (predicted, None);
+        return None;
     }
+    let predicted = dist - eps;
     let n: [f64; 3] = std::array::from_fn(|d| r[d] / dist);
     let w: [f64; 3] = std::array::from_fn(|d| v[d] - ve[d]);
     let closing = -dot(n, w) + nu;
@@ -209,7 +211,7 @@ fn pair(
     let alpha = -dot(n, a);
     let (stop, slope) = stopping(share * closing, alpha, sp.braking, sp.jerk, sp.lag);
     if predicted - stop / share >= activation {
-        return (predicted, None);
+        return None;
     }
     let h = share * (predicted - keep) - stop;
     let along = dot(n, w);
@@ -223,7 +225,7 @@ fn pair(
     } else {
         [0.0; 3]
     };
-    (predicted, Some(Constraint { n, b, side }))
+    Some(Constraint { n, b, side })
 }
 
 /// The acceleration the thrust gives a vehicle at attitude `att` that holds the vertical `u_z`
@@ -249,9 +251,9 @@ pub fn pair_distances(sp: &SeparationParams, desired: f64) -> (f64, f64) {
 /// traffic it reports), with its measured acceleration `accel` (m/s², from its own recent
 /// velocities; `None`: not yet known, the thrust's is used), and how far apart the formation
 /// puts its slot and those of some quadrotors, `slots` ((agent index, m); a quadrotor not in it
-/// gets the defaults D_L, D_A), on the position loop's limited virtual control `u`. The vehicle's acceleration is U_iS plus what the thrust does not make
-/// (the lumped uncertainty and disturbance, F~ = accel - thrust acceleration): the half-spaces
-/// bound U_iS + F~.
+/// gets the defaults D_L, D_A), on the position loop's limited virtual control `u`. The
+/// vehicle's acceleration is U_iS plus what the thrust does not make (the lumped uncertainty and
+/// disturbance, F~ = accel - thrust acceleration): the half-spaces bound U_iS + F~.
 pub fn filter(
     sp: &SeparationParams,
     own: &VehicleState,
@@ -300,7 +302,7 @@ pub fn filter(
             .find(|s| s.0 == e.agent)
             .map_or(f64::INFINITY, |s| s.1);
         let distances = pair_distances(sp, desired);
-        if let (_, Some(c)) = pair(sp, age, (own.position, own.velocity, a), distances, e) {
+        if let Some(c) = pair(sp, age, (own.position, own.velocity, a), distances, e) {
             cs[m] = c;
             m += 1;
         }

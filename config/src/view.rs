@@ -1,6 +1,7 @@
 //! What every view of a run draws alike — the Foxglove scene, the ROS 2 markers and the figures:
 //! the agents' colours, the state of a graph edge at a step and its colour, and an attitude as a
-//! quaternion. Pure functions of the scenario's data.
+//! quaternion; how a controller's separation layer is counted. Pure functions of the scenario's
+//! and the messages' data.
 
 use crate::scenario::events::Timeline;
 use crate::Scenario;
@@ -126,5 +127,40 @@ mod tests {
         assert_eq!(agent_rgb(1), agent_rgb(11));
         assert_eq!(agent_rgb(0), agent_rgb(1));
         assert_ne!(agent_rgb(1), agent_rgb(2));
+    }
+}
+
+/// How long a controller's separation layer acted (D25) and the smallest separation it predicted,
+/// counted alike in `summary.json` (every step of the run) and in live telemetry (every step of
+/// one process).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeparationTally {
+    /// Steps at which the layer changed the virtual control.
+    pub active_steps: u64,
+    /// Smallest predicted separation, m (infinite: none in range yet).
+    pub min_predicted_m: f64,
+}
+
+impl Default for SeparationTally {
+    fn default() -> SeparationTally {
+        SeparationTally {
+            active_steps: 0,
+            min_predicted_m: f64::INFINITY,
+        }
+    }
+}
+
+impl SeparationTally {
+    /// Counts the telemetry of one command.
+    pub fn observe(&mut self, t: &crate::protocol::wire::ControllerTelemetry) {
+        if t.sep_correction != [0.0; 3] {
+            self.active_steps += 1;
+        }
+        self.min_predicted_m = self.min_predicted_m.min(t.sep_predicted_m);
+    }
+
+    /// Time the layer acted, s, for steps of `dt` s.
+    pub fn active_s(&self, dt: f64) -> f64 {
+        self.active_steps as f64 * dt
     }
 }

@@ -62,10 +62,8 @@ pub struct AgentStats {
     pub saturated_steps: u64,
     /// Latest formation error norm (for the CSV).
     pub last_error: f64,
-    /// Steps at which its separation layer changed U_iP (D25).
-    pub separation_active_steps: u64,
-    /// Smallest separation its layer predicted, m (infinite: none in range).
-    pub min_predicted_separation: f64,
+    /// Its separation layer (D25).
+    pub separation: formation_config::view::SeparationTally,
 }
 
 /// All metrics of a run.
@@ -106,8 +104,7 @@ impl Metrics {
             min_rate_margin: f64::INFINITY,
             saturated_steps: 0,
             last_error: 0.0,
-            separation_active_steps: 0,
-            min_predicted_separation: f64::INFINITY,
+            separation: Default::default(),
         };
         Metrics {
             agents: vec![blank; s.n_agents()],
@@ -165,12 +162,7 @@ impl Metrics {
             if in_enclose {
                 a.enclose.add(e);
             }
-            if cmd.telemetry.sep_correction != [0.0; 3] {
-                a.separation_active_steps += 1;
-            }
-            a.min_predicted_separation = a
-                .min_predicted_separation
-                .min(cmd.telemetry.sep_predicted_m);
+            a.separation.observe(&cmd.telemetry);
             let att = norm(st.attitude);
             let c1_bar = norm(cmd.telemetry.attitude_cmd) + self.margin;
             if att > c1_bar {

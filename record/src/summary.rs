@@ -206,8 +206,8 @@ impl Summary {
                         0.0
                     },
                     separation: AgentSeparation {
-                        layer_active_s: a.separation_active_steps as f64 * dt,
-                        min_predicted_m: finite(a.min_predicted_separation),
+                        layer_active_s: a.separation.active_s(dt),
+                        min_predicted_m: finite(a.separation.min_predicted_m),
                         min_actual_m: m.separation.nearest.get(i).copied().and_then(finite),
                     },
                     restarts: 0,

@@ -4,30 +4,21 @@
 //! on and off, crossing starts are flown apart, and a run under the safety distance fails with
 //! exit code 3 and the verdict `fail`.
 
-use formation_tests::{bin, temp_dir, TempDir};
+use formation_tests::{formation, stderr_of, summary, temp_dir, TempDir};
 use serde_json::Value;
-use std::process::Command;
 
 /// Runs `formation sim <args>` into a fresh folder: (exit code, summary.json, the folder (removed
 /// when dropped), stderr).
 fn sim(args: &[&str], tag: &str) -> (Option<i32>, Value, TempDir, String) {
     let out = temp_dir(tag);
-    let o = Command::new(bin("formation"))
-        .arg("sim")
-        .args(args)
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("formation runs");
-    let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+    let path = out.display().to_string();
+    let mut all = vec!["sim"];
+    all.extend_from_slice(args);
+    all.extend(["--out", path.as_str()]);
+    let o = formation(&all);
+    let stderr = stderr_of(&o);
     assert!(!stderr.contains("panicked"), "{stderr}");
-    let text = std::fs::read_to_string(out.join("summary.json")).expect("summary.json written");
-    (
-        o.status.code(),
-        serde_json::from_str(&text).expect("summary.json is JSON"),
-        out,
-        stderr,
-    )
+    (o.status.code(), summary(&out), out, stderr)
 }
 
 fn steps_below(v: &Value) -> u64 {
@@ -143,25 +134,16 @@ fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit
 /// the deviation it breaks (exit 2).
 #[test]
 fn a_bad_separation_parameter_exits_2_naming_the_field() {
-    let (code, _, _dir, stderr) = {
-        let out = temp_dir("sep-bad");
-        let o = Command::new(bin("formation"))
-            .args([
-                "sim",
-                "--set",
-                "controller.separation.broadcast_delay_s=0.2",
-                "--out",
-            ])
-            .arg(&out)
-            .output()
-            .expect("formation runs");
-        (
-            o.status.code(),
-            (),
-            out,
-            String::from_utf8_lossy(&o.stderr).to_string(),
-        )
-    };
+    let out = temp_dir("sep-bad");
+    let path = out.display().to_string();
+    let o = formation(&[
+        "sim",
+        "--set",
+        "controller.separation.broadcast_delay_s=0.2",
+        "--out",
+        path.as_str(),
+    ]);
+    let (code, stderr) = (o.status.code(), stderr_of(&o));
     assert_eq!(code, Some(2), "{stderr}");
     assert!(
         stderr.contains("controller.separation.broadcast_delay_s") && stderr.contains("D25"),

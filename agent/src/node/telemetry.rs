@@ -9,6 +9,7 @@ use formation_config::protocol::wire::{
     AgentTelemetry, ControlCommand, ReferenceFrame, VehicleState, TELEMETRY_EVERY_S,
 };
 use formation_config::scenario::Scenario;
+use formation_config::view::SeparationTally;
 use std::time::Duration;
 
 /// Decides which steps are sampled and builds the samples.
@@ -21,10 +22,8 @@ pub struct Sampler {
     target: [f64; 3],
     /// Period index (`k / every`) of the latest sample taken by [`Sampler::due_once`].
     last_period: Option<u64>,
-    /// Steps at which the separation layer acted, and the smallest separation it predicted,
-    /// since this process started (D25).
-    sep_active_steps: u64,
-    sep_min_predicted_m: f64,
+    /// The separation layer of the commands since this process started (D25).
+    separation: SeparationTally,
     dt: f64,
     /// Samples sent and the wall time spent building and sending them (the overhead).
     sent: u64,
@@ -42,8 +41,7 @@ impl Sampler {
             rate_limit: s.controller.attitude.rate_limit_rad_s,
             target: [0.0; 3],
             last_period: None,
-            sep_active_steps: 0,
-            sep_min_predicted_m: f64::INFINITY,
+            separation: SeparationTally::default(),
             dt: s.simulation.dt_s,
             sent: 0,
             send_time: Duration::ZERO,
@@ -58,11 +56,7 @@ impl Sampler {
 
     /// Accounts the separation layer of a command this process computed.
     pub fn observe_command(&mut self, cmd: &ControlCommand) {
-        let t = &cmd.telemetry;
-        if t.sep_correction != [0.0; 3] {
-            self.sep_active_steps += 1;
-        }
-        self.sep_min_predicted_m = self.sep_min_predicted_m.min(t.sep_predicted_m);
+        self.separation.observe(&cmd.telemetry);
     }
 
     /// True when step `k` is sampled.
@@ -104,8 +98,8 @@ impl Sampler {
             attitude_limit_rad: norm(cmd.telemetry.attitude_cmd) + self.margin,
             rate_limit_rad_s: self.rate_limit,
             loop_latency_us: latency.as_secs_f64() * 1e6,
-            sep_active_s: self.sep_active_steps as f64 * self.dt,
-            sep_min_predicted_m: self.sep_min_predicted_m,
+            sep_active_s: self.separation.active_s(self.dt),
+            sep_min_predicted_m: self.separation.min_predicted_m,
             controller: cmd.telemetry,
         }
     }
