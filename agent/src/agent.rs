@@ -50,7 +50,7 @@ pub struct Agent {
     /// process was lost ([`Agent::taken_down`]), if it was.
     lost_from: Vec<Option<u64>>,
     /// How far apart the newest reference frame puts this agent's slot and the slot of each
-    /// quadrotor of the last traffic report (agent index, m; `u32::MAX`: none): the distance
+    /// quadrotor of the last traffic report (agent index, squared distance m²; `u32::MAX`: none): the distance
     /// the separation layer does not fight (D25). Read from each frame for the quadrotors the
     /// last report named, so that a step costs the report's length, not N.
     slot_distances: [(u32, f64); MAX_TRAFFIC],
@@ -247,11 +247,15 @@ impl Agent {
         );
         let me = self.p.id;
         let n = r.n_agents as usize;
+        // The ids of a report fill the array from the front; u32::MAX ends them.
         for (j, d) in self.slot_distances.iter_mut() {
+            if *j == u32::MAX {
+                break;
+            }
             let k = *j as usize;
             *d = if k < n && me < n {
                 let (a, b) = (r.offset[me], r.offset[k]);
-                ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+                (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
             } else {
                 f64::INFINITY
             };

@@ -32,6 +32,7 @@ pub struct LeaderInfo {
 
 /// Eq. (8)-(9): e_iP and e_iV from the agent's own (delayed) data, its neighbours' with weights a_ij and
 /// the leader's with weight b_i.
+#[inline]
 pub fn consensus_errors(
     me: &Member,
     neighbours: impl Iterator<Item = (f64, Member)>,

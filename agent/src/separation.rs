@@ -49,7 +49,7 @@ use formation_config::kinematics::thrust_axis;
 use formation_config::protocol::wire::{
     TrafficEntry, VehicleState, MAX_TRAFFIC, TRAFFIC_UNCOOPERATIVE,
 };
-use formation_config::scenario::{PositionGains, SeparationSpec};
+use formation_config::scenario::{PositionGains, SeparationMethod, SeparationSpec};
 use nalgebra::Vector3;
 
 /// Sweeps of Hildreth's method over the active constraints: with at most [`MAX_TRAFFIC`] of them
@@ -66,11 +66,18 @@ pub const ACCEL_WINDOW_S: f64 = 0.01;
 /// A line of sight closer to vertical than this (its horizontal part, -) gets no sidestep.
 const SIDESTEP_MIN_HORIZONTAL: f64 = 1e-3;
 
+/// The repulsive term's distance floor, m: it stays finite for coincident reports.
+const REPULSION_MIN_DISTANCE_M: f64 = 1e-3;
+
 /// The layer's parameters for one agent, from the scenario.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SeparationParams {
     /// The layer acts on U_iP (otherwise it only predicts, for the telemetry).
     pub enabled: bool,
+    /// The design: the barrier filter (default), buffered Voronoi cells or a repulsive term.
+    pub method: SeparationMethod,
+    /// k_R: gain of the repulsive term, m³/s².
+    pub repulsive_gain: f64,
     /// D_L: distance the barrier keeps, m (safety distance + margin).
     pub keep_m: f64,
     /// The safety distance, m.
@@ -111,6 +118,8 @@ impl SeparationParams {
     ) -> Self {
         SeparationParams {
             enabled: spec.enabled,
+            method: spec.method,
+            repulsive_gain: spec.repulsive_gain_m3_s2,
             keep_m: safety_m + spec.margin_m,
             safety: safety_m,
             margin: spec.margin_m,
@@ -180,6 +189,36 @@ pub fn stopping(c: f64, alpha: f64, braking: f64, jerk: f64, lag: f64) -> (f64, 
     }
 }
 
+/// The line of sight to one report, carried forward by its `age`.
+struct Sight {
+    /// |r|, r = P_i - p^_j, m.
+    dist: f64,
+    /// r / |r|.
+    n: [f64; 3],
+    /// a_o tau_a² / 2: how far j may be from where it is predicted, m.
+    eps: f64,
+    /// The report's velocity v_j, m/s.
+    ve: [f64; 3],
+}
+
+/// The line of sight from report `e`, `age` s old, to agent i at `p`; `None` for coincident
+/// centres (no direction to push along).
+fn sight(sp: &SeparationParams, age: f64, p: [f64; 3], e: &TrafficEntry) -> Option<Sight> {
+    let (pe, ve) = (e.p(), e.v());
+    let pj: [f64; 3] = std::array::from_fn(|d| pe[d] + ve[d] * age);
+    let r: [f64; 3] = std::array::from_fn(|d| p[d] - pj[d]);
+    let dist = dot(r, r).sqrt();
+    if dist <= 0.0 {
+        return None;
+    }
+    Some(Sight {
+        dist,
+        n: std::array::from_fn(|d| r[d] / dist),
+        eps: 0.5 * sp.other_accel * age * age,
+        ve,
+    })
+}
+
 /// The pair's half-space for agent i at `p`, `v` with acceleration `a` against one report
 /// `age` s old, or `None` when the pair is not within the activation distance.
 fn pair(
@@ -189,18 +228,9 @@ fn pair(
     (keep, activation): (f64, f64),
     e: &TrafficEntry,
 ) -> Option<Constraint> {
-    let (pe, ve) = (e.p(), e.v());
-    let pj: [f64; 3] = std::array::from_fn(|d| pe[d] + ve[d] * age);
-    let eps = 0.5 * sp.other_accel * age * age;
+    let Sight { dist, n, eps, ve } = sight(sp, age, p, e)?;
     let nu = sp.other_accel * age;
-    let r: [f64; 3] = std::array::from_fn(|d| p[d] - pj[d]);
-    let dist = dot(r, r).sqrt();
-    if dist <= 0.0 {
-        // Coincident centres: no direction to push along.
-        return None;
-    }
     let predicted = dist - eps;
-    let n: [f64; 3] = std::array::from_fn(|d| r[d] / dist);
     let w: [f64; 3] = std::array::from_fn(|d| v[d] - ve[d]);
     let closing = -dot(n, w) + nu;
     let share = if e.flags & TRAFFIC_UNCOOPERATIVE == 0 {
@@ -217,15 +247,73 @@ fn pair(
     let along = dot(n, w);
     let w_perp: [f64; 3] = std::array::from_fn(|d| w[d] - along * n[d]);
     let b = (share * closing - sp.rate * h) / slope - share * dot(w_perp, w_perp) / dist;
-    // To the right of the line of sight seen from above: z x n, horizontal.
+    Some(Constraint {
+        n,
+        b,
+        side: sidestep(sp, n),
+    })
+}
+
+/// Buffered Voronoi cells (Zhou et al., RA-L 2017) for a vehicle that cannot stop at once: agent
+/// i at `p`, `v` with acceleration `a` keeps the point where it would stop inside its cell, the
+/// half-space on its side of the bisector of the pair (from j's report carried forward by its
+/// age, less eps) shrunk by half the `keep` distance. Only j's position enters: the cell's face
+/// is taken to stand still, i answers for its own closing speed c = -n . V_i on its half of the
+/// gap. `None` when the face is not within half the activation distance of the stopping point.
+fn cell(
+    sp: &SeparationParams,
+    age: f64,
+    (p, v, a): ([f64; 3], [f64; 3], [f64; 3]),
+    (keep, activation): (f64, f64),
+    e: &TrafficEntry,
+) -> Option<Constraint> {
+    let Sight { dist, n, eps, .. } = sight(sp, age, p, e)?;
+    let face = 0.5 * (dist - eps) - 0.5 * keep;
+    let closing = -dot(n, v);
+    let (stop, slope) = stopping(closing, -dot(n, a), sp.braking, sp.jerk, sp.lag);
+    if face - stop >= 0.5 * (activation - keep) {
+        return None;
+    }
+    let h = face - stop;
+    let b = (closing - sp.rate * h) / slope;
+    Some(Constraint {
+        n,
+        b,
+        side: sidestep(sp, n),
+    })
+}
+
+/// The sidestep direction of a pair with line of sight `n`: to its right seen from above (z x n,
+/// horizontal), sigma_S long; none for a line of sight close to vertical.
+fn sidestep(sp: &SeparationParams, n: [f64; 3]) -> [f64; 3] {
     let side = [-n[1], n[0], 0.0];
     let hn = dot(side, side).sqrt();
-    let side = if hn > SIDESTEP_MIN_HORIZONTAL {
+    if hn > SIDESTEP_MIN_HORIZONTAL {
         side.map(|x| x * sp.sidestep / hn)
     } else {
         [0.0; 3]
-    };
-    Some(Constraint { n, b, side })
+    }
+}
+
+/// The repulsive term of one report for agent i at `p` (Khatib's potential field on the
+/// predicted distance d^ = |p - p^_j| - eps): k_R (1/d^ - 1/D_A) / d^² along the line of sight
+/// while d^ < D_A (with d^ floored at 1 mm), zero beyond.
+fn repulsion(
+    sp: &SeparationParams,
+    age: f64,
+    p: [f64; 3],
+    activation: f64,
+    e: &TrafficEntry,
+) -> [f64; 3] {
+    let (pe, ve) = (e.p(), e.v());
+    let r: [f64; 3] = std::array::from_fn(|d| p[d] - pe[d] - ve[d] * age);
+    let dist = dot(r, r).sqrt();
+    let predicted = (dist - 0.5 * sp.other_accel * age * age).max(REPULSION_MIN_DISTANCE_M);
+    if dist <= 0.0 || predicted >= activation {
+        return [0.0; 3];
+    }
+    let push = sp.repulsive_gain * (1.0 / predicted - 1.0 / activation) / (predicted * predicted);
+    r.map(|x| push * x / dist)
 }
 
 /// The acceleration the thrust gives a vehicle at attitude `att` that holds the vertical `u_z`
@@ -250,7 +338,8 @@ pub fn pair_distances(sp: &SeparationParams, desired: f64) -> (f64, f64) {
 /// The layer for agent i at its current state `own` (step, position, velocity, attitude and the
 /// traffic it reports), with its measured acceleration `accel` (m/s², from its own recent
 /// velocities; `None`: not yet known, the thrust's is used), and how far apart the formation
-/// puts its slot and those of some quadrotors, `slots` ((agent index, m); a quadrotor not in it
+/// puts its slot and those of some quadrotors, `slots` ((agent index, squared distance m²); a
+/// quadrotor not in it
 /// gets the defaults D_L, D_A), on the position loop's limited virtual control `u`. The
 /// vehicle's acceleration is U_iS plus what the thrust does not make (the lumped uncertainty and
 /// disturbance, F~ = accel - thrust acceleration): the half-spaces bound U_iS + F~.
@@ -261,38 +350,61 @@ pub fn filter(
     slots: &[(u32, f64)],
     u: [f64; 3],
 ) -> Filtered {
-    let mut cs = [Constraint::default(); MAX_TRAFFIC];
-    let mut m = 0;
     let used = own.traffic.used();
+    if used.is_empty() {
+        return Filtered {
+            u,
+            predicted_m: f64::INFINITY,
+            acted: false,
+        };
+    }
     // The thrust's acceleration is needed only once a pair is in the filter (before the first
     // report, the vehicle's own acceleration is taken to be it).
     let thrust = || thrust_acceleration(own.attitude, u[2], sp.gravity);
     let a = accel.unwrap_or_else(thrust);
     // A first pass without square roots: the predicted squared distances, and the distance
     // beyond which no report can be within the activation distance (a bound on d^ - S / rho
-    // from the own speed and acceleration and the fastest report; S grows with both).
+    // from the fastest relative speed of a report and the own acceleration; S grows with both:
+    // the closing speed -n . (V_i - v_j) + nu is at most |V_i - v_j| + nu).
     let mut d2 = [f64::INFINITY; MAX_TRAFFIC];
     let (mut nearest, mut fastest) = (f64::INFINITY, 0.0_f64);
+    let mut uncooperative = false;
     // One snapshot per report: every entry has the same age.
     let age = own.step.saturating_sub(own.traffic.step) as f64 * sp.dt;
     for (l, e) in used.iter().enumerate() {
         let (pj, vj) = (e.p(), e.v());
         let r: [f64; 3] = std::array::from_fn(|d| own.position[d] - pj[d] - vj[d] * age);
+        let w: [f64; 3] = std::array::from_fn(|d| own.velocity[d] - vj[d]);
         d2[l] = dot(r, r);
-        fastest = fastest.max(dot(vj, vj));
+        fastest = fastest.max(dot(w, w));
         nearest = nearest.min(d2[l]);
+        uncooperative |= e.flags & TRAFFIC_UNCOOPERATIVE != 0;
     }
     let eps = 0.5 * sp.other_accel * age * age;
-    let predicted_m = if used.is_empty() {
-        f64::INFINITY
-    } else {
-        nearest.sqrt() - eps
-    };
-    let c_max = dot(own.velocity, own.velocity).sqrt() + fastest.sqrt() + sp.other_accel * age;
+    let predicted_m = nearest.sqrt() - eps;
+    let c_max = fastest.sqrt() + sp.other_accel * age;
     let alpha_max = dot(a, a).sqrt();
     let stop =
         |share: f64| stopping(share * c_max, alpha_max, sp.braking, sp.jerk, sp.lag).0 / share;
-    let gate = sp.activation_m + eps + stop(0.5).max(stop(1.0));
+    // A report's share is 1/2, or 1 for a quadrotor whose controller is down.
+    let worst = if uncooperative {
+        stop(0.5).max(stop(1.0))
+    } else {
+        stop(0.5)
+    };
+    let gate = sp.activation_m + eps + worst;
+    let unchanged = Filtered {
+        u,
+        predicted_m,
+        acted: false,
+    };
+    if !sp.enabled || nearest >= gate * gate {
+        return unchanged;
+    }
+    let mut cs = [Constraint::default(); MAX_TRAFFIC];
+    let mut m = 0;
+    let mut push = [0.0; 3];
+    let me = (own.position, own.velocity, a);
     for (l, e) in used.iter().enumerate() {
         if d2[l] >= gate * gate {
             continue;
@@ -300,12 +412,28 @@ pub fn filter(
         let desired = slots
             .iter()
             .find(|s| s.0 == e.agent)
-            .map_or(f64::INFINITY, |s| s.1);
+            .map_or(f64::INFINITY, |s| s.1.sqrt());
         let distances = pair_distances(sp, desired);
-        if let Some(c) = pair(sp, age, (own.position, own.velocity, a), distances, e) {
+        let c = match sp.method {
+            SeparationMethod::Barrier => pair(sp, age, me, distances, e),
+            SeparationMethod::Voronoi => cell(sp, age, me, distances, e),
+            SeparationMethod::Repulsive => {
+                let f = repulsion(sp, age, own.position, distances.1, e);
+                (0..3).for_each(|d| push[d] += f[d]);
+                None
+            }
+        };
+        if let Some(c) = c {
             cs[m] = c;
             m += 1;
         }
+    }
+    if push != [0.0; 3] {
+        return Filtered {
+            u: std::array::from_fn(|d| u[d] + push[d]),
+            predicted_m,
+            acted: true,
+        };
     }
     let unchanged = Filtered {
         u,
@@ -313,7 +441,7 @@ pub fn filter(
         acted: false,
     };
     let cs = &mut cs[..m];
-    if !sp.enabled || cs.is_empty() {
+    if cs.is_empty() {
         return unchanged;
     }
     // n . (U_iS + F~) >= b, F~ = a - thrust acceleration.
@@ -451,6 +579,57 @@ mod tests {
         assert!(f.u[1] < 0.0, "steps to its right: {:?}", f.u);
     }
 
+    /// The two other designs on the same head-on pair: buffered Voronoi cells brake (the
+    /// stopping point would leave the cell) and step aside; the repulsive term pushes back
+    /// only once the pair is within the activation distance, harder the closer it is.
+    #[test]
+    fn voronoi_cells_and_the_repulsive_term_push_a_head_on_pair_apart() {
+        let head_on = |gap: f64| {
+            own(
+                100,
+                [0.0; 3],
+                [1.0, 0.0, 0.0],
+                &[at(100, [gap, 0.0, 0.0], [-1.0, 0.0, 0.0])],
+            )
+        };
+        let cells = SeparationParams {
+            method: SeparationMethod::Voronoi,
+            ..params()
+        };
+        let f = filter(&cells, &head_on(2.0), None, &[], [1.0, 0.0, 0.0]);
+        assert!(f.acted && f.u[0] < 0.0 && f.u[1] < 0.0, "{:?}", f.u);
+        // Far apart and opening: the cell's face is out of reach.
+        let far = own(
+            100,
+            [0.0; 3],
+            [-1.0, 0.0, 0.0],
+            &[at(100, [3.0, 0.0, 0.0], [1.0, 0.0, 0.0])],
+        );
+        assert!(!filter(&cells, &far, None, &[], [1.0, 0.0, 0.0]).acted);
+        let rep = SeparationParams {
+            method: SeparationMethod::Repulsive,
+            ..params()
+        };
+        let u = [1.0, 0.0, 0.0];
+        let outside = filter(&rep, &head_on(1.0), None, &[], u);
+        assert!(
+            !outside.acted && outside.u == u,
+            "beyond D_A = 0.9 m: {:?}",
+            outside.u
+        );
+        let (near, nearer) = (
+            filter(&rep, &head_on(0.8), None, &[], u),
+            filter(&rep, &head_on(0.6), None, &[], u),
+        );
+        assert!(
+            near.acted && near.u[0] < u[0] && nearer.u[0] < near.u[0],
+            "{near:?} {nearer:?}"
+        );
+        // k_R (1/0.6 - 1/0.9) / 0.36 along -x (the report in f32: to 1e-6).
+        let want = 0.5 * (1.0 / 0.6 - 1.0 / 0.9) / 0.36;
+        assert!((u[0] - nearer.u[0] - want).abs() < 1e-6, "{:?}", nearer.u);
+    }
+
     /// The same pair seen through a report 50 ms old: the other is carried forward, and the worst
     /// closing speed grows by a_o tau: the filter brakes harder.
     #[test]
@@ -581,7 +760,7 @@ mod tests {
         let (keep, act) = pair_distances(&sp, 0.7);
         assert!((keep - 0.55).abs() < 1e-12 && (act - 0.55).abs() < 1e-12);
         assert_eq!(pair_distances(&sp, 0.2), (sp.safety, sp.safety));
-        let slots = [(1, 0.7)];
+        let slots = [(1, 0.7 * 0.7)];
         let mut s = own(0, [0.0; 3], [0.0; 3], &[at(0, [0.7, 0.0, 0.0], [0.0; 3])]);
         s.agent = 0;
         let mut e = s.traffic.entries[0];
@@ -590,7 +769,7 @@ mod tests {
         let u = [1.0, 0.0, 0.0];
         let held = filter(&sp, &s, None, &slots, u);
         assert!(!held.acted, "{held:?}");
-        let far_slots = [(1, 3.0)];
+        let far_slots = [(1, 3.0 * 3.0)];
         let pushed = filter(&sp, &s, None, &far_slots, u);
         assert!(pushed.acted && pushed.u[0] < u[0], "{pushed:?}");
     }

@@ -1,12 +1,17 @@
 //! Separation: the closest approach of any two quadrotors per metric window and over the whole run,
 //! and the number of steps at which it is below the scenario's safety distance.
 //!
-//! On true positions, per step: a sweep along x (sort by x, then only the pairs closer in x than the
-//! closest distance so far), O(N log N) for a spread-out swarm instead of the N (N - 1) / 2 distances
-//! of every pair; it gives bit for bit the answer of the all-pairs definition ([`closest_pair`]),
-//! tie-break included (unit tests).
+//! On true positions, per step: up to [`ALL_PAIRS_MAX`] quadrotors, one pass over every pair gives
+//! both the closest pair and each one's nearest other; beyond, a sweep along x (sort by x, then only
+//! the pairs closer in x than the closest distance so far), O(N log N) for a spread-out swarm
+//! instead of the N (N - 1) / 2 distances of every pair. Both give bit for bit the answer of the
+//! all-pairs definition ([`closest_pair`]), tie-break included (unit tests).
 
 use serde::Serialize;
+
+/// Up to this many quadrotors a step's separation is computed over every pair (cheaper than
+/// sorting for a small fleet); beyond, by the sweep along x.
+pub const ALL_PAIRS_MAX: usize = 16;
 
 /// The closest approach of two quadrotors.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -30,6 +35,15 @@ impl Approach {
 /// Closest approach of the positions of one step: the distance and the pair (0-based, i < j), or
 /// `None` for fewer than two positions. The first pair in (i, j) order wins a tie.
 pub fn closest_pair(p: &[[f64; 3]]) -> Option<(f64, usize, usize)> {
+    all_pairs(p, &mut [])
+}
+
+/// [`closest_pair`] over every pair and, when `out_sq` holds one value per position, each
+/// quadrotor's squared distance to its nearest other (infinite for a lone one; the same bits as
+/// [`nearest_each`]; an empty `out_sq` asks only for the pair).
+pub fn all_pairs(p: &[[f64; 3]], out_sq: &mut [f64]) -> Option<(f64, usize, usize)> {
+    out_sq.iter_mut().for_each(|d| *d = f64::INFINITY);
+    let each = out_sq.len() == p.len();
     let mut best = (f64::INFINITY, 0, 0);
     for (i, a) in p.iter().enumerate() {
         for (j, b) in p.iter().enumerate().skip(i + 1) {
@@ -37,6 +51,10 @@ pub fn closest_pair(p: &[[f64; 3]]) -> Option<(f64, usize, usize)> {
             let d2 = dx * dx + dy * dy + dz * dz;
             if d2 < best.0 {
                 best = (d2, i, j);
+            }
+            if each {
+                out_sq[i] = out_sq[i].min(d2);
+                out_sq[j] = out_sq[j].min(d2);
             }
         }
     }
@@ -74,10 +92,11 @@ pub fn closest_pair_sweep(p: &[[f64; 3]], order: &mut Vec<usize>) -> Option<(f64
     (p.len() >= 2).then(|| (best.0.sqrt(), best.1, best.2))
 }
 
-/// Each quadrotor's distance to its nearest other at one step, into `out` (infinite for a lone
-/// one), by the same sweep along x: quadrotor a's scan in each direction ends once (x_b - x_a)²
-/// exceeds its best squared distance so far. `order` is scratch space.
-pub fn nearest_each(p: &[[f64; 3]], order: &mut Vec<usize>, out: &mut [f64]) {
+/// Each quadrotor's squared distance to its nearest other at one step, into `out_sq` (infinite for
+/// a lone one), by the same sweep along x: quadrotor a's scan in each direction ends once
+/// (x_b - x_a)² exceeds its best squared distance so far. `order` is scratch space.
+pub fn nearest_each(p: &[[f64; 3]], order: &mut Vec<usize>, out_sq: &mut [f64]) {
+    let out = out_sq;
     order.clear();
     order.extend(0..p.len());
     order.sort_unstable_by(|&a, &b| p[a][0].total_cmp(&p[b][0]).then(a.cmp(&b)));
@@ -105,7 +124,6 @@ pub fn nearest_each(p: &[[f64; 3]], order: &mut Vec<usize>, out: &mut [f64]) {
         }
         out[a] = best;
     }
-    out.iter_mut().for_each(|d| *d = d.sqrt());
 }
 
 /// Running separation statistics of a run.
@@ -123,9 +141,10 @@ pub struct Separation {
     pub whole: Option<Approach>,
     /// Closest distance of the latest step, m.
     pub last: Option<f64>,
-    /// Per quadrotor: the smallest distance to any other over the run, m (infinite: none yet).
-    pub nearest: Vec<f64>,
-    /// Per quadrotor: its nearest other's distance at the latest step (scratch), m.
+    /// Per quadrotor: the smallest squared distance to any other over the run, m² (infinite: none
+    /// yet); [`Separation::nearest_m`] in m.
+    nearest_sq: Vec<f64>,
+    /// Per quadrotor: its nearest other's squared distance at the latest step (scratch), m².
     now: Vec<f64>,
     /// Positions of the current step (allocated once).
     scratch: Vec<[f64; 3]>,
@@ -143,7 +162,7 @@ impl Separation {
             enclose: None,
             whole: None,
             last: None,
-            nearest: Vec::new(),
+            nearest_sq: Vec::new(),
             now: Vec::new(),
             scratch: Vec::new(),
             order: Vec::new(),
@@ -155,7 +174,7 @@ impl Separation {
         let mut s = Separation::new(safety_distance_m);
         s.scratch.reserve(n);
         s.order.reserve(n);
-        s.nearest = vec![f64::INFINITY; n];
+        s.nearest_sq = vec![f64::INFINITY; n];
         s.now = vec![f64::INFINITY; n];
         s
     }
@@ -170,22 +189,45 @@ impl Separation {
     ) {
         self.scratch.clear();
         self.scratch.extend(positions);
-        let Some((d, i, j)) = closest_pair_sweep(&self.scratch, &mut self.order) else {
+        let n = self.scratch.len();
+        let tracked = self.nearest_sq.len() == n;
+        let found = if n <= ALL_PAIRS_MAX && tracked {
+            all_pairs(&self.scratch, &mut self.now)
+        } else {
+            closest_pair_sweep(&self.scratch, &mut self.order)
+        };
+        let Some((d, i, j)) = found else {
             return;
         };
         self.last = Some(d);
         if d < self.safety_distance_m {
             self.steps_below_safety += 1;
         }
-        // Per quadrotor only where it can lower a minimum: the step's closest distance is below
-        // some quadrotor's minimum so far (the run's closest pair is always a candidate).
-        if self.nearest.len() == self.scratch.len() && self.nearest.iter().any(|&m| d < m) {
-            let now = &mut self.now;
-            nearest_each(&self.scratch, &mut self.order, now);
-            for (m, n) in self.nearest.iter_mut().zip(now.iter()) {
-                *m = m.min(*n);
+        // Per quadrotor (min of squares: sqrt is monotonic, so the same bits as a min of
+        // distances). Beyond ALL_PAIRS_MAX only where it can lower a minimum: the step's closest
+        // distance is below some quadrotor's minimum so far.
+        if tracked {
+            if n > ALL_PAIRS_MAX {
+                if !self.nearest_sq.iter().any(|&m| d < m.sqrt()) {
+                    return self.keep(t, in_cover, in_enclose, (d, i, j));
+                }
+                nearest_each(&self.scratch, &mut self.order, &mut self.now);
+            }
+            for (m, now) in self.nearest_sq.iter_mut().zip(self.now.iter()) {
+                *m = m.min(*now);
             }
         }
+        self.keep(t, in_cover, in_enclose, (d, i, j));
+    }
+
+    /// Quadrotor `i`'s smallest distance to any other over the run, m (`None`: not tracked;
+    /// infinite: no other yet).
+    pub fn nearest_m(&self, i: usize) -> Option<f64> {
+        self.nearest_sq.get(i).map(|d2| d2.sqrt())
+    }
+
+    /// Keeps the step's closest approach `(d, i, j)` at `t` as the window's and the run's.
+    fn keep(&mut self, t: f64, in_cover: bool, in_enclose: bool, (d, i, j): (f64, usize, usize)) {
         let a = Approach {
             distance_m: d,
             time_s: t,
@@ -221,7 +263,8 @@ mod tests {
     }
 
     #[test]
-    fn the_sweep_gives_the_all_pairs_answer_bit_for_bit_ties_and_non_finite_positions_included() {
+    fn the_sweep_and_the_one_pass_give_the_all_pairs_answer_bit_for_bit_ties_and_non_finite_positions_included(
+    ) {
         let mut rng = 0x2545_f491_4f6c_dd1du64;
         let mut next = move || {
             rng ^= rng << 13;
@@ -252,11 +295,20 @@ mod tests {
                 }
                 let want = closest_pair(&p);
                 let got = closest_pair_sweep(&p, &mut order);
-                assert_eq!(
-                    got.map(|(d, i, j)| (d.to_bits(), i, j)),
-                    want.map(|(d, i, j)| (d.to_bits(), i, j)),
-                    "n = {n}, round {round}"
-                );
+                let bits = |r: Option<(f64, usize, usize)>| r.map(|(d, i, j)| (d.to_bits(), i, j));
+                assert_eq!(bits(got), bits(want), "n = {n}, round {round}");
+                let (mut each, mut one_pass) = (vec![0.0; n], vec![0.0; n]);
+                nearest_each(&p, &mut order, &mut each);
+                let got = all_pairs(&p, &mut one_pass);
+                assert_eq!(bits(got), bits(want), "all pairs, n = {n}, round {round}");
+                if !p.iter().flatten().any(|x| !x.is_finite()) {
+                    let bits = |v: &[f64]| v.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(
+                        bits(&each),
+                        bits(&one_pass),
+                        "nearest, n = {n}, round {round}"
+                    );
+                }
             }
         }
         let all_nan = [[f64::NAN; 3]; 4];

@@ -208,7 +208,7 @@ impl Summary {
                     separation: AgentSeparation {
                         layer_active_s: a.separation.active_s(dt),
                         min_predicted_m: finite(a.separation.min_predicted_m),
-                        min_actual_m: m.separation.nearest.get(i).copied().and_then(finite),
+                        min_actual_m: m.separation.nearest_m(i).and_then(finite),
                     },
                     restarts: 0,
                     checkpoints_refused: 0,

@@ -31,6 +31,16 @@ fn closest(v: &Value) -> f64 {
         .unwrap()
 }
 
+/// A formation whose pairs stay beyond the 0.9 m activation distance (rings of 4 and 2 m, 45 s).
+const WIDE: [&str; 6] = [
+    "--set",
+    "mission.formation.cover_radius_m=4.0",
+    "--set",
+    "mission.formation.enclose_radius_m=2.0",
+    "--set",
+    "simulation.duration_s=45",
+];
+
 /// Swaps the start positions of two pairs of agents (1-based) of the paper scenario.
 fn swapped(pairs: &[(usize, usize)]) -> Vec<String> {
     let starts = [
@@ -81,14 +91,7 @@ fn the_shipped_abrupt_fault_case_keeps_every_pair_beyond_the_safety_distance() {
 /// the trajectory is the same, byte for byte, with it off.
 #[test]
 fn a_run_whose_pairs_stay_beyond_the_activation_distance_is_byte_identical_with_the_layer_off() {
-    let wide = [
-        "--set",
-        "mission.formation.cover_radius_m=4.0",
-        "--set",
-        "mission.formation.enclose_radius_m=2.0",
-        "--set",
-        "simulation.duration_s=45",
-    ];
+    let wide = WIDE;
     let (code_on, on, dir_on, e1) = sim(&wide, "sep-inert-on");
     let mut off_args = wide.to_vec();
     off_args.extend(["--set", "controller.separation.enabled=false"]);
@@ -134,19 +137,48 @@ fn crossing_starts_are_flown_apart_and_without_the_layer_the_run_fails_with_exit
 /// the deviation it breaks (exit 2).
 #[test]
 fn a_bad_separation_parameter_exits_2_naming_the_field() {
-    let out = temp_dir("sep-bad");
-    let path = out.display().to_string();
-    let o = formation(&[
-        "sim",
-        "--set",
-        "controller.separation.broadcast_delay_s=0.2",
-        "--out",
-        path.as_str(),
-    ]);
-    let (code, stderr) = (o.status.code(), stderr_of(&o));
-    assert_eq!(code, Some(2), "{stderr}");
+    let stderr = refused("controller.separation.broadcast_delay_s=0.2", "sep-bad");
     assert!(
         stderr.contains("controller.separation.broadcast_delay_s") && stderr.contains("D25"),
         "{stderr}"
     );
+}
+
+/// The repulsive term, one of the designs measured against the barrier (D25), is inert while no
+/// pair is within the activation distance: the wide formation's trajectory is byte-identical with
+/// the layer off. A negative gain is refused naming the field (exit 2).
+#[test]
+fn the_repulsive_design_is_inert_beyond_the_activation_distance_and_refuses_a_negative_gain() {
+    let wide = WIDE;
+    let mut rep = wide.to_vec();
+    rep.extend(["--set", "controller.separation.method=\"repulsive\""]);
+    let (code_on, _, dir_on, e1) = sim(&rep, "sep-rep-on");
+    let mut off = wide.to_vec();
+    off.extend(["--set", "controller.separation.enabled=false"]);
+    let (code_off, _, dir_off, e2) = sim(&off, "sep-rep-off");
+    assert_eq!((code_on, code_off), (Some(0), Some(0)), "{e1}{e2}");
+    let a = std::fs::read(dir_on.join("trajectory.csv")).unwrap();
+    let b = std::fs::read(dir_off.join("trajectory.csv")).unwrap();
+    assert!(
+        a == b,
+        "trajectory.csv differs with the repulsive term and without the layer"
+    );
+    let stderr = refused(
+        "controller.separation.repulsive_gain_m3_s2=-1",
+        "sep-rep-bad",
+    );
+    assert!(
+        stderr.contains("controller.separation.repulsive_gain_m3_s2"),
+        "{stderr}"
+    );
+}
+
+/// `formation sim --set SET` is refused before anything runs (exit 2); its stderr.
+fn refused(set: &str, tag: &str) -> String {
+    let out = temp_dir(tag);
+    let path = out.display().to_string();
+    let o = formation(&["sim", "--set", set, "--out", path.as_str()]);
+    let (code, stderr) = (o.status.code(), stderr_of(&o));
+    assert_eq!(code, Some(2), "{stderr}");
+    stderr
 }

@@ -83,11 +83,13 @@ crate::wire_fields!(Traffic {
 
 impl TrafficEntry {
     /// Position, m, in double precision.
+    #[inline]
     pub fn p(&self) -> [f64; 3] {
         self.position.map(f64::from)
     }
 
     /// Velocity, m/s, in double precision.
+    #[inline]
     pub fn v(&self) -> [f64; 3] {
         self.velocity.map(f64::from)
     }
@@ -95,6 +97,7 @@ impl TrafficEntry {
 
 impl Traffic {
     /// The entries in use.
+    #[inline]
     pub fn used(&self) -> &[TrafficEntry] {
         &self.entries[..(self.count as usize).min(MAX_TRAFFIC)]
     }

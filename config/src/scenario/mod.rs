@@ -354,6 +354,9 @@ pub struct SeparationSpec {
     /// The layer acts (`false`: U_iP goes through untouched; the broadcast is still reported and
     /// the predicted separation still logged). Ours: true.
     pub enabled: bool,
+    /// The design of the layer. Ours: `barrier` (the other two are kept to be measured against
+    /// it: docs/deviations.md D25, docs/measurements.md "Separation").
+    pub method: SeparationMethod,
     /// Margin kept on top of the safety distance, m: the barrier's distance is D_L = safety + this.
     /// Ours: 0.15.
     pub margin_m: f64,
@@ -386,6 +389,28 @@ pub struct SeparationSpec {
     /// holds the last one, up to tau_B + T_B old. Ours: 0.01 (100 Hz; the plant finds the
     /// nearest quadrotors once per broadcast).
     pub broadcast_period_s: f64,
+    /// k_R: gain of the repulsive term of `method = "repulsive"`, m³/s²: a pair at predicted
+    /// distance d^ < D_A pushes apart with k_R (1/d^ - 1/D_A) / d^² (Khatib's potential field).
+    /// Unused by the other methods. Ours: 0.5 (1.8 m/s² at the 0.5 m safety distance).
+    pub repulsive_gain_m3_s2: f64,
+}
+
+/// The design of the separation layer (D25): three well-known designs on the same delayed
+/// position broadcast, the same activation distance and the same limits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SeparationMethod {
+    /// A control-barrier-function safety filter on U_iP (Wang, Ames, Egerstedt, IEEE T-RO 2017),
+    /// with the pair's relative velocity, the report's age and the vehicle's braking limits:
+    /// the default.
+    #[default]
+    Barrier,
+    /// Buffered Voronoi cells (Zhou, Wang, Bandyopadhyay, Schwager, RA-L 2017): each quadrotor
+    /// keeps the point where it would stop inside its cell, the half-space beyond the bisector
+    /// of the pair shrunk by half the keep distance; it uses the others' positions only.
+    Voronoi,
+    /// A repulsive term added to U_iP (Khatib's potential field), no filter.
+    Repulsive,
 }
 
 impl Default for SeparationSpec {
@@ -402,6 +427,8 @@ impl Default for SeparationSpec {
             sensing_range_m: 6.0,
             broadcast_delay_s: 0.05,
             broadcast_period_s: 0.01,
+            method: SeparationMethod::Barrier,
+            repulsive_gain_m3_s2: 0.5,
         }
     }
 }
@@ -939,6 +966,7 @@ impl Scenario {
 
 impl DelaySpec {
     /// tau(t) = base + amplitude sin(angular_rate t), clamped to [0, tau_max] (Assumption 2), s.
+    #[inline]
     pub fn tau(&self, t: f64, tau_max: f64) -> f64 {
         (self.base_s + self.amplitude_s * (self.angular_rate_rad_s * t).sin()).clamp(0.0, tau_max)
     }

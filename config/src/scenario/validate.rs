@@ -98,7 +98,7 @@ pub const EQ46_49: &str =
 pub const EQ35_50: &str = "eq. (35), (50): K_iE > 1 and gamma_iE > 0";
 /// The separation layer and its position broadcast (docs/deviations.md D25).
 pub const SEPARATION: &str =
-    "D25: the separation layer's barrier needs a positive braking, jerk, rate and sensing range, non-negative margins and lag, and a broadcast delay within the delay bound tau_M";
+    "D25: the separation layer's barrier needs a positive braking, jerk, rate and sensing range, non-negative margins, lag and repulsive gain (finite), and a broadcast delay within the delay bound tau_M";
 /// The shaping of the transitions (docs/deviations.md D26).
 pub const SHAPING: &str = "D26: a transition is capped to a positive acceleration and jerk";
 /// The mission of Section 4.
@@ -186,6 +186,14 @@ fn check_separation(s: &Scenario, c: &mut Collector) {
     c.positive(&f("barrier_rate_1_s"), sp.barrier_rate_1_s, SEPARATION);
     c.non_negative(&f("sidestep_ratio"), sp.sidestep_ratio, SEPARATION);
     c.positive(&f("sensing_range_m"), sp.sensing_range_m, SEPARATION);
+    let k_r = sp.repulsive_gain_m3_s2;
+    if !(k_r >= 0.0 && k_r.is_finite()) {
+        c.push(
+            f("repulsive_gain_m3_s2"),
+            SEPARATION,
+            format!("must be finite and >= 0, got {k_r}"),
+        );
+    }
     let tau_m = s.simulation.max_delay_s;
     if !(sp.broadcast_delay_s >= 0.0 && sp.broadcast_delay_s <= tau_m) {
         c.push(
