@@ -25,6 +25,10 @@ pub struct ClosedLoop {
     shares: Vec<NeighbourState>,
     commands: Vec<ControlCommand>,
     truths: Vec<PlantTruth>,
+    /// The [`Plant::traffic_builds`] whose reports `states` and `truths` hold (`u64::MAX`: none
+    /// yet): a report is copied only when the broadcast has built new ones (D25).
+    states_traffic: u64,
+    truths_traffic: u64,
     dt: f64,
     k: u64,
     /// The fault timeline (scenario events; the same in every process of a run).
@@ -76,6 +80,8 @@ impl ClosedLoop {
             shares: vec![NeighbourState::default(); n],
             commands: vec![ControlCommand::default(); n],
             truths: vec![PlantTruth::default(); n],
+            states_traffic: u64::MAX,
+            truths_traffic: u64::MAX,
             dt: scenario.simulation.dt_s,
             k: 0,
         }
@@ -97,8 +103,11 @@ impl ClosedLoop {
         }
         self.mission
             .reference(k, k as f64 * self.dt, &mut self.reference);
+        let builds = self.plant.traffic_builds();
+        let fresh = builds != self.states_traffic;
+        self.states_traffic = builds;
         for (i, a) in self.agents.iter_mut().enumerate() {
-            self.states[i] = self.plant.vehicle_state(i);
+            self.plant.vehicle_state_into(i, &mut self.states[i], fresh);
             // A down agent's process observes nothing (it is dead or stopped).
             if self.timeline.up(i, k) {
                 a.observe_reference(&self.reference);
@@ -174,6 +183,9 @@ impl ClosedLoop {
     pub fn act(&mut self) {
         let k = self.k;
         let every = self.runtime.checkpoint_steps(self.dt);
+        let builds = self.plant.traffic_builds();
+        let fresh = builds != self.truths_traffic;
+        self.truths_traffic = builds;
         for (i, a) in self.agents.iter_mut().enumerate() {
             match self.timeline.down_window(i, k) {
                 None => {
@@ -193,7 +205,7 @@ impl ClosedLoop {
                     self.commands[i] = self.plant.apply_fallback(i, k - w.from, &self.runtime);
                 }
             }
-            self.truths[i] = self.plant.truth(i);
+            self.plant.truth_into(i, &mut self.truths[i], fresh);
             if !self.history.is_empty() {
                 self.history.set_command(
                     k,

@@ -167,22 +167,36 @@ impl Plant {
 
     /// The state message of quadrotor `i` at the current step.
     pub fn vehicle_state(&self, i: usize) -> VehicleState {
+        let mut s = VehicleState::default();
+        self.vehicle_state_into(i, &mut s, true);
+        s
+    }
+
+    /// How many times the position broadcast's reports were built so far (D25): while it is the
+    /// same, every quadrotor's report is the same, bit for bit.
+    pub fn traffic_builds(&self) -> u64 {
+        self.broadcast.builds()
+    }
+
+    /// [`Plant::vehicle_state`] written into `out`, its traffic report only if `traffic` (the
+    /// caller keeps the report it copied while [`Plant::traffic_builds`] has not changed).
+    pub fn vehicle_state_into(&self, i: usize, out: &mut VehicleState, traffic: bool) {
         debug_assert!(
             !self.vehicles[i].advanced,
             "quadrotor {i} is already at step k + 1"
         );
         let x = &self.vehicles[i].state;
-        VehicleState {
-            step: self.step,
-            t: self.time(),
-            agent: i as u32,
-            _pad: 0,
-            sent_ns: 0,
-            position: x.p.into(),
-            velocity: x.v.into(),
-            attitude: x.a.into(),
-            rate: x.w.into(),
-            traffic: self.broadcast.report(i),
+        out.step = self.step;
+        out.t = self.time();
+        out.agent = i as u32;
+        out._pad = 0;
+        out.sent_ns = 0;
+        out.position = x.p.into();
+        out.velocity = x.v.into();
+        out.attitude = x.a.into();
+        out.rate = x.w.into();
+        if traffic {
+            out.traffic = self.broadcast.report(i);
         }
     }
 
@@ -311,18 +325,24 @@ impl Plant {
 
     /// What only the plant knows about quadrotor `i` at the current step (after [`Plant::apply`]).
     pub fn truth(&self, i: usize) -> PlantTruth {
+        let mut t = PlantTruth::default();
+        self.truth_into(i, &mut t, true);
+        t
+    }
+
+    /// [`Plant::truth`] written into `out`, its state's traffic report only if `traffic` (as in
+    /// [`Plant::vehicle_state_into`]).
+    pub fn truth_into(&self, i: usize, out: &mut PlantTruth, traffic: bool) {
         let veh = &self.vehicles[i];
-        PlantTruth {
-            state: self.vehicle_state(i),
-            thrust_n: veh.input.thrust,
-            torque_applied_nm: veh.input.torque.into(),
-            gamma: veh.gamma.into(),
-            delta: veh.delta.into(),
-            // F_iP of the state of step k, computed once per state (also RK4's first stage).
-            uncertainty: veh.f_p_now.into(),
-            // D_iA(t_k): the start-of-step term RK4 uses, `disturbance(spec, t_k)` computed once.
-            disturbance: veh.terms_now.disturbance.into(),
-        }
+        self.vehicle_state_into(i, &mut out.state, traffic);
+        out.thrust_n = veh.input.thrust;
+        out.torque_applied_nm = veh.input.torque.into();
+        out.gamma = veh.gamma.into();
+        out.delta = veh.delta.into();
+        // F_iP of the state of step k, computed once per state (also RK4's first stage).
+        out.uncertainty = veh.f_p_now.into();
+        // D_iA(t_k): the start-of-step term RK4 uses, `disturbance(spec, t_k)` computed once.
+        out.disturbance = veh.terms_now.disturbance.into();
     }
 
     /// Integrates quadrotor `i` over [t_k, t_k+1] with its held input, once [`Plant::apply`] and

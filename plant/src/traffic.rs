@@ -34,6 +34,8 @@ pub struct Broadcast {
     period_steps: u64,
     /// The measurement step of the current reports.
     measured: u64,
+    /// How many times the reports were built: a new count means new reports.
+    builds: u64,
     /// Ring of `delay_steps + period_steps` snapshots of N beacons, by step.
     ring: Vec<Beacon>,
     /// The reports of the current step, one per quadrotor.
@@ -85,6 +87,7 @@ impl Broadcast {
             delay_steps,
             period_steps,
             measured: 0,
+            builds: 0,
             ring,
             reports: vec![Traffic::default(); n],
             bucket_of: vec![0; n],
@@ -93,6 +96,12 @@ impl Broadcast {
         };
         b.build_reports(0);
         b
+    }
+
+    /// How many times the reports were built so far: the reports of two steps with the same
+    /// count are the same, bit for bit.
+    pub fn builds(&self) -> u64 {
+        self.builds
     }
 
     /// The report quadrotor `i` receives at the current step.
@@ -127,6 +136,7 @@ impl Broadcast {
             return; // the same broadcast as the last step's
         }
         self.measured = m;
+        self.builds += 1;
         if self.n <= BRUTE_FORCE_UP_TO {
             self.pairwise(m);
         } else {
