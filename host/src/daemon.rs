@@ -963,10 +963,18 @@ impl Daemon {
         drop(r.node.take());
         drop(r.membership.take());
         let _ = std::fs::remove_dir_all(&r.dir);
-        if r.req.colocated.is_some() {
+        if let Some(c) = &r.req.colocated {
             // The files are the orchestrator's: it removes them, or the last process of the run
-            // does (its agents here were members of its run).
-            eprintln!("formation host: run {run_id} ended; its folder removed (co-located: its iceoryx2 files are the orchestrator's)");
+            // does. Its agents here were members of its run, ended here without leaving it as a
+            // member does: the daemon leaves in their place, and removes the files if nobody of
+            // the run is left (the orchestrator SIGKILLed, its other processes gone before).
+            let last = Membership::join_file(Path::new(&c.members), &r.req.prefix)
+                .ok()
+                .and_then(Membership::leave_last);
+            match last {
+                Some(Ok(n)) => eprintln!("formation host: run {run_id} ended; its folder and {n} iceoryx2 files removed (co-located, and the last of its run: its orchestrator is gone)"),
+                _ => eprintln!("formation host: run {run_id} ended; its folder removed (co-located: its iceoryx2 files are the orchestrator's)"),
+            }
             return;
         }
         let removed = ipc::remove_residue(&r.req.prefix).unwrap_or(0);

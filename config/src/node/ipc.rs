@@ -386,11 +386,15 @@ pub fn reap(live: &[String], min_age: std::time::Duration) -> Vec<(String, usize
         if live.contains(&prefix) || age < min_age {
             continue;
         }
+        // Counted as the files there were less those left: iceoryx2's own cleanup of the dead
+        // nodes removes most of them before `remove_residue` sees the rest.
+        let before = residue(&prefix).map_or(0, |v| v.len());
         if !matches!(cleanup_dead_nodes(&prefix), Ok(true)) {
             continue;
         }
-        if let Ok(n) = remove_residue(&prefix) {
-            out.push((prefix, n));
+        if remove_residue(&prefix).is_ok() {
+            let left = residue(&prefix).map_or(0, |v| v.len());
+            out.push((prefix, before.saturating_sub(left)));
         }
     }
     out

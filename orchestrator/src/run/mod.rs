@@ -12,6 +12,8 @@
 mod cleanup;
 mod driver;
 pub mod export;
+#[cfg(feature = "multihost")]
+mod fence;
 mod governor;
 pub mod host_probe;
 pub mod injections;

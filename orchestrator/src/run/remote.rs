@@ -550,6 +550,11 @@ impl RemoteRun {
                 format!("{label} on {host}"),
                 Box::new(RemoteAgent {
                     cluster: self.cluster.clone(),
+                    colocated: self
+                        .colocated
+                        .iter()
+                        .any(|c| *c == host)
+                        .then(|| self.request.prefix.clone()),
                     host,
                     run_id: self.run_id.clone(),
                     agent,
@@ -701,6 +706,31 @@ struct RemoteAgent {
     run_id: String,
     agent: usize,
     pid: u32,
+    /// For a host that shares this machine's kernel (co-located): the run's iceoryx2 prefix, by
+    /// which the orchestrator recognises and fences the process itself once the host is lost.
+    colocated: Option<String>,
+}
+
+impl RemoteAgent {
+    /// Its host was lost: on a co-located host, whose daemon may only be paused while its
+    /// agents run on, the process is ended here before its successor starts (`fence`); what
+    /// was done, for the line that names the loss.
+    fn fence(&self) -> String {
+        let Some(prefix) = &self.colocated else {
+            return String::new();
+        };
+        match super::fence::end_agent(self.pid, prefix, self.agent, super::fence::FENCE_TIMEOUT) {
+            super::fence::Fenced::Ended => {
+                "; fenced: its process ended here (SIGKILL) before its successor starts".into()
+            }
+            super::fence::Fenced::Gone | super::fence::Fenced::NotOurs => String::new(),
+            super::fence::Fenced::StillRunning => format!(
+                "; fenced: SIGKILLed here, still running after {:?}",
+                super::fence::FENCE_TIMEOUT
+            ),
+            super::fence::Fenced::Failed(kind) => format!("; cannot fence its process: {kind}"),
+        }
+    }
 }
 
 impl RemoteProcess for RemoteAgent {
@@ -714,7 +744,16 @@ impl RemoteProcess for RemoteAgent {
 
     fn kill_and_reap(&mut self) {
         if self.cluster.lost(&self.host).is_some() {
-            // Its host is gone, and the process with it (it dies with its daemon).
+            // Its host is gone, and the process with it (it dies with its daemon), unless the
+            // daemon is only paused: on a co-located host it is fenced here.
+            let fenced = self.fence();
+            if !fenced.is_empty() {
+                tracing::info!(
+                    agent = self.agent + 1,
+                    host = self.host.as_str(),
+                    "{fenced}"
+                );
+            }
             return;
         }
         let req = Request::Kill {
@@ -778,8 +817,9 @@ impl RemoteProcess for RemoteAgent {
         }
         self.cluster.lost(&self.host).map(|_| {
             format!(
-                "was lost with host {} (its daemon's liveliness token vanished)",
-                self.host
+                "was lost with host {} (its daemon's liveliness token vanished){}",
+                self.host,
+                self.fence()
             )
         })
     }
