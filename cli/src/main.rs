@@ -325,6 +325,7 @@ fn command_exit_code(e: &CommandError) -> u8 {
         | CommandError::NodeArgs { .. } => cli::EXIT_INVALID,
         CommandError::Diverged(_) | CommandError::TooClose { .. } => cli::EXIT_RESULT_FAILED,
         CommandError::Interrupted(_) => cli::EXIT_INTERRUPTED,
+        CommandError::Node { source, .. } if source.port_held() => cli::EXIT_PORT_HELD,
         CommandError::WriteScenario { .. }
         | CommandError::WriteOutputs { .. }
         | CommandError::Run(_)
@@ -366,6 +367,18 @@ mod tests {
             ),
             (1, true)
         );
+        use formation_config::node::error::{NodeError, PortError, PortErrorKind};
+        use formation_config::protocol::messages::Role;
+        let held = |detail: &str| CommandError::Node {
+            role: Role::Agent,
+            source: NodeError::Port(PortError::new(
+                "formation/agent/3/share",
+                PortErrorKind::Port,
+                format_args!("{detail}"),
+            )),
+        };
+        assert_eq!(held("ExceedsMaxSupportedPublishers").exit_code(), 75);
+        assert_eq!(held("InternalFailure").exit_code(), 1);
         let count = LiveError::AgentCount { n: 0, max: 128 };
         assert_eq!(count.exit_code(), 2);
         assert_eq!(

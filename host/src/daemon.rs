@@ -972,7 +972,7 @@ impl Daemon {
                 .ok()
                 .and_then(Membership::leave_last);
             match last {
-                Some(Ok(n)) => eprintln!("formation host: run {run_id} ended; its folder and {n} iceoryx2 files removed (co-located, and the last of its run: its orchestrator is gone)"),
+                Some(Ok(n)) if n > 0 => eprintln!("formation host: run {run_id} ended; its folder and {n} iceoryx2 files removed (co-located, and the last of its run: its orchestrator is gone)"),
                 _ => eprintln!("formation host: run {run_id} ended; its folder removed (co-located: its iceoryx2 files are the orchestrator's)"),
             }
             return;

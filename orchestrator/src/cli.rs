@@ -16,6 +16,11 @@ pub const EXIT_INVALID: u8 = 2;
 pub const EXIT_RESULT_FAILED: u8 = 3;
 /// Exit code after Ctrl-C (128 + SIGINT).
 pub const EXIT_INTERRUPTED: u8 = 130;
+/// Exit code of a role process (`formation node`) that could not make one of its ports because
+/// another process still holds it (an agent's predecessor that is not gone yet): try again later
+/// (EX_TEMPFAIL of sysexits.h). The supervision waits for the predecessor to be fenced and starts
+/// the agent again, without counting it against `runtime.max_restarts` (docs/failures.md).
+pub const EXIT_PORT_HELD: u8 = 75;
 
 /// The arguments of subcommand `name` with every default applied by clap, exactly as if the
 /// subcommand had been given with no argument (bare `formation` is `formation run`).

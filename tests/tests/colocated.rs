@@ -151,63 +151,21 @@ fn a_killed_co_located_daemon_under_on_failure_has_its_agents_taken_over_here_an
     let mut daemon = Daemon::start(&rt, &["--name", &name]);
     let out = dir.join("run");
     let err_path = dir.join("run.err");
-    let place = format!("4,5@{name}");
-    let mut run = Command::new(bin("formation"))
-        .args([
-            "run",
-            "--set",
-            "simulation.duration_s=8",
-            "--restart",
-            "on-failure",
-            "--restart-state",
-            "warm",
-            "--hosts",
-            &name,
-            "--place",
-            &place,
-            "--out",
-        ])
-        .arg(&out)
-        .env("XDG_RUNTIME_DIR", &rt)
-        .env_remove("CARGO")
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&err_path).unwrap())
-        .spawn()
-        .expect("formation run starts");
-    let t0 = Instant::now();
+    let mut run = start_split_run(
+        &rt,
+        &name,
+        &["simulation.duration_s=8"],
+        &["--restart-state", "warm"],
+        &out,
+        &err_path,
+    );
     // Past the start-up transient: once agent 4 has checkpointed t = 3 s.
-    while runs_root(&daemon.log)
-        .and_then(|r| agent_4_checkpoint_step(&r))
-        .is_none_or(|s| s < 3000)
-    {
-        assert!(
-            run.try_wait().unwrap().is_none(),
-            "the run ended early: {}",
-            std::fs::read_to_string(&err_path).unwrap_or_default()
-        );
-        assert!(
-            t0.elapsed() < Duration::from_secs(120),
-            "no checkpoint of agent 4 on the daemon: {}",
-            daemon.log_text()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    until_agent_4_checkpointed(&daemon, &mut run, &err_path, 3000);
     let (prefix, pids) = start_line(&std::fs::read_to_string(&err_path).unwrap());
     // SAFETY: kill(2) on our own child.
     unsafe { libc::kill(daemon.child.id() as libc::pid_t, libc::SIGKILL) };
     let _ = daemon.child.wait();
-    let killed = Instant::now();
-    let st = loop {
-        if let Some(st) = run.try_wait().unwrap() {
-            break st;
-        }
-        assert!(
-            killed.elapsed() < Duration::from_secs(180),
-            "the run hangs after its co-located host was lost: {}",
-            std::fs::read_to_string(&err_path).unwrap_or_default()
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    };
+    let st = wait_exit(&mut run, &err_path);
     let err = std::fs::read_to_string(&err_path).unwrap();
     assert_eq!(st.code(), Some(0), "{err}");
     assert!(
@@ -230,6 +188,195 @@ fn a_killed_co_located_daemon_under_on_failure_has_its_agents_taken_over_here_an
     assert_eq!(s["diverged"], false, "{s}");
     assert_gone(&pids);
     assert_no_residue(&prefix, &rt);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Starts `formation run --restart on-failure --hosts NAME --place 4,5@NAME` with `sets` and
+/// `extra` arguments, its stderr into `err_path`.
+fn start_split_run(
+    rt: &Path,
+    name: &str,
+    sets: &[&str],
+    extra: &[&str],
+    out: &Path,
+    err_path: &Path,
+) -> std::process::Child {
+    let place = format!("4,5@{name}");
+    let mut cmd = Command::new(bin("formation"));
+    cmd.args([
+        "run",
+        "--restart",
+        "on-failure",
+        "--hosts",
+        name,
+        "--place",
+        &place,
+    ]);
+    for s in sets {
+        cmd.args(["--set", s]);
+    }
+    cmd.args(extra)
+        .arg("--out")
+        .arg(out)
+        .env("XDG_RUNTIME_DIR", rt)
+        .env_remove("CARGO")
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(err_path).unwrap())
+        .spawn()
+        .expect("formation run starts")
+}
+
+/// Waits until agent 4 on `daemon` has checkpointed step `step` (the run still going).
+fn until_agent_4_checkpointed(
+    daemon: &Daemon,
+    run: &mut std::process::Child,
+    err_path: &Path,
+    step: u64,
+) {
+    let t0 = Instant::now();
+    while runs_root(&daemon.log)
+        .and_then(|r| agent_4_checkpoint_step(&r))
+        .is_none_or(|s| s < step)
+    {
+        assert!(
+            run.try_wait().unwrap().is_none(),
+            "the run ended early: {}",
+            std::fs::read_to_string(err_path).unwrap_or_default()
+        );
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "no checkpoint of agent 4 on the daemon: {}",
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Waits (up to 180 s) for `run` to exit.
+fn wait_exit(run: &mut std::process::Child, err_path: &Path) -> std::process::ExitStatus {
+    let t0 = Instant::now();
+    loop {
+        if let Some(st) = run.try_wait().unwrap() {
+            return st;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(180),
+            "the run hangs: {}",
+            std::fs::read_to_string(err_path).unwrap_or_default()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A co-located daemon paused (SIGSTOP) past the lease while its agents run on: the host is
+/// declared lost, its agents are fenced here (killed before their successors start), each is
+/// taken over once, and the run ends with exit 0; nothing is left once the daemon is resumed.
+fn a_paused_co_located_daemon_is_fenced(tag: &str, mode: &[&str], duration: &str, pause_at: u64) {
+    let dir = temp_dir(tag);
+    let rt = runtime(&dir, 0o700);
+    let name = unique("cp");
+    let daemon = Daemon::start(&rt, &["--name", &name]);
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let mut extra = vec!["--lease-ms", "1000"];
+    extra.extend(mode);
+    let mut run = start_split_run(&rt, &name, &[duration], &extra, &out, &err_path);
+    until_agent_4_checkpointed(&daemon, &mut run, &err_path, pause_at);
+    let (prefix, pids) = start_line(&std::fs::read_to_string(&err_path).unwrap());
+    let lost = format!("host {name} lost; its agents 4, 5 are taken over on local");
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(daemon.child.id() as libc::pid_t, libc::SIGSTOP) };
+    let paused = Instant::now();
+    while !std::fs::read_to_string(&err_path).unwrap().contains(&lost)
+        && run.try_wait().unwrap().is_none()
+        && paused.elapsed() < Duration::from_secs(30)
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Paused well past the lease, as a partition that heals.
+    std::thread::sleep(Duration::from_millis(1000));
+    // SAFETY: kill(2) on our own child.
+    unsafe { libc::kill(daemon.child.id() as libc::pid_t, libc::SIGCONT) };
+    let st = wait_exit(&mut run, &err_path);
+    let err = std::fs::read_to_string(&err_path).unwrap();
+    assert_eq!(st.code(), Some(0), "{err}");
+    assert!(err.contains(&lost), "the host is declared lost: {err}");
+    for a in [4, 5] {
+        let fenced = err.lines().filter(|l| {
+            l.contains(&format!("agent {a} (--agent {})", a - 1))
+                && l.contains("fenced: its process ended here (SIGKILL)")
+        });
+        assert_eq!(fenced.count(), 1, "agent {a} is fenced once: {err}");
+        let started = err
+            .lines()
+            .filter(|l| l.contains(&format!("formation run: agent {a} taken over at step")));
+        assert_eq!(started.count(), 1, "agent {a} is started once: {err}");
+    }
+    assert!(
+        !err.contains("ExceedsMaxSupported") && !err.contains("exited with code"),
+        "no successor finds its ports held: {err}"
+    );
+    assert_gone(&pids);
+    assert_no_residue(&prefix, &rt);
+    drop(daemon);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_paused_co_located_daemon_in_lockstep_is_fenced_and_each_agent_taken_over_once() {
+    a_paused_co_located_daemon_is_fenced("co-pause", &[], "simulation.duration_s=120", 1000);
+}
+
+#[test]
+fn a_paused_co_located_daemon_in_realtime_is_fenced_and_each_agent_taken_over_once() {
+    a_paused_co_located_daemon_is_fenced(
+        "co-pause-rt",
+        &["--realtime"],
+        "simulation.duration_s=10",
+        2000,
+    );
+}
+
+/// The orchestrator SIGKILLed in the middle of a realtime run whose agents 4, 5 are on a
+/// co-located daemon: its role processes die with it, the daemon ends its agents when it sees the
+/// orchestrator gone and, the last of the run, removes the run's files: none within 5 s.
+#[test]
+fn an_orchestrator_killed_beside_a_co_located_daemon_leaves_no_file_within_5_s() {
+    let dir = temp_dir("co-orch-kill");
+    let rt = runtime(&dir, 0o700);
+    let name = unique("ck");
+    let daemon = Daemon::start(&rt, &["--name", &name]);
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let mut run = start_split_run(
+        &rt,
+        &name,
+        &["simulation.duration_s=30"],
+        &["--realtime"],
+        &out,
+        &err_path,
+    );
+    until_agent_4_checkpointed(&daemon, &mut run, &err_path, 1000);
+    let (prefix, pids) = start_line(&std::fs::read_to_string(&err_path).unwrap());
+    run.kill().unwrap();
+    run.wait().unwrap();
+    let killed = Instant::now();
+    let root = rt.join("formation").join("iox2");
+    loop {
+        let left = residue(&prefix, &root);
+        if left.is_empty() {
+            break;
+        }
+        assert!(
+            killed.elapsed() < Duration::from_secs(5),
+            "{} files of the run are left 5 s after its orchestrator was killed: {left:?}\ndaemon: {}",
+            left.len(),
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_gone(&pids);
+    drop(daemon);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

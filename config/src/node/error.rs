@@ -109,6 +109,15 @@ impl fmt::Display for NodeError {
 
 impl std::error::Error for NodeError {}
 
+impl NodeError {
+    /// A port could not be made because the service has all the ports of that kind it allows:
+    /// another process (a predecessor not gone yet) holds the one this process needs.
+    pub fn port_held(&self) -> bool {
+        matches!(self, NodeError::Port(PortError { kind: PortErrorKind::Port, detail, .. })
+            if detail.starts_with("ExceedsMaxSupported"))
+    }
+}
+
 impl From<PortError> for NodeError {
     fn from(e: PortError) -> Self {
         NodeError::Port(e)

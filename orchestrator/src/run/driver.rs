@@ -151,12 +151,16 @@ fn supervise(crew: &mut Crew, w: &Watch) -> Option<Outcome> {
     let takeover = &mut *crew.takeover;
     // Every child found dead now (the agents of a lost host die together), then a silent or
     // stopped one.
-    let mut deaths: Vec<Death> = std::iter::from_fn(|| spawn::check_indexed(children))
+    let found: Vec<(usize, String)> =
+        std::iter::from_fn(|| spawn::check_indexed(children)).collect();
+    let mut deaths: Vec<Death> = found
+        .into_iter()
         .map(|(idx, line)| Death {
             idx,
             line,
             hung: false,
             since_seen: w.since_check,
+            port_held: children[idx].exit_code() == Some(i32::from(crate::cli::EXIT_PORT_HELD)),
         })
         .collect();
     if let (true, Some((i, quiet))) = (deaths.is_empty(), w.silent) {
@@ -174,6 +178,7 @@ fn supervise(crew: &mut Crew, w: &Watch) -> Option<Outcome> {
             line,
             hung: true,
             since_seen: quiet,
+            port_held: false,
         });
     }
     let still = takeover.still_for(w.since_progress);
@@ -211,6 +216,7 @@ fn supervise(crew: &mut Crew, w: &Watch) -> Option<Outcome> {
             line,
             hung: true,
             since_seen: limit,
+            port_held: false,
         });
     }
     for death in deaths {

@@ -152,6 +152,10 @@ mod tests {
     fn a_process_that_is_not_the_agent_is_left_alone_and_a_gone_one_is_named() {
         let mut sleeper = Command::new("sleep").arg("30").spawn().unwrap();
         let pid = sleeper.id();
+        let cmdline = format!("/proc/{pid}/cmdline");
+        while !std::fs::read(&cmdline).is_ok_and(|c| c.starts_with(b"sleep")) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
         assert_eq!(end_agent(pid, "fm1_", 3, FENCE_TIMEOUT), Fenced::NotOurs);
         assert!(sleeper.try_wait().unwrap().is_none(), "still running");
         sleeper.kill().unwrap();
@@ -168,6 +172,11 @@ mod tests {
             .spawn()
             .unwrap();
         let pid = agent.id();
+        // Until it has exec'd, the child's command line is this test's.
+        let cmdline = format!("/proc/{pid}/cmdline");
+        while !std::fs::read(&cmdline).is_ok_and(|c| c.windows(4).any(|w| w == b"fm1_")) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
         let t0 = std::time::Instant::now();
         assert_eq!(end_agent(pid, "fm1_", 3, FENCE_TIMEOUT), Fenced::Ended);
         assert!(t0.elapsed() < FENCE_TIMEOUT);

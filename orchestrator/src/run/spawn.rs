@@ -150,6 +150,15 @@ impl RoleProcess {
         }
     }
 
+    /// Its exit code, once it has exited by itself (a process on this machine; `None` for one on
+    /// another host, killed by a signal, or still running).
+    pub fn exit_code(&self) -> Option<i32> {
+        match &self.proc {
+            Proc::Local(_, Some(st)) => st.code(),
+            _ => None,
+        }
+    }
+
     fn done(&self) -> bool {
         match &self.proc {
             Proc::Local(_, st) => st.is_some(),

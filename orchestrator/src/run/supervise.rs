@@ -52,6 +52,35 @@ pub struct Plan {
     pub scheduled: bool,
 }
 
+/// The pause before a successor starts again after `failed` consecutive starts that did not
+/// come up (0: at once), s: 100 ms doubled per failed start, at most [`BACKOFF_CAP`].
+pub fn restart_backoff(failed: u32) -> std::time::Duration {
+    if failed == 0 {
+        return std::time::Duration::ZERO;
+    }
+    BACKOFF_BASE
+        .saturating_mul(1 << (failed - 1).min(16))
+        .min(BACKOFF_CAP)
+}
+
+/// The first pause of [`restart_backoff`].
+pub const BACKOFF_BASE: std::time::Duration = std::time::Duration::from_millis(100);
+/// The longest pause of [`restart_backoff`].
+pub const BACKOFF_CAP: std::time::Duration = std::time::Duration::from_secs(2);
+/// Starts refused because a predecessor still holds the agent's ports (exit 75) that are waited
+/// out, with the backoff, before the run stops (about 13 s): longer than a fence takes.
+pub const MAX_HELD_STARTS: u32 = 10;
+
+/// How an agent process ended, as the supervision tells them apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ending {
+    /// It died, exited with an error or was killed as hung: a restart under the policy.
+    Failed,
+    /// It could not make its ports because its predecessor still holds them (exit 75): it waits
+    /// for the predecessor to be fenced, not counted against `runtime.max_restarts`.
+    PortHeld,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Slot {
     /// The process computes its steps.
@@ -75,6 +104,10 @@ pub struct Supervisor {
     timeline: Timeline,
     slots: Vec<Slot>,
     restarts: Vec<u32>,
+    /// Per agent: starts refused since its last join because a predecessor held its ports.
+    held: Vec<u32>,
+    /// Per agent: successors that ended since its last join before saying hello.
+    failed_starts: Vec<u32>,
 }
 
 impl Supervisor {
@@ -86,7 +119,15 @@ impl Supervisor {
             timeline,
             slots: vec![Slot::Running; n],
             restarts: vec![0; n],
+            held: vec![0; n],
+            failed_starts: vec![0; n],
         }
+    }
+
+    /// How long agent i's next successor waits before it starts ([`restart_backoff`] of the
+    /// successors that failed since its last join).
+    pub fn backoff(&self, i: usize) -> std::time::Duration {
+        restart_backoff(self.failed_starts[i])
     }
 
     /// Restarts under the policy, per agent.
@@ -122,7 +163,7 @@ impl Supervisor {
     /// scenario's initial state ([`Action::Relaunch`], a restart like any other), otherwise the
     /// run stops.
     pub fn on_lost_at_start(&mut self, i: usize, line: &str) -> Action {
-        match self.decide_restart(i, line) {
+        match self.decide_restart(i, line, Ending::Failed) {
             Action::TakeDown(i) => {
                 self.slots[i] = Slot::Running;
                 Action::Relaunch(i)
@@ -187,6 +228,8 @@ impl Supervisor {
             Some(Slot::Spawned { rejoin_at }) => {
                 let step = *rejoin_at;
                 self.slots[i] = Slot::Running;
+                self.held[i] = 0;
+                self.failed_starts[i] = 0;
                 Some(Action::Joined { agent: i, step })
             }
             _ => None,
@@ -195,20 +238,33 @@ impl Supervisor {
 
     /// Agent i's process died (or was declared hung and killed) outside the timeline; `line`
     /// names it. `None`: the timeline killed it (expected).
-    pub fn on_death(&mut self, i: usize, line: &str) -> Option<Action> {
+    pub fn on_death(&mut self, i: usize, line: &str, ending: Ending) -> Option<Action> {
         match self.slots[i] {
             Slot::Parked(_) => return None,
-            Slot::Running | Slot::Spawned { .. } => {}
+            Slot::Running => {}
+            Slot::Spawned { .. } => self.failed_starts[i] += 1,
             Slot::Dead | Slot::Down { .. } => {
                 return Some(Action::Fail(format!("{line} while it was being replaced")))
             }
         }
-        Some(self.decide_restart(i, line))
+        Some(self.decide_restart(i, line, ending))
     }
 
-    fn decide_restart(&mut self, i: usize, line: &str) -> Action {
+    fn decide_restart(&mut self, i: usize, line: &str, ending: Ending) -> Action {
         if self.runtime.restart == RestartPolicy::Never {
             return Action::Fail(line.to_string());
+        }
+        if ending == Ending::PortHeld {
+            if self.held[i] >= MAX_HELD_STARTS {
+                return Action::Fail(format!(
+                    "{line}; agent {}'s ports were still held by a predecessor after {} starts",
+                    i + 1,
+                    self.held[i]
+                ));
+            }
+            self.held[i] += 1;
+            self.slots[i] = Slot::Dead;
+            return Action::TakeDown(i);
         }
         if self.restarts[i] >= self.runtime.max_restarts {
             return Action::Fail(format!(
@@ -288,7 +344,7 @@ mod tests {
         assert_eq!(s.on_recorded(20_000), vec![Action::Kill(2)]);
         assert!(s.expects_gone(2));
         assert_eq!(
-            s.on_death(2, "agent 3 was killed"),
+            s.on_death(2, "agent 3 was killed", Ending::Failed),
             None,
             "the timeline killed it"
         );
@@ -334,7 +390,7 @@ mod tests {
     fn a_death_outside_the_timeline_stops_the_run_unless_the_policy_restarts_and_counts_it() {
         let mut never = Supervisor::new(3, Timeline::new(&[], 0.001), Runtime::default(), 68);
         assert!(matches!(
-            never.on_death(1, "agent 2 was killed"),
+            never.on_death(1, "agent 2 was killed", Ending::Failed),
             Some(Action::Fail(_))
         ));
         let rt = Runtime {
@@ -344,7 +400,7 @@ mod tests {
         };
         let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
         assert_eq!(
-            s.on_death(1, "agent 2 was killed"),
+            s.on_death(1, "agent 2 was killed", Ending::Failed),
             Some(Action::TakeDown(1))
         );
         let up = s.on_taken_down(1, 5000, 4990).expect("announced");
@@ -365,7 +421,7 @@ mod tests {
         s.on_hello(1);
         assert_eq!(s.restarts(), &[0, 1, 0]);
         assert!(
-            matches!(s.on_death(1, "agent 2 was killed"), Some(Action::Fail(m)) if m.contains("max_restarts"))
+            matches!(s.on_death(1, "agent 2 was killed", Ending::Failed), Some(Action::Fail(m)) if m.contains("max_restarts"))
         );
     }
 
@@ -392,7 +448,7 @@ mod tests {
         assert_eq!(s.restarts(), &[0, 0, 0, 1, 1]);
         // Its later death goes the usual way, and the count applies.
         assert!(
-            matches!(s.on_death(3, "died"), Some(Action::Fail(m)) if m.contains("max_restarts"))
+            matches!(s.on_death(3, "died", Ending::Failed), Some(Action::Fail(m)) if m.contains("max_restarts"))
         );
     }
 
@@ -404,7 +460,7 @@ mod tests {
         };
         let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
         assert!(!s.taking_over());
-        s.on_death(1, "died");
+        s.on_death(1, "died", Ending::Failed);
         assert!(s.taking_over(), "dead, not taken down yet");
         s.on_taken_down(1, 100, 90);
         assert!(s.taking_over(), "down");
@@ -422,7 +478,10 @@ mod tests {
         };
         let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt, 68);
         assert_eq!(s.on_dead_realtime(1, 380, 500), None, "not dead");
-        assert_eq!(s.on_death(1, "agent 2 died"), Some(Action::TakeDown(1)));
+        assert_eq!(
+            s.on_death(1, "agent 2 died", Ending::Failed),
+            Some(Action::TakeDown(1))
+        );
         let a = s.on_dead_realtime(1, 380, 500);
         assert_eq!(
             a,
@@ -446,5 +505,77 @@ mod tests {
                 step: 500
             })
         );
+    }
+
+    #[test]
+    fn restarts_back_off_from_100_ms_doubling_to_2_s() {
+        let ms = |n| restart_backoff(n).as_millis();
+        assert_eq!(
+            (0..8).map(ms).collect::<Vec<_>>(),
+            [0, 100, 200, 400, 800, 1600, 2000, 2000]
+        );
+        assert_eq!(ms(u32::MAX), 2000);
+    }
+
+    /// A successor refused its ports (its predecessor still holds them) is tried again without
+    /// using up `max_restarts`, each time after a longer pause; one that comes up resets both.
+    #[test]
+    fn a_successor_whose_ports_are_held_waits_with_backoff_and_is_not_counted() {
+        let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt_on(1), 100);
+        assert_eq!(
+            s.on_death(1, "died", Ending::Failed),
+            Some(Action::TakeDown(1))
+        );
+        assert_eq!(
+            s.backoff(1),
+            std::time::Duration::ZERO,
+            "the first start is at once"
+        );
+        let respawn = |s: &mut Supervisor| match s.on_taken_down(1, 1000, 1000) {
+            Some(Action::Announce(e)) => {
+                let plans = s.on_recorded(e.step);
+                assert!(
+                    matches!(plans.as_slice(), [Action::Respawn(_)]),
+                    "{plans:?}"
+                );
+            }
+            other => panic!("{other:?}"),
+        };
+        respawn(&mut s);
+        for tries in 1..=MAX_HELD_STARTS {
+            assert_eq!(
+                s.on_death(1, "exited with code 75", Ending::PortHeld),
+                Some(Action::TakeDown(1))
+            );
+            assert_eq!(s.backoff(1), restart_backoff(tries), "try {tries}");
+            respawn(&mut s);
+        }
+        assert_eq!(s.restarts()[1], 1, "only the first death is a restart");
+        assert!(matches!(
+            s.on_death(1, "exited with code 75", Ending::PortHeld),
+            Some(Action::Fail(m)) if m.contains("still held")
+        ));
+        let mut s = Supervisor::new(3, Timeline::new(&[], 0.001), rt_on(1), 100);
+        s.on_death(1, "died", Ending::Failed);
+        respawn(&mut s);
+        s.on_death(1, "exited with code 75", Ending::PortHeld);
+        respawn(&mut s);
+        assert!(matches!(
+            s.on_hello(1),
+            Some(Action::Joined { agent: 1, .. })
+        ));
+        assert_eq!(
+            s.backoff(1),
+            std::time::Duration::ZERO,
+            "a join resets the backoff"
+        );
+    }
+
+    fn rt_on(max_restarts: u32) -> Runtime {
+        Runtime {
+            restart: RestartPolicy::OnFailure,
+            max_restarts,
+            ..Runtime::default()
+        }
     }
 }

@@ -4,7 +4,7 @@
 //! service, and logs what happened when, for `summary.json`.
 
 use super::spawn::{self, RoleProcess};
-use super::supervise::{Action, Plan, Supervisor};
+use super::supervise::{Action, Ending, Plan, Supervisor};
 use crate::history::{self, History};
 use formation_config::node::args::ChildArgs;
 use formation_config::node::ports::{
@@ -59,6 +59,8 @@ pub struct Death {
     pub hung: bool,
     /// Wall time since it was last seen working.
     pub since_seen: Duration,
+    /// It exited because a predecessor still holds its ports (`cli::EXIT_PORT_HELD`).
+    pub port_held: bool,
 }
 
 /// How a successor agent process is started: the executable, an agent's command line (its
@@ -115,6 +117,8 @@ pub struct Takeover {
     last_action: Instant,
     /// The run's measured start-up: from the launch of its processes to every hello.
     startup: Option<Duration>,
+    /// Successors waiting out their backoff (`supervise::restart_backoff`): when each starts.
+    pending: Vec<(Instant, Plan)>,
     /// What happened, in order.
     pub incidents: Vec<Incident>,
 }
@@ -173,6 +177,7 @@ impl Takeover {
             last_action: Instant::now(),
             startup: None,
             on_failure: scenario.runtime.restart == RestartPolicy::OnFailure,
+            pending: Vec::new(),
             incidents: Vec::new(),
         })
     }
@@ -254,6 +259,12 @@ impl Takeover {
         node: &RunNode,
         children: &mut [RoleProcess],
     ) -> Result<(), String> {
+        let now = Instant::now();
+        let (due, wait): (Vec<_>, Vec<_>) = self.pending.drain(..).partition(|(t, _)| *t <= now);
+        self.pending = wait;
+        for (_, plan) in due {
+            self.respawn(plan, node, children)?;
+        }
         while let Ok(Some(e)) = self.events_in.receive() {
             let e = *e;
             if e.kind != EVENT_DOWN {
@@ -301,6 +312,7 @@ impl Takeover {
             line,
             hung,
             since_seen,
+            port_held,
         } = death;
         let Some(i) = idx.checked_sub(FIRST_AGENT) else {
             return Err(format!(
@@ -310,7 +322,12 @@ impl Takeover {
         self.last_action = Instant::now();
         let lost = self.lost_host(idx, children)?;
         let line = self.naming_the_host(line, &lost);
-        match self.supervisor.on_death(i, &line) {
+        let ending = if port_held {
+            Ending::PortHeld
+        } else {
+            Ending::Failed
+        };
+        match self.supervisor.on_death(i, &line, ending) {
             None => Ok(()),
             Some(Action::Fail(m)) => Err(format!("{m}; stopping the run")),
             Some(a) => {
@@ -337,6 +354,9 @@ impl Takeover {
                             super::remote::TAKEOVER_HOST
                         );
                     }
+                    _ if port_held => eprintln!(
+                        "error: {line}: its predecessor still holds its ports; starting it again once that one is gone (not counted in runtime.max_restarts)"
+                    ),
                     _ => eprintln!("error: {line}; restarting it (runtime.restart = on-failure)"),
                 }
                 self.incidents.push(incident);
@@ -541,7 +561,19 @@ impl Takeover {
                 });
                 Ok(())
             }
-            Action::Respawn(plan) => self.respawn(plan, node, children),
+            Action::Respawn(plan) => {
+                let wait = self.supervisor.backoff(plan.agent);
+                if wait.is_zero() {
+                    return self.respawn(plan, node, children);
+                }
+                eprintln!(
+                    "formation run: agent {} starts again in {} ms (backoff after its successor failed to start)",
+                    plan.agent + 1,
+                    wait.as_millis()
+                );
+                self.pending.push((Instant::now() + wait, plan));
+                Ok(())
+            }
             Action::Joined { agent, step } => {
                 if let Some(inc) = self.incidents.iter_mut().rev().find(|x| x.agent == agent) {
                     inc.restarted_after_ms = Some(inc.started.elapsed().as_secs_f64() * 1e3);
