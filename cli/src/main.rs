@@ -300,6 +300,9 @@ impl Failure for LiveError {
             | LiveError::Agent(_)
             | LiveError::Request(_)
             | LiveError::AgentCount { .. } => cli::EXIT_INVALID,
+            LiveError::Confirm(formation_live::error::ConfirmError::Rejected(_)) => {
+                cli::EXIT_INVALID
+            }
             LiveError::Inspect(_) | LiveError::Confirm(_) | LiveError::Json(_) => 1,
         }
     }
@@ -379,6 +382,8 @@ mod tests {
         };
         assert_eq!(held("ExceedsMaxSupportedPublishers").exit_code(), 75);
         assert_eq!(held("InternalFailure").exit_code(), 1);
+        let rejected = LiveError::Confirm(ConfirmError::Rejected("needs a lockstep run".into()));
+        assert_eq!(rejected.exit_code(), 2, "a rejected injection is bad input");
         let count = LiveError::AgentCount { n: 0, max: 128 };
         assert_eq!(count.exit_code(), 2);
         assert_eq!(

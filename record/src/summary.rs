@@ -75,7 +75,9 @@ pub struct AgentSummary {
     pub torque_saturation_fraction: f64,
     /// Its separation layer and closest approach (D25).
     pub separation: AgentSeparation,
-    /// Times its process was restarted under `runtime.restart = "on-failure"`.
+    /// Times its process was restarted under `runtime.restart = "on-failure"` after a failure
+    /// (a death or hang outside the timeline, its host lost): not the successors of scheduled
+    /// crashes and hangs (timeline or injected), nor starts that waited for a fence.
     pub restarts: u32,
     /// Checkpoints refused at a restart (damaged, another agent's or another run's), each
     /// restarted cold at once instead.

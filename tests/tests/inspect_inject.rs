@@ -545,6 +545,13 @@ fn inspect_answers_on_a_realtime_run_and_shows_an_injected_fault_in_gamma_hat() 
         lowest < gamma_before - 0.1,
         "mean Gamma-hat of agent 2: {gamma_before} before the injection of 0.5, lowest after {lowest}"
     );
+    // A crash is not scheduled on the wall clock: the run rejects it with its reason (exit 2),
+    // and no process is killed.
+    let o = formation(&runs, &["inject", "crash", "--agent", "3", "--down", "1"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("needs a lockstep run"), "{err}");
+    assert_eq!(run.role_processes().len(), 7, "nothing was killed");
     drop(run);
     let _ = std::fs::remove_dir_all(&dir);
 }

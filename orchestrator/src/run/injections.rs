@@ -62,6 +62,9 @@ enum Refusal {
     /// The event breaks the rules of a timeline event.
     #[error("{0}")]
     Event(#[from] ValidationErrors),
+    /// A crash or hang asked of a realtime run, which takes them only as they happen.
+    #[error("a `{0}` injection needs a lockstep run (realtime runs take faults, delays and link faults; end or stop the process itself, e.g. `kill -9 PID`, and the supervision handles it under runtime.restart; docs/failures.md)")]
+    Realtime(&'static str),
 }
 
 /// Ports and log of the injections of one run.
@@ -75,14 +78,17 @@ pub struct Injections {
     /// The fault and delay injections accepted to apply inside the run, as timeline events.
     changes: Vec<Event>,
     scenario: Scenario,
+    /// A realtime run: crashes and hangs are refused.
+    realtime: bool,
 }
 
 impl Injections {
-    /// Opens the ports and creates `out/events.jsonl`.
+    /// Opens the ports and creates `out/events.jsonl`; `realtime`: the run is on the wall clock.
     pub fn open(
         node: &RunNode,
         scenario: &Scenario,
         out: &Path,
+        realtime: bool,
     ) -> Result<Injections, InjectionsError> {
         let path = out.join("events.jsonl");
         Ok(Injections {
@@ -98,6 +104,7 @@ impl Injections {
             logged: Vec::new(),
             changes: Vec::new(),
             scenario: scenario.clone(),
+            realtime,
         })
     }
 
@@ -121,6 +128,8 @@ impl Injections {
         match r.kind {
             INJECT_FAULT => validate::fault(&self.scenario, r.gamma, r.delta)?,
             INJECT_DELAY => validate::delay(&self.scenario, &profile(r))?,
+            INJECT_CRASH if self.realtime => return Err(Refusal::Realtime("crash")),
+            INJECT_HANG if self.realtime => return Err(Refusal::Realtime("hang")),
             INJECT_CRASH | INJECT_HANG | INJECT_LINK_DOWN | INJECT_LINK_UP => {}
             k => return Err(Refusal::UnknownKind(k)),
         }

@@ -148,7 +148,7 @@ impl<'p> Run<'p> {
         tracing::info!(placement = %pinned, "role processes started");
         let registration = register(plan, ids, &run_dir, &children.0)?;
         let live = Live {
-            injections: injections::Injections::open(&node, scenario, &run_dir)?,
+            injections: injections::Injections::open(&node, scenario, &run_dir, mode.realtime)?,
             registration,
         };
         let respawn = takeover::Respawn {
