@@ -435,11 +435,6 @@ pub fn filter(
             acted: true,
         };
     }
-    let unchanged = Filtered {
-        u,
-        predicted_m,
-        acted: false,
-    };
     let cs = &mut cs[..m];
     if cs.is_empty() {
         return unchanged;
@@ -455,6 +450,16 @@ pub fn filter(
     if cs.iter().all(|c| dot(c.n, u) >= c.b) {
         return unchanged;
     }
+    Filtered {
+        u: solve(cs, u),
+        predicted_m,
+        acted: true,
+    }
+}
+
+/// U_iS for U_iP = `u` and the half-spaces `cs` (some unmet): the sidestep added, then the
+/// closest point that meets them all.
+fn solve(cs: &[Constraint], u: [f64; 3]) -> [f64; 3] {
     // The sidestep: each violated pair adds its share at right angles to its line of sight.
     let mut target = u;
     for c in cs.iter() {
@@ -483,11 +488,7 @@ pub fn filter(
             break;
         }
     }
-    Filtered {
-        u: x,
-        predicted_m,
-        acted: true,
-    }
+    x
 }
 
 #[cfg(test)]
