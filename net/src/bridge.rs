@@ -120,6 +120,9 @@ pub struct Stats {
     pub frames_in: AtomicU64,
     /// Records refused (unknown service, type or size mismatch).
     pub refused: AtomicU64,
+    /// Frames refused because their sender has left the run (a host declared lost: it is
+    /// fenced, whatever keys it still holds; docs/multi-host.md "Fencing a lost host").
+    pub fenced: AtomicU64,
 }
 
 /// A running bridge; stopped on drop (the subscriber undeclared, the receiving side's ports
@@ -747,6 +750,8 @@ struct Inbound {
     stamps: Vec<(u64, u64)>,
     /// Sequence numbers seen per sending host.
     replay: HashMap<String, Replay>,
+    /// Hosts that have left the run (lost): their frames are refused and counted as fenced.
+    gone: Vec<String>,
     /// Refusals logged at most once a second per sender and reason.
     log: LogLimit,
 }
@@ -793,6 +798,7 @@ impl Inbound {
             from,
             stamps: Vec::with_capacity(64),
             replay: HashMap::new(),
+            gone: Vec::new(),
             log: LogLimit::default(),
         })
     }
@@ -802,6 +808,17 @@ impl Inbound {
         self.cfg.placement = placement.clone();
         self.cfg.create = false;
         let hosts = self.cfg.placement.hosts();
+        // A host that has left the placement is lost for good: nothing it sends is taken.
+        let left: Vec<String> = self
+            .from
+            .keys()
+            .filter(|h| !hosts.contains(h))
+            .cloned()
+            .collect();
+        for h in left {
+            self.from.remove(&h);
+            self.gone.push(h);
+        }
         let old = Ports {
             ins: std::mem::take(&mut self.ins),
             ..Ports::default()
@@ -820,7 +837,7 @@ impl Inbound {
         links: &Mutex<BTreeMap<String, LinkDelays>>,
     ) {
         stats.frames_in.fetch_add(1, Ordering::Relaxed);
-        let Some((records, sender)) = self.admit(frame) else {
+        let Some((records, sender)) = self.admit(frame, stats) else {
             stats.refused.fetch_add(1, Ordering::Relaxed);
             return;
         };
@@ -892,7 +909,7 @@ impl Inbound {
     /// The records of a frame and its sending host, if the frame may be taken (see the module
     /// documentation): not too long, with proof of the run's secret for this host, a sequence
     /// number its sender has not used, and a sender that is a host of the run named first.
-    fn admit<'f>(&mut self, frame: &'f [u8]) -> Option<(Vec<Record<'f>>, &'f str)> {
+    fn admit<'f>(&mut self, frame: &'f [u8], stats: &Stats) -> Option<(Vec<Record<'f>>, &'f str)> {
         let me = self.cfg.me.clone();
         if frame.len() > MAX_FRAME {
             self.log.warn("unknown", "oversized", || {
@@ -923,6 +940,14 @@ impl Inbound {
         };
         let sender = match records.first() {
             Some(Record::From(h)) if self.from.contains_key(*h) => *h,
+            Some(Record::From(h)) if self.gone.iter().any(|g| g == h) => {
+                let h = h.to_string();
+                stats.fenced.fetch_add(1, Ordering::Relaxed);
+                self.log.warn(&h, "fenced", || {
+                    format!("bridge: a frame from {h}, a host lost to the run, refused (fenced)")
+                });
+                return None;
+            }
             Some(Record::From(h)) => {
                 let h = h.to_string();
                 self.log.warn("unknown", "not a host", || {

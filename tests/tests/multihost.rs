@@ -1061,6 +1061,109 @@ fn a_host_whose_link_goes_down_early_is_taken_over_here_after_its_lease() {
     let _ = std::fs::remove_dir_all(&r.dir);
 }
 
+/// A host cut off past its lease and then back (a partition that heals): the orchestrator
+/// declares it lost after the daemon's 1 s lease and takes its agents over here, each once; the
+/// daemon, told a 20 s lease by the orchestrator, has not noticed the cut, and learns when the
+/// link is back that the orchestrator dropped it (its link to it is closed): it ends its agents.
+/// The run exits 0. A frame it would still send is refused by the launcher's bridge, re-planned
+/// without the host, and counted as fenced (`formation run: N frame(s) from lost hosts refused
+/// after they were fenced`, printed when N > 0).
+#[test]
+fn a_host_cut_off_past_its_lease_and_back_ends_its_agents_and_the_run_goes_on() {
+    if !available("a_host_cut_off_past_its_lease_and_back_ends_its_agents_and_the_run_goes_on") {
+        return;
+    }
+    let dir = work_dir("lost-back");
+    let mut hosts = Hosts::new(2, &dir);
+    let ep = format!("tcp/{}:7447", hosts.addrs[1]);
+    let auth = hosts.auth.display().to_string();
+    hosts.start_daemon_with(
+        1,
+        &dir,
+        &["--listen", &ep, "--auth", &auth, "--lease-ms", "1000"],
+        &[],
+    );
+    let residue = dir.join("residue-launcher.txt");
+    let out = dir.join("run");
+    let err_path = dir.join("run.err");
+    let args = [
+        "--set",
+        "simulation.duration_s=120",
+        "--restart",
+        "on-failure",
+        "--lease-ms",
+        "20000",
+    ];
+    let mut run = spawn_split_paper_run(&hosts, &residue, &args, &out, &err_path, None);
+    let t0 = Instant::now();
+    let csv = out.join("trajectory.csv");
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 1 << 20 {
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "the run wrote nothing"
+        );
+        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let veth = hosts.names[0].replace("h0", "a1");
+    ip(&["-n", &hosts.names[0], "link", "set", &veth, "down"]);
+    let cut = Instant::now();
+    let err = || std::fs::read_to_string(&err_path).unwrap_or_default();
+    while !err().contains("lost with host h1") {
+        assert!(
+            cut.elapsed() < Duration::from_secs(30),
+            "h1 not declared lost: {}",
+            err()
+        );
+        assert!(
+            run.try_wait().unwrap().is_none(),
+            "the run ended: {}",
+            err()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    ip(&["-n", &hosts.names[0], "link", "set", &veth, "up"]);
+    let t1 = Instant::now();
+    let st = loop {
+        if let Some(st) = run.try_wait().unwrap() {
+            break st;
+        }
+        assert!(
+            t1.elapsed() < Duration::from_secs(180),
+            "the run hangs: {}",
+            err()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let err = err();
+    assert_eq!(st.code(), Some(0), "{err}");
+    for a in [4, 5] {
+        let started = err
+            .lines()
+            .filter(|l| l.contains(&format!("formation run: agent {a} taken over at step")));
+        assert_eq!(started.count(), 1, "agent {a} is started once: {err}");
+    }
+    let log = dir.join("daemon-1.log");
+    let daemon_log = || std::fs::read_to_string(&log).unwrap_or_default();
+    let back = Instant::now();
+    while !daemon_log().contains("its orchestrator is gone; ending it") {
+        assert!(
+            back.elapsed() < Duration::from_secs(30),
+            "the daemon did not end the run once back: {}",
+            daemon_log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let start = err
+        .lines()
+        .find(|l| l.contains("formation run: id"))
+        .unwrap();
+    let pids = formation_tests::run::start_line_pids(start);
+    formation_tests::host::assert_gone(&pids[5..]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn a_host_lost_while_another_hosts_takeover_is_under_way_is_taken_over_in_its_turn() {
     if !available("a_host_lost_while_another_hosts_takeover_is_under_way_is_taken_over_in_its_turn")

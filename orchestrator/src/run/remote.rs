@@ -340,8 +340,15 @@ impl Drop for RemoteRun {
                 events_out = s.events_out.load(Relaxed),
                 frames_in = s.frames_in.load(Relaxed),
                 refused = s.refused.load(Relaxed),
+                fenced = s.fenced.load(Relaxed),
                 "bridge stopped"
             );
+            let fenced = s.fenced.load(Relaxed);
+            if fenced > 0 {
+                eprintln!(
+                    "formation run: {fenced} frame(s) from lost hosts refused after they were fenced"
+                );
+            }
         }
     }
 }
