@@ -60,6 +60,20 @@ struct Seen {
     exits: Vec<(String, ExitReport)>,
     lost: Vec<(String, Instant)>,
     checkpoints: Checkpoints,
+    /// Reports (exits, checkpoints) refused because their host was lost before they came: a
+    /// lost host is fenced for the rest of the run.
+    fenced: u64,
+}
+
+impl Seen {
+    /// Whether a report of `host` is taken: not once the host was lost (counted in `fenced`).
+    fn admits(&mut self, host: &str) -> bool {
+        if self.lost.iter().any(|(h, _)| h == host) {
+            self.fenced += 1;
+            return false;
+        }
+        true
+    }
 }
 
 /// The checkpoints the daemons forwarded, kept with the orchestrator: per agent the
@@ -361,7 +375,10 @@ impl Cluster {
                     Ok((r.host.clone(), r))
                 });
                 if let Some(r) = r {
-                    seen.lock().unwrap().exits.push((r.host.clone(), r));
+                    let mut seen = seen.lock().unwrap();
+                    if seen.admits(&r.host) {
+                        seen.exits.push((r.host.clone(), r));
+                    }
                 }
             })
             .wait()
@@ -379,10 +396,10 @@ impl Cluster {
                     Ok((n.host.clone(), (n, bytes.to_vec())))
                 });
                 if let Some((n, bytes)) = note {
-                    seen.lock()
-                        .unwrap()
-                        .checkpoints
-                        .offer(n.agent, n.step, bytes);
+                    let mut seen = seen.lock().unwrap();
+                    if seen.admits(&n.host) {
+                        seen.checkpoints.offer(n.agent, n.step, bytes);
+                    }
                 }
             })
             .wait()
@@ -428,6 +445,11 @@ impl Cluster {
             .checkpoints
             .pick(agent, down_from, oldest)
             .map(|(s, b)| (s, b.to_vec()))
+    }
+
+    /// Reports (exit reports, checkpoints) refused because their host had been lost.
+    pub fn fenced_reports(&self) -> u64 {
+        self.seen.lock().unwrap().fenced
     }
 
     /// When `host`'s daemon was seen to go (its liveliness token vanished), if it did.
@@ -555,6 +577,17 @@ crate::error::into_string!(RequestError, AnnounceError);
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_lost_host_is_fenced_its_later_reports_refused_and_counted() {
+        let mut seen = Seen::default();
+        assert!(seen.admits("b"));
+        seen.lost.push(("b".to_string(), Instant::now()));
+        assert!(!seen.admits("b"));
+        assert!(!seen.admits("b"));
+        assert!(seen.admits("c"), "another host's reports are taken");
+        assert_eq!(seen.fenced, 2);
+    }
 
     #[test]
     fn a_takeover_restores_the_newest_checkpoint_before_the_step_it_went_down_within_the_records() {

@@ -213,6 +213,21 @@ pub fn assert_trajectory_is_sims(
 /// The other user of the tests that act as a second uid (`nobody`).
 pub const OTHER_UID: u32 = 65534;
 
+/// Whether `test` may run: this process may use at least two CPUs. A machine with one skips it,
+/// saying so, unless `FORMATION_REQUIRE_TWO_CPUS=1` (CI, which has two), where it fails.
+pub fn two_cpus_or_skip(test: &str) -> bool {
+    let n = cpus_allowed(std::process::id()).len();
+    if n >= 2 {
+        return true;
+    }
+    assert!(
+        std::env::var("FORMATION_REQUIRE_TWO_CPUS").as_deref() != Ok("1"),
+        "{test} needs two CPUs ({n} allowed) and FORMATION_REQUIRE_TWO_CPUS=1 requires it"
+    );
+    eprintln!("skipping {test}: it needs two CPUs, this process may use {n}");
+    false
+}
+
 /// True when the test can act as another uid ([`OTHER_UID`]): it runs as root. Otherwise says
 /// why `test` skips, or fails when CI requires it with `FORMATION_REQUIRE_ROOT=1`.
 pub fn root_or_skip(test: &str) -> bool {

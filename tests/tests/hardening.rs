@@ -9,9 +9,7 @@
 //! another uid, as in CI's container); they say so and pass vacuously otherwise.
 
 use formation_tests::run::RunningRun;
-use formation_tests::{
-    bin, cpus_allowed, formation_in as formation, stderr_of as stderr, temp_dir,
-};
+use formation_tests::{bin, formation_in as formation, stderr_of as stderr, temp_dir};
 use std::os::unix::fs::PermissionsExt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -270,9 +268,9 @@ fn sigkill_of_the_orchestrator_leaves_no_iceoryx2_file_no_child_and_a_readable_c
 
 #[test]
 fn runs_started_at_the_same_moment_put_their_plants_on_different_cpus() {
-    let allowed = cpus_allowed(std::process::id()).len();
-    if allowed < 2 {
-        eprintln!("one CPU: nothing to rotate");
+    if !formation_tests::two_cpus_or_skip(
+        "runs_started_at_the_same_moment_put_their_plants_on_different_cpus",
+    ) {
         return;
     }
     let dir = temp_dir("hard-slots");
@@ -333,8 +331,9 @@ fn a_dead_child_is_named_on_stderr_as_soon_as_it_is_found_before_the_run_stops()
 
 #[test]
 fn another_users_run_is_refused_as_a_permission_problem_naming_its_owner() {
-    if !is_root() {
-        eprintln!("not root: cannot make a run of another user");
+    if !formation_tests::root_or_skip(
+        "another_users_run_is_refused_as_a_permission_problem_naming_its_owner",
+    ) {
         return;
     }
     let dir = temp_dir("hard-other-user");

@@ -306,11 +306,10 @@ fn run_beside_busy_loops(
     formation_tests::TempDir,
     Vec<usize>,
 )> {
-    let allowed = cpus_allowed(std::process::id());
-    if allowed.len() < 2 {
-        eprintln!("one CPU: the automatic layout pins nothing");
+    if !formation_tests::two_cpus_or_skip(name) {
         return None;
     }
+    let allowed = cpus_allowed(std::process::id());
     let busy = BusyLoops::on(&allowed);
     // Let the loops show in /proc/stat before the run samples it.
     std::thread::sleep(Duration::from_millis(300));

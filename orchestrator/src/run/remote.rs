@@ -331,6 +331,12 @@ impl Drop for RemoteRun {
                 session::REPLY_TIMEOUT,
             );
         }
+        let reports = self.cluster.fenced_reports();
+        if reports > 0 {
+            eprintln!(
+                "formation run: {reports} report(s) (exits, checkpoints) from lost hosts refused after they were fenced"
+            );
+        }
         if let Some(b) = self.bridge.borrow_mut().take() {
             let s = &b.stats;
             use std::sync::atomic::Ordering::Relaxed;
