@@ -4,8 +4,9 @@
 //! ((31)-(34), (40)-(45)), auxiliary systems ((35), (50)) and adaptive fault estimation ((46)-(49)).
 //!
 //! Pure math: no IPC, no clock, no logging and no allocation per step (buffers are sized at
-//! construction). The process loop around it is `main.rs`; the in-process runner calls the same
-//! [`Agent`] methods with the same messages.
+//! construction). The process around it is the `node` module (feature `node`: its ports and its event loop,
+//! lockstep and realtime); the in-process runner calls the same [`Agent`] methods with the same
+//! messages.
 #![warn(missing_docs)]
 // Per-axis loops index several arrays at once, as the paper's component equations do.
 #![allow(clippy::needless_range_loop)]

@@ -1,7 +1,8 @@
 //! Virtual leader P_d, ground target T_g and formation function Lambda_F of Section 4, with analytic
 //! first and second derivatives.
 //!
-//! Pure math: no IPC, no clock, no allocation per step. The process loop around it is `main.rs`.
+//! Pure math: no IPC, no clock, no allocation per step. The process around it is the `node`
+//! module (feature `node`).
 #![warn(missing_docs)]
 // Per-axis loops index several arrays at once, as the paper's component equations do.
 #![allow(clippy::needless_range_loop)]

@@ -3,7 +3,8 @@
 //! position uncertainty (61), the attitude disturbance (62) and the model perturbation Delta F_i.
 //!
 //! Pure math: no IPC, no clock, no allocation per step. Fixed-step RK4 with the inputs held over the
-//! step. The process loop around it is `main.rs`.
+//! step. The process around it is the `node` module (feature `node`: its ports and its event loops,
+//! lockstep and realtime).
 #![warn(missing_docs)]
 
 pub mod dynamics;
