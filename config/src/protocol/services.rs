@@ -5,8 +5,8 @@
 //! (`node::ports::publisher(node, &VEHICLE_STATE.at(i))` gives a `Publisher<VehicleState>`), so a
 //! name used with the wrong type does not compile. The orchestrator creates every service by walking
 //! the table ([`visit`]) with limits sized for the run ([`Sizing`]); the role processes only open
-//! them (an iceoryx2 service's limits are fixed by the process that creates it; one that opens it
-//! with other limits is refused: docs/runtime.md).
+//! them: an iceoryx2 service's limits (publishers, subscribers, buffers) are set by the process
+//! that creates it (docs/runtime.md).
 //!
 //! Names are relative to the run's iceoryx2 prefix ([`run_prefix`]), so concurrent runs never see
 //! each other. Per-agent names carry the 0-based agent index (`formation/agent/0/state` is agent 1's).
