@@ -305,15 +305,15 @@ fn repulsion(
     activation: f64,
     e: &TrafficEntry,
 ) -> [f64; 3] {
-    let (pe, ve) = (e.p(), e.v());
-    let r: [f64; 3] = std::array::from_fn(|d| p[d] - pe[d] - ve[d] * age);
-    let dist = dot(r, r).sqrt();
-    let predicted = (dist - 0.5 * sp.other_accel * age * age).max(REPULSION_MIN_DISTANCE_M);
-    if dist <= 0.0 || predicted >= activation {
+    let Some(Sight { dist, n, eps, .. }) = sight(sp, age, p, e) else {
+        return [0.0; 3];
+    };
+    let predicted = (dist - eps).max(REPULSION_MIN_DISTANCE_M);
+    if predicted >= activation {
         return [0.0; 3];
     }
     let push = sp.repulsive_gain * (1.0 / predicted - 1.0 / activation) / (predicted * predicted);
-    r.map(|x| push * x / dist)
+    n.map(|x| push * x)
 }
 
 /// The acceleration the thrust gives a vehicle at attitude `att` that holds the vertical `u_z`
@@ -339,8 +339,8 @@ pub fn pair_distances(sp: &SeparationParams, desired: f64) -> (f64, f64) {
 /// traffic it reports), with its measured acceleration `accel` (m/s², from its own recent
 /// velocities; `None`: not yet known, the thrust's is used), and how far apart the formation
 /// puts its slot and those of some quadrotors, `slots` ((agent index, squared distance m²); a
-/// quadrotor not in it
-/// gets the defaults D_L, D_A), on the position loop's limited virtual control `u`. The
+/// quadrotor not in it gets the defaults D_L, D_A), on the position loop's limited virtual
+/// control `u`. The
 /// vehicle's acceleration is U_iS plus what the thrust does not make (the lumped uncertainty and
 /// disturbance, F~ = accel - thrust acceleration): the half-spaces bound U_iS + F~.
 pub fn filter(

@@ -92,11 +92,10 @@ pub fn closest_pair_sweep(p: &[[f64; 3]], order: &mut Vec<usize>) -> Option<(f64
     (p.len() >= 2).then(|| (best.0.sqrt(), best.1, best.2))
 }
 
-/// Each quadrotor's squared distance to its nearest other at one step, into `out_sq` (infinite for
-/// a lone one), by the same sweep along x: quadrotor a's scan in each direction ends once
+/// Each quadrotor's squared distance to its nearest other at one step, into `out` (infinite for a
+/// lone one), by the same sweep along x: quadrotor a's scan in each direction ends once
 /// (x_b - x_a)² exceeds its best squared distance so far. `order` is scratch space.
-pub fn nearest_each(p: &[[f64; 3]], order: &mut Vec<usize>, out_sq: &mut [f64]) {
-    let out = out_sq;
+pub fn nearest_each(p: &[[f64; 3]], order: &mut Vec<usize>, out: &mut [f64]) {
     order.clear();
     order.extend(0..p.len());
     order.sort_unstable_by(|&a, &b| p[a][0].total_cmp(&p[b][0]).then(a.cmp(&b)));

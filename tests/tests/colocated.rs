@@ -63,6 +63,11 @@ fn residue(prefix: &str, iox2_root: &Path) -> Vec<PathBuf> {
 /// Waits up to 10 s for nothing of `prefix` to be left (the daemon's agents may exit just after
 /// the orchestrator).
 fn assert_no_residue(prefix: &str, rt: &Path) {
+    assert_no_residue_within(prefix, rt, Duration::from_secs(10));
+}
+
+/// Waits up to `within` for nothing of `prefix` to be left.
+fn assert_no_residue_within(prefix: &str, rt: &Path, within: Duration) {
     let root = rt.join("formation").join("iox2");
     let t0 = Instant::now();
     loop {
@@ -71,10 +76,11 @@ fn assert_no_residue(prefix: &str, rt: &Path) {
             return;
         }
         assert!(
-            t0.elapsed() < Duration::from_secs(10),
-            "files of the run are left: {left:?}"
+            t0.elapsed() < within,
+            "{} files of the run are left after {within:?}: {left:?}",
+            left.len()
         );
-        std::thread::sleep(Duration::from_millis(100));
+        std::thread::sleep(Duration::from_millis(50));
     }
 }
 
@@ -360,21 +366,7 @@ fn an_orchestrator_killed_beside_a_co_located_daemon_leaves_no_file_within_5_s()
     let (prefix, pids) = start_line(&std::fs::read_to_string(&err_path).unwrap());
     run.kill().unwrap();
     run.wait().unwrap();
-    let killed = Instant::now();
-    let root = rt.join("formation").join("iox2");
-    loop {
-        let left = residue(&prefix, &root);
-        if left.is_empty() {
-            break;
-        }
-        assert!(
-            killed.elapsed() < Duration::from_secs(5),
-            "{} files of the run are left 5 s after its orchestrator was killed: {left:?}\ndaemon: {}",
-            left.len(),
-            daemon.log_text()
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    assert_no_residue_within(&prefix, &rt, Duration::from_secs(5));
     assert_gone(&pids);
     drop(daemon);
     let _ = std::fs::remove_dir_all(&dir);

@@ -698,6 +698,21 @@ fn spawn_split_paper_run(
         .expect("formation run starts")
 }
 
+/// Waits until `run` has written `bytes` of `out/trajectory.csv` (it still running), at most
+/// `within`.
+fn until_written(run: &mut Child, out: &Path, bytes: u64, within: Duration) {
+    let t0 = Instant::now();
+    let csv = out.join("trajectory.csv");
+    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < bytes {
+        assert!(
+            t0.elapsed() < within,
+            "the run wrote no {bytes} bytes of trajectory.csv within {within:?}"
+        );
+        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 fn run_and_kill_the_remote_daemon(tag: &str, args: &[&str], at: KillAt) -> LostHost {
     run_and_lose_the_remote_host(tag, args, at, false)
 }
@@ -727,17 +742,7 @@ fn run_and_lose_the_remote_host(tag: &str, args: &[&str], at: KillAt, link_down:
     assert_eq!(pids.len(), 7, "plant, leader and 5 agents: {start_line}");
     match at {
         KillAt::After(d) => std::thread::sleep(d),
-        KillAt::Written(bytes) => {
-            let csv = out.join("trajectory.csv");
-            while std::fs::metadata(&csv).map_or(0, |m| m.len()) < bytes {
-                assert!(
-                    t0.elapsed() < Duration::from_secs(120),
-                    "the run wrote no {bytes} bytes of trajectory.csv"
-                );
-                assert!(run.try_wait().unwrap().is_none(), "the run ended early");
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
+        KillAt::Written(bytes) => until_written(&mut run, &out, bytes, Duration::from_secs(120)),
         KillAt::Checkpoint(k) => {
             let log = dir.join("daemon-1.log");
             while remote_checkpoint_step(hosts.daemons[0].id(), &log).is_none_or(|s| s < k) {
@@ -1095,16 +1100,7 @@ fn a_host_cut_off_past_its_lease_and_back_ends_its_agents_and_the_run_goes_on() 
         "20000",
     ];
     let mut run = spawn_split_paper_run(&hosts, &residue, &args, &out, &err_path, None);
-    let t0 = Instant::now();
-    let csv = out.join("trajectory.csv");
-    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 1 << 20 {
-        assert!(
-            t0.elapsed() < Duration::from_secs(120),
-            "the run wrote nothing"
-        );
-        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    until_written(&mut run, &out, 1 << 20, Duration::from_secs(120));
     let veth = hosts.names[0].replace("h0", "a1");
     ip(&["-n", &hosts.names[0], "link", "set", &veth, "down"]);
     let cut = Instant::now();
@@ -1204,18 +1200,9 @@ fn a_host_lost_while_another_hosts_takeover_is_under_way_is_taken_over_in_its_tu
         .stderr(std::fs::File::create(&err_path).unwrap())
         .spawn()
         .expect("formation run starts");
-    let t0 = Instant::now();
-    let csv = out.join("trajectory.csv");
     // Mid-run, after the first checkpoints (the first MiB of trajectory.csv is some hundreds of
     // steps; wait for several).
-    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 4 << 20 {
-        assert!(
-            t0.elapsed() < Duration::from_secs(120),
-            "the run did not fly"
-        );
-        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    until_written(&mut run, &out, 4 << 20, Duration::from_secs(120));
     // h1 first; h2 while agent 4's takeover is under way (its successor is started tens of
     // steps after the take-down and says hello some hundreds of ms later).
     let mut d1 = hosts.daemons.remove(0);
@@ -1282,13 +1269,7 @@ fn a_stopped_remote_agent_is_named_stopped_with_its_host_when_the_run_stalls() {
         "1000",
     ];
     let mut run = spawn_split_paper_run(&hosts, &residue, &args, &out, &err_path, None);
-    let t0 = Instant::now();
-    let csv = out.join("trajectory.csv");
-    while std::fs::metadata(&csv).map_or(0, |m| m.len()) < 1 << 20 {
-        assert!(t0.elapsed() < START_BOUND, "the run did not fly");
-        assert!(run.try_wait().unwrap().is_none(), "the run ended early");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    until_written(&mut run, &out, 1 << 20, START_BOUND);
     let err = std::fs::read_to_string(&err_path).unwrap();
     let start = err
         .lines()

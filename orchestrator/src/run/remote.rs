@@ -732,16 +732,16 @@ impl RemoteAgent {
         let Some(prefix) = &self.colocated else {
             return String::new();
         };
-        match super::fence::end_agent(self.pid, prefix, self.agent, super::fence::FENCE_TIMEOUT) {
-            super::fence::Fenced::Ended => {
+        use super::fence::{end_agent, Fenced, FENCE_TIMEOUT};
+        match end_agent(self.pid, prefix, self.agent, FENCE_TIMEOUT) {
+            Fenced::Ended => {
                 "; fenced: its process ended here (SIGKILL) before its successor starts".into()
             }
-            super::fence::Fenced::Gone | super::fence::Fenced::NotOurs => String::new(),
-            super::fence::Fenced::StillRunning => format!(
-                "; fenced: SIGKILLed here, still running after {:?}",
-                super::fence::FENCE_TIMEOUT
-            ),
-            super::fence::Fenced::Failed(kind) => format!("; cannot fence its process: {kind}"),
+            Fenced::Gone | Fenced::NotOurs => String::new(),
+            Fenced::StillRunning => {
+                format!("; fenced: SIGKILLed here, still running after {FENCE_TIMEOUT:?}")
+            }
+            Fenced::Failed(kind) => format!("; cannot fence its process: {kind}"),
         }
     }
 }
